@@ -1,0 +1,1 @@
+"""awalker tools: bag conversion, replay, synthesis, tracking runs, evaluation, the CLI."""

@@ -1,0 +1,51 @@
+"""The ``awalker`` command: one entry point, one module per subcommand.
+
+Every module in ``awalker_tools.commands`` provides ``register(subparsers)``, which adds its
+parser and sets ``func`` to a callable ``(args) -> int``; modules are found automatically and
+listed alphabetically in ``--help``. User errors (``InputError``) are printed as one line
+naming the file or topic, without a traceback, and exit with status 2.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+
+from awalker_tracker.errors import InputError
+
+from awalker_tools import commands
+
+
+def command_modules() -> list[str]:
+    """Names of the subcommand modules in ``awalker_tools.commands``, sorted."""
+    return sorted(m.name for m in pkgutil.iter_modules(commands.__path__) if not m.name.startswith("_"))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="awalker",
+        description="Physics-based 3D person tracking with the Anthropomorphic Walker (ROS 2).",
+    )
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    subparsers.required = True
+    for name in command_modules():
+        importlib.import_module(f"awalker_tools.commands.{name}").register(subparsers)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except InputError as exc:
+        print(f"awalker {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"awalker {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

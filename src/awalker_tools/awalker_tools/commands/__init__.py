@@ -1,0 +1,1 @@
+"""Subcommands of the awalker CLI; each module has register(subparsers)."""

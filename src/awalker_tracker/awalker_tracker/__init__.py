@@ -1,0 +1,4 @@
+"""awalker_tracker: physics-based 3D person tracking with the Anthropomorphic Walker.
+
+The core (``model``, ``vision``, ``inference``) is ROS-free; ``nodes`` holds thin rclpy nodes.
+"""

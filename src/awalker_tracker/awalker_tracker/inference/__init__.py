@@ -1,0 +1,1 @@
+"""Particle filter with look-ahead, MAP trajectory and camera synchronisation (ROS-free)."""

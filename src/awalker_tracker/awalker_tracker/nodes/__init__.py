@@ -1,0 +1,1 @@
+"""Thin rclpy nodes: features, tracker, pose publisher."""

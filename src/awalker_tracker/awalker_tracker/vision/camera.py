@@ -1,0 +1,198 @@
+"""Calibrated pinhole cameras with OpenCV distortion, and the calibration YAML.
+
+World frame: z up, ground at z = 0 (REP 103). Camera (optical) frame: z forward, x right,
+y down. A camera's pose is ``world_from_camera``: its optical frame's rotation and position
+in the world.
+
+Calibration YAML schema (one file, one or more cameras)::
+
+    cameras:
+      - name: cam0                    # [A-Za-z0-9_]+, used in topic names (/cam0/image_raw)
+        width: 640                    # pixels
+        height: 480
+        K: [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]   # 3x3 intrinsics (a flat list of 9 also works)
+        distortion: [k1, k2, p1, p2, k3]           # OpenCV order; 0, 4, 5 or 8 values
+        pose:                         # the optical frame in the world frame
+          position: [x, y, z]         # metres
+          orientation: [qx, qy, qz, qw]   # unit quaternion (world_from_camera)
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from scipy.spatial.transform import Rotation
+
+from awalker_tracker.errors import InputError
+
+_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+_DISTORTION_SIZES = (0, 4, 5, 8)
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """A calibrated camera. Arrays: K (3, 3), distortion (D,), rotation (3, 3), position (3,)."""
+
+    name: str
+    width: int
+    height: int
+    K: np.ndarray
+    distortion: np.ndarray
+    rotation: np.ndarray  # world_from_camera rotation: columns are the camera axes in the world
+    position: np.ndarray  # camera centre in the world (m)
+
+    @property
+    def frame_id(self) -> str:
+        """The camera's optical frame name."""
+        return f"{self.name}_optical_frame"
+
+    @property
+    def quaternion(self) -> np.ndarray:
+        """world_from_camera orientation as (qx, qy, qz, qw)."""
+        return Rotation.from_matrix(self.rotation).as_quat()
+
+    @classmethod
+    def look_at(
+        cls,
+        name: str,
+        width: int,
+        height: int,
+        focal_length: float,
+        position: np.ndarray,
+        target: np.ndarray,
+        distortion: np.ndarray | None = None,
+    ) -> "Camera":
+        """A camera at ``position`` (m) looking at ``target`` (m) with the image x axis level."""
+        position = np.asarray(position, float)
+        forward = np.asarray(target, float) - position
+        forward /= np.linalg.norm(forward)
+        right = np.cross(forward, [0.0, 0.0, 1.0])
+        if np.linalg.norm(right) < 1e-9:
+            raise ValueError("Camera.look_at: viewing direction is vertical; heading undefined")
+        right /= np.linalg.norm(right)
+        down = np.cross(forward, right)
+        K = np.array([[focal_length, 0, (width - 1) / 2], [0, focal_length, (height - 1) / 2], [0, 0, 1]])
+        dist = np.zeros(0) if distortion is None else np.asarray(distortion, float)
+        return cls(name, int(width), int(height), K, dist, np.stack([right, down, forward], axis=1), position)
+
+    def world_to_camera(self, points: np.ndarray) -> np.ndarray:
+        """World points (..., 3) -> camera-frame points (..., 3), metres."""
+        return (np.asarray(points) - self.position) @ self.rotation
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Project world points (..., 3) to pixels (..., 2) and depth along the optical axis (...).
+
+        Points at or behind the camera get depth <= 0 and pixel coordinates of NaN.
+        Any leading shape works, e.g. (N particles, M points, 3).
+        """
+        pc = self.world_to_camera(points)
+        depth = pc[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = np.where(depth > 1e-9, 1.0 / depth, np.nan)
+        x = pc[..., 0] * inv
+        y = pc[..., 1] * inv
+        x, y = self._distort(x, y)
+        K = self.K
+        u = K[0, 0] * x + K[0, 1] * y + K[0, 2]
+        v = K[1, 1] * y + K[1, 2]
+        return np.stack([u, v], axis=-1), depth
+
+    def _distort(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        d = np.zeros(8)
+        d[: self.distortion.size] = self.distortion
+        if not d.any():
+            return x, y
+        k1, k2, p1, p2, k3, k4, k5, k6 = d
+        r2 = x * x + y * y
+        radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        return xd, yd
+
+    def to_dict(self) -> dict[str, Any]:
+        """This camera as an entry of the calibration YAML."""
+        return {
+            "name": self.name,
+            "width": self.width,
+            "height": self.height,
+            "K": self.K.tolist(),
+            "distortion": self.distortion.tolist(),
+            "pose": {"position": self.position.tolist(), "orientation": self.quaternion.tolist()},
+        }
+
+
+def _matrix(value: Any, shape: tuple[int, ...], where: str) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{where}: expected numbers of shape {shape}, got {value!r}") from exc
+    if arr.size != int(np.prod(shape)):
+        raise InputError(f"{where}: expected {int(np.prod(shape))} numbers (shape {shape}), got shape {arr.shape}")
+    arr = arr.reshape(shape)
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{where}: contains NaN or infinity")
+    return arr
+
+
+def camera_from_dict(entry: Any, where: str) -> Camera:
+    """One camera from a calibration YAML entry; ``where`` names the file and entry in errors."""
+    if not isinstance(entry, dict):
+        raise InputError(f"{where}: expected a mapping with name, width, height, K, distortion, pose")
+    missing = [k for k in ("name", "width", "height", "K", "pose") if k not in entry]
+    if missing:
+        raise InputError(f"{where}: missing field(s) {', '.join(missing)}")
+    name = entry["name"]
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise InputError(f"{where}: name must match [A-Za-z][A-Za-z0-9_]*, got {name!r}")
+    where = f"{where} (camera {name})"
+    width, height = entry["width"], entry["height"]
+    if not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in (width, height)):
+        raise InputError(f"{where}: width and height must be positive integers, got {width!r}, {height!r}")
+    K = _matrix(entry["K"], (3, 3), f"{where}: K")
+    if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]) or K[1, 0] != 0:
+        raise InputError(f"{where}: K must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+    dist_value = entry.get("distortion") or []
+    dist = np.asarray(dist_value, float).ravel() if isinstance(dist_value, list) else None
+    if dist is None or dist.size not in _DISTORTION_SIZES or not np.all(np.isfinite(dist)):
+        raise InputError(f"{where}: distortion must be a list of 0, 4, 5 or 8 numbers, got {dist_value!r}")
+    pose = entry["pose"]
+    if not isinstance(pose, dict) or "position" not in pose or "orientation" not in pose:
+        raise InputError(f"{where}: pose must have position [x, y, z] and orientation [qx, qy, qz, qw]")
+    position = _matrix(pose["position"], (3,), f"{where}: pose.position")
+    quat = _matrix(pose["orientation"], (4,), f"{where}: pose.orientation")
+    norm = np.linalg.norm(quat)
+    if abs(norm - 1.0) > 1e-3:
+        raise InputError(f"{where}: pose.orientation must be a unit quaternion [qx, qy, qz, qw], norm is {norm:.4f}")
+    rotation = Rotation.from_quat(quat / norm).as_matrix()
+    return Camera(name, width, height, K, dist, rotation, position)
+
+
+def load_calibration(path: str | Path) -> list[Camera]:
+    """Read a calibration YAML (schema in this module's docstring) into cameras."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise InputError(f"{path}: calibration file not found") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read calibration file ({exc.strerror})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise InputError(f"{path}: not valid YAML ({exc})") from None
+    if not isinstance(data, dict) or not isinstance(data.get("cameras"), list) or not data["cameras"]:
+        raise InputError(f"{path}: expected a top-level 'cameras:' list with at least one camera")
+    cameras = [camera_from_dict(entry, f"{path}: cameras[{i}]") for i, entry in enumerate(data["cameras"])]
+    names = [c.name for c in cameras]
+    if len(set(names)) != len(names):
+        raise InputError(f"{path}: camera names must be unique, got {names}")
+    return cameras
+
+
+def save_calibration(cameras: list[Camera], path: str | Path) -> None:
+    """Write cameras as a calibration YAML that ``load_calibration`` reads back."""
+    Path(path).write_text(yaml.safe_dump({"cameras": [c.to_dict() for c in cameras]}, sort_keys=False))
