@@ -1,0 +1,166 @@
+"""SMC with look-ahead: exact answers from a Kalman filter, unbiased resampling, ancestry."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from awalker_tracker.inference.smc import (
+    AncestryHistory, ParticleFilter, SMCConfig, effective_sample_size, map_trajectory,
+    normalize_log_weights, resample)
+
+
+@dataclass
+class ScalarStates:
+    x: np.ndarray            # (N,)
+    path: np.ndarray         # (N, frames so far): every value this particle's lineage took
+
+    def take(self, idx: np.ndarray) -> "ScalarStates":
+        return ScalarStates(self.x[idx], self.path[idx])
+
+
+@dataclass
+class LinearGaussian:
+    """x_t = a x_{t-1} + N(0, q); z_t = x_t + N(0, r); x_0 ~ N(m0, p0)."""
+
+    a: float = 0.95
+    q: float = 0.3
+    r: float = 0.05
+    m0: float = 1.0
+    p0: float = 2.0
+
+    def initial(self, n, rng):
+        x = self.m0 + np.sqrt(self.p0) * rng.standard_normal(n)
+        return ScalarStates(x, x[:, None].copy())
+
+    def transition(self, states, rng):
+        x = self.a * states.x + np.sqrt(self.q) * rng.standard_normal(states.x.shape)
+        return ScalarStates(x, np.concatenate([states.path, x[:, None]], axis=1)), {"moved": True}
+
+    def log_likelihood(self, prev_states, states, z):
+        return -0.5 * (z - states.x) ** 2 / self.r
+
+    def simulate(self, frames, rng):
+        x = self.m0 + np.sqrt(self.p0) * rng.standard_normal()
+        zs = []
+        for _ in range(frames):
+            zs.append(x + np.sqrt(self.r) * rng.standard_normal())
+            x = self.a * x + np.sqrt(self.q) * rng.standard_normal()
+        return np.array(zs)
+
+    def kalman(self, zs):
+        """Filtering means and variances p(x_t | z_0..t)."""
+        means, variances = [], []
+        m, p = self.m0, self.p0
+        for t, z in enumerate(zs):
+            if t > 0:
+                m, p = self.a * m, self.a**2 * p + self.q
+            gain = p / (p + self.r)
+            m, p = m + gain * (z - m), (1 - gain) * p
+            means.append(m)
+            variances.append(p)
+        return np.array(means), np.array(variances)
+
+
+def _weighted_moments(step):
+    w = step.weights
+    mean = np.sum(w * step.states.x)
+    return mean, np.sum(w * (step.states.x - mean) ** 2)
+
+
+@pytest.mark.parametrize("lookahead,scheme", [(0, "systematic"), (3, "systematic"),
+                                              (3, "stratified"), (3, "multinomial")])
+def test_filter_matches_kalman(lookahead, scheme):
+    model = LinearGaussian()
+    zs = model.simulate(25, np.random.default_rng(1))
+    kal_mean, kal_var = model.kalman(zs)
+    pf = ParticleFilter(model, SMCConfig(num_particles=20000, lookahead=lookahead, resampling=scheme, seed=3))
+    steps = pf.run(zs)
+    assert [s.frame for s in steps] == list(range(len(zs)))
+    assert pf.num_resamples > 0          # the resampling path is exercised
+    for step, m, v in zip(steps, kal_mean, kal_var):
+        mean, var = _weighted_moments(step)
+        tolerance = 5.0 * np.sqrt(v / step.effective_sample_size) + 1e-3
+        assert abs(mean - m) < tolerance, (step.frame, mean, m)
+        # relative error of a weighted variance ~ sqrt(2 / N_eff)
+        assert abs(var - v) < (5.0 * np.sqrt(2.0 / step.effective_sample_size) + 0.05) * v, (step.frame, var, v)
+
+
+def test_lookahead_lags_by_tau_and_resamples_less():
+    model = LinearGaussian(r=0.02)
+    zs = model.simulate(40, np.random.default_rng(5))
+    pf = ParticleFilter(model, SMCConfig(num_particles=2000, lookahead=3, seed=0))
+    outputs = [len(pf.push(z)) for z in zs]
+    assert outputs[:3] == [0, 0, 0] and all(n == 1 for n in outputs[3:])
+    assert [s.frame for s in pf.finish()] == [37, 38, 39]
+    plain = ParticleFilter(model, SMCConfig(num_particles=2000, lookahead=0, seed=0))
+    plain.run(zs)
+    # Look-ahead weights are peakier than one frame's, but resampling with w_hat keeps it well defined.
+    assert 0 < pf.num_resamples <= len(zs)
+    assert plain.num_resamples > 0
+
+
+@pytest.mark.parametrize("scheme", ["systematic", "stratified", "multinomial"])
+def test_resampling_is_unbiased(scheme):
+    rng = np.random.default_rng(0)
+    weights = rng.random(12) ** 3
+    weights /= weights.sum()
+    n, trials = 12, 4000
+    counts = np.zeros(12)
+    for _ in range(trials):
+        idx = resample(weights, rng, scheme)
+        assert idx.shape == (n,) and np.all(np.diff(idx) >= 0)
+        counts += np.bincount(idx, minlength=12)
+        if scheme == "systematic":   # low variance: each count is floor or ceil of N w
+            c = np.bincount(idx, minlength=12)
+            assert np.all(c >= np.floor(n * weights) - 1e-9) and np.all(c <= np.ceil(n * weights) + 1e-9)
+    mean_counts = counts / trials
+    # multinomial count variance is N w (1 - w); the others are lower
+    std_error = np.sqrt(n * weights * (1 - weights) / trials)
+    assert np.all(np.abs(mean_counts - n * weights) < 5 * std_error + 1e-3)
+
+
+def test_weight_helpers():
+    assert effective_sample_size(np.zeros(50)) == pytest.approx(50)
+    assert effective_sample_size(np.array([0.0, -np.inf, -np.inf])) == pytest.approx(1)
+    assert np.allclose(np.exp(normalize_log_weights(np.full(4, -np.inf))), 0.25)
+    lw = normalize_log_weights(np.array([1000.0, 1000.0 + np.log(3.0)]))
+    assert np.allclose(np.exp(lw), [0.25, 0.75])
+    with pytest.raises(ValueError):
+        normalize_log_weights(np.array([0.0, np.nan]))
+    with pytest.raises(ValueError):
+        SMCConfig(resampling="bogus")
+    with pytest.raises(ValueError):
+        SMCConfig(trust=1.5)
+
+
+@pytest.mark.parametrize("prune_every", [0, 4])
+def test_ancestry_reconstructs_lineages(prune_every):
+    """The lineage rebuilt from per-frame ancestry equals the path each particle carried itself."""
+    model = LinearGaussian(r=0.01)
+    zs = model.simulate(30, np.random.default_rng(2))
+    pf = ParticleFilter(model, SMCConfig(num_particles=500, lookahead=2, seed=7))
+    history = AncestryHistory(prune_every=prune_every)
+    steps = pf.run(zs)
+    for step in steps:
+        history.append(None if step.frame == 0 else step.ancestors, {"x": step.states.x})
+    assert pf.num_resamples > 3
+    final = steps[-1]
+    for index in [final.best_index, 0, 499]:
+        assert np.array_equal(history.trajectory(index)["x"], final.states.path[index])
+    assert np.array_equal(map_trajectory(history, final.log_weights)["x"], final.states.path[final.best_index])
+    if prune_every:
+        history.prune()
+        assert history.stored_particles() < 500 * 30 / 3   # the ancestry tree coalesces
+        for index in [final.best_index, 123]:
+            assert np.array_equal(history.trajectory(index)["x"], final.states.path[index])
+
+
+def test_bad_likelihood_is_reported():
+    class Broken(LinearGaussian):
+        def log_likelihood(self, prev_states, states, z):
+            return np.full(3, np.nan)
+
+    with pytest.raises(ValueError, match="shape"):
+        ParticleFilter(Broken(), SMCConfig(num_particles=10, lookahead=0)).push(0.0)
