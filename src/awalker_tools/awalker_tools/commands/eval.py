@@ -1,0 +1,85 @@
+"""`awalker eval DIR [--truth CSV|BAG]`: marker errors, foot skate and plots of a tracking run."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from awalker_tracker.errors import InputError
+
+from awalker_tools import evaluation, plots
+
+RUN_FILE = "run.yaml"   # written by `awalker track`: {input: bag path, ...}
+
+
+def find_truth(run_dir: Path, truth: Path | None) -> Path:
+    """The ground-truth source: --truth, else DIR/ground_truth.csv, else beside/in the input bag."""
+    if truth is not None:
+        if not truth.exists():
+            raise InputError(f"--truth {truth}: no such file or bag")
+        return truth
+    candidates = [run_dir / "ground_truth.csv"]
+    run_file = run_dir / RUN_FILE
+    if run_file.is_file():
+        info = yaml.safe_load(run_file.read_text()) or {}
+        if info.get("input"):
+            bag = Path(info["input"])
+            candidates += [bag.parent / "ground_truth.csv", bag / "ground_truth.csv", bag]
+    for c in candidates:
+        if c.is_file() and c.suffix == ".csv":
+            return c
+        if c.exists() and c.suffix != ".csv":
+            return c
+    raise InputError(f"{run_dir}: no ground truth found (looked for {', '.join(map(str, candidates))}); "
+                     "pass --truth ground_truth.csv or a bag with /awalker/ground_truth")
+
+
+def load_truth(path: Path) -> evaluation.PoseTrack:
+    if path.suffix == ".csv":
+        return evaluation.read_poses_csv(path)
+    return evaluation.truth_from_bag(path)
+
+
+def run(args: argparse.Namespace) -> int:
+    run_dir = Path(args.dir)
+    if not run_dir.is_dir():
+        raise InputError(f"{run_dir}: not a directory (expected the --out DIR of `awalker track`)")
+    estimate = evaluation.read_poses_csv(run_dir / "poses.csv")
+    truth_path = find_truth(run_dir, Path(args.truth) if args.truth else None)
+    truth = load_truth(truth_path)
+    summary_path = run_dir / "summary.csv"
+    summary = evaluation.read_summary_csv(summary_path) if summary_path.is_file() else None
+    result = evaluation.evaluate(estimate, truth, summary)
+    result["truth_source"] = str(truth_path)
+    out = Path(args.json) if args.json else run_dir / "eval.json"
+    out.write_text(json.dumps(result, indent=1))
+    per_frame = result["per_frame"]
+    pngs = [plots.plot_errors(run_dir / "error_over_time.png", np.array(per_frame["frame"]),
+                              np.array(per_frame["absolute_mm"]), np.array(per_frame["relative_mm"]),
+                              title=f"3D marker error: {run_dir.name}")]
+    if summary is not None:
+        rate = 1e9 / float(np.median(np.diff(truth.stamps_ns))) if len(truth.stamps_ns) > 1 else 30.0
+        pngs.append(plots.plot_speed_and_stance(
+            run_dir / "speed_stance.png", summary["frame"], summary["speed"], summary["speed_std"],
+            summary["stance_left_probability"], true_speed=evaluation.pelvis_speed(truth, rate),
+            true_frames=truth.frames, title=f"speed and stance leg: {run_dir.name}"))
+    print(evaluation.format_table(result, label=run_dir.name))
+    print(f"wrote {out} and {', '.join(str(p) for p in pngs)}")
+    return 0
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "eval", help="3D marker error (absolute/relative), foot skate and plots of a tracking run",
+        description="Compare DIR/poses.csv of `awalker track` with ground truth (paper Sec. 6): "
+                    "median and mean +- std of absolute and pelvis-aligned errors over pelvis, thorax, "
+                    "hips, knees and ankles; foot skate, penetration and float; writes DIR/eval.json "
+                    "and PNG plots of error, speed and stance probability over time.")
+    parser.add_argument("dir", help="output directory of `awalker track` (holds poses.csv, summary.csv)")
+    parser.add_argument("--truth", help="ground truth: CSV (frame,stamp_ns,marker,x,y,z) or a bag with "
+                                        "/awalker/ground_truth (default: found beside the run or input bag)")
+    parser.add_argument("--json", help="where to write the metrics (default DIR/eval.json)")
+    parser.set_defaults(func=run)

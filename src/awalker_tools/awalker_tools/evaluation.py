@@ -1,0 +1,326 @@
+"""Evaluation of tracked poses against ground truth (paper Sec. 6, HumanEva protocol).
+
+Files (one row per frame and marker, metres, world frame z up):
+    poses.csv / ground_truth.csv: ``frame,stamp_ns,marker,x,y,z``
+    summary.csv: ``frame,stamp_ns,speed,speed_std,stance_left_probability,effective_sample_size,
+                  resampled,heel_strike,stance_leg``
+Metrics:
+- absolute error: per frame, mean 3D distance (mm) over pelvis, thorax, hips, knees, ankles;
+- relative error: the same after translating the estimated pelvis onto the true one;
+- median and mean +- std over frames (Table 2 format);
+- foot skate: horizontal slip (mm) of a heel/toe marker that touches the ground in two
+  consecutive frames; ground penetration (mm below z = 0) and float (mm of the lowest foot
+  marker above the ground), computed for estimate and truth alike (the truth's values show
+  the marker offset of the body model).
+"""
+from __future__ import annotations
+
+import csv
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from awalker_tracker.errors import InputError
+
+EVAL_MARKERS = ("pelvis", "thorax", "left_hip", "right_hip", "left_knee", "right_knee",
+                "left_ankle", "right_ankle")
+FOOT_MARKERS = {"left": ("left_heel", "left_toe"), "right": ("right_heel", "right_toe")}
+POSE_COLUMNS = ("frame", "stamp_ns", "marker", "x", "y", "z")
+SUMMARY_COLUMNS = ("frame", "stamp_ns", "speed", "speed_std", "stance_left_probability",
+                   "effective_sample_size", "resampled", "heel_strike", "stance_leg")
+
+
+@dataclass(frozen=True)
+class PoseTrack:
+    """Marker trajectories: ``markers[f, m]`` is marker ``marker_names[m]`` at frame ``frames[f]``."""
+
+    frames: np.ndarray          # (F,) int
+    stamps_ns: np.ndarray       # (F,) int
+    marker_names: tuple[str, ...]
+    markers: np.ndarray         # (F, M, 3) metres, NaN where a marker is missing
+
+    def marker(self, name: str) -> np.ndarray:
+        """(F, 3) trajectory of one marker."""
+        return self.markers[:, self.marker_names.index(name)]
+
+
+# ----------------------------------------------------------------------------- files
+
+def write_poses_csv(path: Path, track: PoseTrack) -> None:
+    """Write ``frame,stamp_ns,marker,x,y,z`` rows (metres)."""
+    with open(path, "w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(POSE_COLUMNS)
+        for f, (frame, stamp) in enumerate(zip(track.frames, track.stamps_ns)):
+            for m, name in enumerate(track.marker_names):
+                x, y, z = track.markers[f, m]
+                writer.writerow([int(frame), int(stamp), name, f"{x:.6f}", f"{y:.6f}", f"{z:.6f}"])
+
+
+def read_poses_csv(path: Path) -> PoseTrack:
+    """Read a poses/ground-truth CSV; extra columns are ignored, missing ones are an InputError."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such pose file (expected CSV with columns {','.join(POSE_COLUMNS)})")
+    with open(path, newline="") as fh:
+        reader = csv.DictReader(fh)
+        missing = [c for c in POSE_COLUMNS if c not in (reader.fieldnames or [])]
+        if missing:
+            raise InputError(f"{path}: missing column(s) {', '.join(missing)} "
+                             f"(expected header {','.join(POSE_COLUMNS)})")
+        rows = list(reader)
+    if not rows:
+        raise InputError(f"{path}: no pose rows (expected one row per frame and marker)")
+    names: list[str] = []
+    frame_stamp: dict[int, int] = {}
+    values: dict[tuple[int, str], tuple[float, float, float]] = {}
+    for line, row in enumerate(rows, start=2):
+        try:
+            frame, stamp = int(row["frame"]), int(row["stamp_ns"])
+            xyz = (float(row["x"]), float(row["y"]), float(row["z"]))
+        except (TypeError, ValueError):
+            raise InputError(f"{path}:{line}: expected integer frame/stamp_ns and numeric x,y,z, got {row}") from None
+        if not np.all(np.isfinite(xyz)):
+            raise InputError(f"{path}:{line}: non-finite coordinate in {row}")
+        if frame in frame_stamp and frame_stamp[frame] != stamp:
+            raise InputError(f"{path}:{line}: frame {frame} has two stamps ({frame_stamp[frame]}, {stamp})")
+        frame_stamp[frame] = stamp
+        if row["marker"] not in names:
+            names.append(row["marker"])
+        values[(frame, row["marker"])] = xyz
+    frames = np.array(sorted(frame_stamp), np.int64)
+    markers = np.full((frames.size, len(names), 3), np.nan)
+    index = {f: i for i, f in enumerate(frames)}
+    for (frame, name), xyz in values.items():
+        markers[index[frame], names.index(name)] = xyz
+    stamps = np.array([frame_stamp[f] for f in frames], np.int64)
+    return PoseTrack(frames, stamps, tuple(names), markers)
+
+
+def write_summary_csv(path: Path, rows: Sequence[dict]) -> None:
+    """Write per-frame tracker summaries (keys = SUMMARY_COLUMNS)."""
+    with open(path, "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=SUMMARY_COLUMNS)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: row[k] for k in SUMMARY_COLUMNS})
+
+
+def read_summary_csv(path: Path) -> dict[str, np.ndarray]:
+    """Columns of summary.csv as arrays (heel_strike and stance_leg as strings)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such summary file (written by `awalker track`)")
+    with open(path, newline="") as fh:
+        reader = csv.DictReader(fh)
+        missing = [c for c in SUMMARY_COLUMNS if c not in (reader.fieldnames or [])]
+        if missing:
+            raise InputError(f"{path}: missing column(s) {', '.join(missing)}")
+        rows = list(reader)
+    out: dict[str, np.ndarray] = {}
+    try:
+        for key in SUMMARY_COLUMNS:
+            col = [r[key] for r in rows]
+            if key in ("heel_strike", "stance_leg"):
+                out[key] = np.array(col, dtype=object)
+            elif key in ("frame", "stamp_ns"):
+                out[key] = np.array(col, np.int64)
+            elif key == "resampled":
+                out[key] = np.array([c.strip().lower() in ("1", "true") for c in col])
+            else:
+                out[key] = np.array(col, float)
+    except ValueError as exc:
+        raise InputError(f"{path}: bad value in column {key!r}: {exc}") from None
+    return out
+
+
+# ----------------------------------------------------------------------------- metrics
+
+def align_tracks(estimate: PoseTrack, truth: PoseTrack) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of ``estimate`` and ``truth`` with equal stamps (frames whose stamps match)."""
+    common, est_rows, true_rows = np.intersect1d(estimate.stamps_ns, truth.stamps_ns, return_indices=True)
+    if common.size == 0:
+        raise InputError("estimate and ground truth share no frame stamps "
+                         f"(estimate {estimate.stamps_ns[:3].tolist()}..., truth {truth.stamps_ns[:3].tolist()}...)")
+    return est_rows, true_rows
+
+
+def _select(track: PoseTrack, names: Sequence[str], rows: np.ndarray, what: str) -> np.ndarray:
+    missing = [n for n in names if n not in track.marker_names]
+    if missing:
+        raise InputError(f"{what}: missing marker(s) {', '.join(missing)} (needed: {', '.join(names)})")
+    return track.markers[rows][:, [track.marker_names.index(n) for n in names]]
+
+
+def marker_errors(estimate: PoseTrack, truth: PoseTrack,
+                  markers: Sequence[str] = EVAL_MARKERS) -> dict[str, np.ndarray]:
+    """Per-frame absolute and pelvis-aligned relative errors (mm) over ``markers``."""
+    est_rows, true_rows = align_tracks(estimate, truth)
+    est = _select(estimate, markers, est_rows, "estimate")
+    tru = _select(truth, markers, true_rows, "ground truth")
+    absolute = 1000.0 * np.nanmean(np.linalg.norm(est - tru, axis=2), axis=1)
+    est_p = _select(estimate, ["pelvis"], est_rows, "estimate")
+    tru_p = _select(truth, ["pelvis"], true_rows, "ground truth")
+    shifted = est - est_p + tru_p
+    relative = 1000.0 * np.nanmean(np.linalg.norm(shifted - tru, axis=2), axis=1)
+    per_marker = 1000.0 * np.nanmean(np.linalg.norm(est - tru, axis=2), axis=0)
+    return {"frames": estimate.frames[est_rows], "stamps_ns": estimate.stamps_ns[est_rows],
+            "absolute_mm": absolute, "relative_mm": relative,
+            "per_marker_mm": dict(zip(markers, per_marker.tolist()))}
+
+
+def statistics(values: np.ndarray) -> dict[str, float]:
+    """Median, mean and standard deviation over frames."""
+    values = np.asarray(values, float)
+    return {"median": float(np.median(values)), "mean": float(np.mean(values)), "std": float(np.std(values)),
+            "max": float(np.max(values)), "frames": int(values.size)}
+
+
+def ground_contact(track: PoseTrack, tolerance_m: float = 0.02) -> dict[str, np.ndarray]:
+    """Per foot marker: (F,) bool, marker within ``tolerance_m`` of its lowest height in the sequence."""
+    contact = {}
+    for markers in FOOT_MARKERS.values():
+        for name in markers:
+            z = track.marker(name)[:, 2]
+            contact[name] = z < np.nanmin(z) + tolerance_m
+    return contact
+
+
+def foot_plausibility(track: PoseTrack, tolerance_m: float = 0.02) -> dict[str, object]:
+    """Foot skate, penetration and float of a pose track (mm).
+
+    Skate: horizontal displacement between consecutive frames of each heel/toe marker that is
+    in ground contact in both frames. Penetration: depth of the lowest foot marker below z = 0.
+    Float: height of the lowest foot marker above z = 0 (the stance foot's clearance).
+    """
+    for names in FOOT_MARKERS.values():
+        for n in names:
+            if n not in track.marker_names:
+                raise InputError(f"pose track has no {n!r} marker (needed for foot skate)")
+    contact = ground_contact(track, tolerance_m)
+    consecutive = np.diff(track.frames) == 1
+    slips = []
+    for name, touching in contact.items():
+        xy = track.marker(name)[:, :2]
+        step = 1000.0 * np.linalg.norm(np.diff(xy, axis=0), axis=1)
+        both = touching[1:] & touching[:-1] & consecutive
+        slips.append(step[both])
+    slips_all = np.concatenate(slips) if slips else np.zeros(0)
+    foot_z = np.stack([track.marker(n)[:, 2] for names in FOOT_MARKERS.values() for n in names], axis=1)
+    lowest = 1000.0 * np.nanmin(foot_z, axis=1)
+    penetration = np.maximum(0.0, -lowest)
+    floating = np.maximum(0.0, lowest)
+    return {
+        "skate_mm": {"mean": float(slips_all.mean()) if slips_all.size else 0.0,
+                     "max": float(slips_all.max()) if slips_all.size else 0.0,
+                     "contact_pairs": int(slips_all.size)},
+        "penetration_mm": {"mean": float(penetration.mean()), "max": float(penetration.max())},
+        "float_mm": {"mean": float(floating.mean()), "max": float(floating.max())},
+    }
+
+
+def pelvis_speed(track: PoseTrack, frame_rate: float, window_s: float = 1.0) -> np.ndarray:
+    """Horizontal pelvis speed (m/s) per frame, averaged over ``window_s`` (about one stride)."""
+    xy = track.marker("pelvis")[:, :2]
+    stamps_s = track.stamps_ns * 1e-9
+    half = max(1, int(round(0.5 * window_s * frame_rate)))
+    speed = np.empty(len(xy))
+    for i in range(len(xy)):
+        a, b = max(0, i - half), min(len(xy) - 1, i + half)
+        dt = stamps_s[b] - stamps_s[a]
+        speed[i] = np.linalg.norm(xy[b] - xy[a]) / dt if dt > 0 else np.nan
+    return speed
+
+
+def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarray] | None = None
+             ) -> dict[str, object]:
+    """All metrics as a JSON-ready dict (per-frame series included)."""
+    errors = marker_errors(estimate, truth)
+    result: dict[str, object] = {
+        "absolute_mm": statistics(errors["absolute_mm"]),
+        "relative_mm": statistics(errors["relative_mm"]),
+        "per_marker_absolute_mm": errors["per_marker_mm"],
+        "estimate_feet": foot_plausibility(estimate),
+        "truth_feet": foot_plausibility(truth),
+        "per_frame": {"frame": errors["frames"].tolist(), "stamp_ns": errors["stamps_ns"].tolist(),
+                      "absolute_mm": errors["absolute_mm"].round(3).tolist(),
+                      "relative_mm": errors["relative_mm"].round(3).tolist()},
+    }
+    if len(truth.stamps_ns) > 1:
+        rate = 1e9 / float(np.median(np.diff(truth.stamps_ns)))
+        result["truth_speed_m_s"] = float(np.nanmedian(pelvis_speed(truth, rate)))
+    if summary is not None:
+        result["estimated_speed_m_s"] = float(np.median(summary["speed"]))
+        left = _stance_left_truth(truth)
+        if left is not None:
+            stamps = truth.stamps_ns
+            lookup = dict(zip(summary["stamp_ns"].tolist(), summary["stance_left_probability"].tolist()))
+            known = [(lookup[s], l) for s, l in zip(stamps.tolist(), left.tolist()) if s in lookup and l is not None]
+            if known:
+                p, l = np.array([k[0] for k in known]), np.array([k[1] for k in known], bool)
+                result["stance_correct_fraction"] = float(np.mean((p > 0.5) == l))
+    return result
+
+
+def _stance_left_truth(truth: PoseTrack) -> np.ndarray | None:
+    """True where the truth's left foot is lower than the right (single-support frames), else None."""
+    try:
+        left = np.minimum(truth.marker("left_heel")[:, 2], truth.marker("left_toe")[:, 2])
+        right = np.minimum(truth.marker("right_heel")[:, 2], truth.marker("right_toe")[:, 2])
+    except ValueError:
+        return None
+    gap = left - right
+    out = np.empty(gap.size, dtype=object)
+    clear = np.abs(gap) > 0.01   # double support (both feet down) is ambiguous: not scored
+    out[:] = None
+    out[clear] = gap[clear] < 0
+    return out
+
+
+def format_table(result: dict[str, object], label: str = "") -> str:
+    """Paper Table 2 style: median and mean +- std of absolute and relative errors (mm)."""
+    a, r = result["absolute_mm"], result["relative_mm"]
+    feet = result["estimate_feet"]
+    lines = [
+        f"{label or 'sequence':<24} {'median':>8} {'mean +- std':>16}   (mm, {a['frames']} frames)",
+        f"{'absolute':<24} {a['median']:8.1f} {a['mean']:8.1f} +- {a['std']:5.1f}",
+        f"{'relative (pelvis)':<24} {r['median']:8.1f} {r['mean']:8.1f} +- {r['std']:5.1f}",
+        f"foot skate {feet['skate_mm']['mean']:.1f} mm mean ({feet['skate_mm']['max']:.1f} max), "
+        f"penetration {feet['penetration_mm']['max']:.1f} mm max, float {feet['float_mm']['mean']:.1f} mm mean",
+    ]
+    if "stance_correct_fraction" in result:
+        lines.append(f"stance leg right on {100 * result['stance_correct_fraction']:.1f}% of single-support frames")
+    if "estimated_speed_m_s" in result and "truth_speed_m_s" in result:
+        lines.append(f"speed: estimated {result['estimated_speed_m_s']:.2f} m/s, true {result['truth_speed_m_s']:.2f} m/s")
+    return "\n".join(lines)
+
+
+def truth_from_bag(path: Path, topic: str = "/awalker/ground_truth") -> PoseTrack:
+    """Ground-truth markers from the awalker_msgs/BodyPose messages of a bag (frame = message order)."""
+    from rosbags.highlevel import AnyReader
+
+    from awalker_tools.typestore import typestore
+
+    path = Path(path)
+    try:
+        with AnyReader([path], default_typestore=typestore()) as reader:
+            connections = [c for c in reader.connections if c.topic == topic]
+            if not connections:
+                raise InputError(f"{path}: no {topic} topic (expected awalker_msgs/BodyPose ground truth)")
+            stamps, names, markers = [], None, []
+            for connection, _, raw in reader.messages(connections=connections):
+                msg = reader.deserialize(raw, connection.msgtype)
+                stamps.append(int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec))
+                names = names or tuple(msg.marker_names)
+                if tuple(msg.marker_names) != names:
+                    raise InputError(f"{path}: {topic} changes its marker names between messages")
+                markers.append([[p.x, p.y, p.z] for p in msg.markers])
+    except InputError:
+        raise
+    except Exception as exc:  # rosbags raises several types for unreadable bags
+        raise InputError(f"{path}: cannot read ground truth from bag ({exc})") from None
+    order = np.argsort(stamps, kind="stable")
+    return PoseTrack(np.arange(len(stamps)), np.asarray(stamps, np.int64)[order], names,
+                     np.asarray(markers, float)[order])

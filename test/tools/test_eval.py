@@ -1,0 +1,150 @@
+"""Evaluation metrics and `awalker eval` on hand-made trajectories with known errors."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from awalker_tracker.errors import InputError
+from awalker_tools import evaluation
+from awalker_tools.cli import main
+from awalker_tools.evaluation import PoseTrack
+
+NAMES = ("pelvis", "thorax", "head", "left_hip", "right_hip", "left_knee", "right_knee", "left_ankle",
+         "right_ankle", "left_heel", "right_heel", "left_toe", "right_toe")
+FRAMES = 30
+
+
+def walking_truth() -> PoseTrack:
+    """A stylised walk at 1 m/s, 30 fps: left foot planted for frames 0-14, right for 15-29."""
+    t = np.arange(FRAMES) / 30.0
+    markers = np.zeros((FRAMES, len(NAMES), 3))
+    base = {"pelvis": (0, 0, 0.95), "thorax": (0, 0, 1.35), "head": (0, 0, 1.65), "left_hip": (0, 0.1, 0.9),
+            "right_hip": (0, -0.1, 0.9), "left_knee": (0.02, 0.1, 0.5), "right_knee": (0.02, -0.1, 0.5),
+            "left_ankle": (0, 0.1, 0.08), "right_ankle": (0, -0.1, 0.08)}
+    for name, offset in base.items():
+        markers[:, NAMES.index(name)] = np.array(offset) + np.stack([t, 0 * t, 0 * t], axis=1)
+    for side, y, planted in (("left", 0.1, t < 0.5), ("right", -0.1, t >= 0.5)):
+        for part, dx in (("heel", -0.05), ("toe", 0.15)):
+            m = NAMES.index(f"{side}_{part}")
+            x_planted = (0.25 if side == "left" else 0.75) + dx
+            markers[:, m, 0] = np.where(planted, x_planted, t + dx)
+            markers[:, m, 1] = y
+            markers[:, m, 2] = np.where(planted, 0.0, 0.1)
+    stamps = 1_000_000_000 + np.arange(FRAMES) * 33_333_333
+    return PoseTrack(np.arange(FRAMES), stamps, NAMES, markers)
+
+
+def shifted(track: PoseTrack, names, offset_m) -> PoseTrack:
+    markers = track.markers.copy()
+    for n in names:
+        markers[:, NAMES.index(n)] += offset_m
+    return PoseTrack(track.frames, track.stamps_ns, track.marker_names, markers)
+
+
+def test_translation_is_absolute_not_relative_error():
+    truth = walking_truth()
+    est = shifted(truth, NAMES, np.array([0.010, 0.0, 0.0]))
+    errors = evaluation.marker_errors(est, truth)
+    assert np.allclose(errors["absolute_mm"], 10.0)
+    assert np.allclose(errors["relative_mm"], 0.0, atol=1e-9)
+
+
+def test_one_knee_off_and_per_frame_statistics():
+    truth = walking_truth()
+    est = shifted(truth, ["left_knee"], np.array([0.0, 0.0, 0.032]))
+    errors = evaluation.marker_errors(est, truth)
+    assert np.allclose(errors["absolute_mm"], 32.0 / 8)       # one of the eight evaluated markers
+    assert np.allclose(errors["relative_mm"], 32.0 / 8)
+    assert errors["per_marker_mm"]["left_knee"] == pytest.approx(32.0)
+    # error growing 1 mm per frame along y: median 14.5, mean 14.5, std of 0..29
+    markers = truth.markers.copy()
+    markers[:, :, 1] += (np.arange(FRAMES) * 1e-3)[:, None]
+    ramp = evaluation.evaluate(PoseTrack(truth.frames, truth.stamps_ns, NAMES, markers), truth)
+    assert ramp["absolute_mm"]["median"] == pytest.approx(14.5)
+    assert ramp["absolute_mm"]["mean"] == pytest.approx(14.5)
+    assert ramp["absolute_mm"]["std"] == pytest.approx(np.std(np.arange(FRAMES)))
+    assert ramp["relative_mm"]["max"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_frames_matched_by_stamp():
+    truth = walking_truth()
+    sub = PoseTrack(truth.frames[5:20] + 100, truth.stamps_ns[5:20], NAMES, truth.markers[5:20] + 0.003)
+    errors = evaluation.marker_errors(sub, truth)
+    assert len(errors["absolute_mm"]) == 15
+    assert np.allclose(errors["absolute_mm"], 3.0 * np.sqrt(3))
+    late = PoseTrack(truth.frames, truth.stamps_ns + 1, NAMES, truth.markers)
+    with pytest.raises(InputError, match="share no frame stamps"):
+        evaluation.marker_errors(late, truth)
+
+
+def test_foot_skate_penetration_and_float():
+    truth = walking_truth()
+    clean = evaluation.foot_plausibility(truth)
+    assert clean["skate_mm"]["max"] == pytest.approx(0.0) and clean["skate_mm"]["contact_pairs"] > 20
+    assert clean["penetration_mm"]["max"] == 0.0 and clean["float_mm"]["max"] == 0.0
+    markers = truth.markers.copy()
+    heel = NAMES.index("left_heel")
+    planted = np.arange(FRAMES) < 15
+    markers[planted, heel, 0] += 0.004 * np.arange(15)        # slips 4 mm per frame while planted
+    markers[:, :, 2] -= 0.007                                  # whole body 7 mm into the ground
+    feet = evaluation.foot_plausibility(PoseTrack(truth.frames, truth.stamps_ns, NAMES, markers))
+    assert feet["skate_mm"]["max"] == pytest.approx(4.0)
+    assert feet["penetration_mm"]["max"] == pytest.approx(7.0)
+    raised = evaluation.foot_plausibility(shifted(truth, NAMES, np.array([0, 0, 0.012])))
+    assert raised["float_mm"]["mean"] == pytest.approx(12.0)
+
+
+def test_csv_roundtrip_and_bad_files(tmp_path):
+    truth = walking_truth()
+    path = tmp_path / "poses.csv"
+    evaluation.write_poses_csv(path, truth)
+    back = evaluation.read_poses_csv(path)
+    assert back.marker_names == NAMES and np.allclose(back.markers, truth.markers, atol=1e-6)
+    assert np.array_equal(back.stamps_ns, truth.stamps_ns)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("frame,stamp,marker,x,y,z\n0,1,pelvis,0,0,0\n")
+    with pytest.raises(InputError, match="stamp_ns"):
+        evaluation.read_poses_csv(bad)
+    bad.write_text("frame,stamp_ns,marker,x,y,z\n0,1,pelvis,0,nan,0\n")
+    with pytest.raises(InputError, match=":2: non-finite"):
+        evaluation.read_poses_csv(bad)
+    with pytest.raises(InputError, match="no such pose file"):
+        evaluation.read_poses_csv(tmp_path / "missing.csv")
+
+
+def test_eval_command_writes_json_and_plots(tmp_path, capsys):
+    truth = walking_truth()
+    run = tmp_path / "run"
+    run.mkdir()
+    evaluation.write_poses_csv(tmp_path / "truth.csv", truth)
+    evaluation.write_poses_csv(run / "poses.csv", shifted(truth, NAMES, np.array([0.0, 0.02, 0.0])))
+    left = (np.arange(FRAMES) < 15).astype(float)
+    evaluation.write_summary_csv(run / "summary.csv", [
+        {"frame": f, "stamp_ns": int(s), "speed": 1.0, "speed_std": 0.1, "stance_left_probability": left[f],
+         "effective_sample_size": 100.0, "resampled": False, "heel_strike": "", "stance_leg": "left"}
+        for f, s in zip(truth.frames, truth.stamps_ns)])
+    assert main(["eval", str(run), "--truth", str(tmp_path / "truth.csv")]) == 0
+    out = capsys.readouterr().out
+    assert "absolute" in out and "20.0" in out
+    result = json.loads((run / "eval.json").read_text())
+    assert result["absolute_mm"]["mean"] == pytest.approx(20.0)
+    assert result["relative_mm"]["mean"] == pytest.approx(0.0, abs=1e-6)
+    assert result["stance_correct_fraction"] == pytest.approx(1.0)
+    assert result["truth_speed_m_s"] == pytest.approx(1.0, rel=0.05)
+    assert (run / "error_over_time.png").stat().st_size > 1000
+    assert (run / "speed_stance.png").stat().st_size > 1000
+    # ground truth found beside the run without --truth
+    evaluation.write_poses_csv(run / "ground_truth.csv", truth)
+    assert main(["eval", str(run)]) == 0
+
+
+def test_eval_command_errors(tmp_path, capsys):
+    assert main(["eval", str(tmp_path / "nope")]) == 2
+    assert "not a directory" in capsys.readouterr().err
+    assert main(["eval", str(tmp_path)]) == 2
+    assert "poses.csv" in capsys.readouterr().err
+    evaluation.write_poses_csv(tmp_path / "poses.csv", walking_truth())
+    assert main(["eval", str(tmp_path)]) == 2
+    assert "no ground truth found" in capsys.readouterr().err
