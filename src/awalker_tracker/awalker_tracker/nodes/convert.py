@@ -1,0 +1,114 @@
+"""Message <-> core conversions for poses and posterior summaries (awalker_msgs, rclpy types).
+
+Only conversions live here; no computation. Arrays go into float64[]/float32[] fields as
+``array.array`` (fast; assigning numpy arrays element-wise is slow in rclpy).
+"""
+from __future__ import annotations
+
+import array
+
+import numpy as np
+from awalker_msgs.msg import BodyPose, FootContact, ParticleCloud, PosteriorSummary, WalkerState
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Point, Pose
+from std_msgs.msg import Header
+
+from awalker_tracker.inference import posterior as core
+
+NS_PER_S = 1_000_000_000
+
+
+def stamp_to_ns(stamp: Time) -> int:
+    return int(stamp.sec) * NS_PER_S + int(stamp.nanosec)
+
+
+def ns_to_stamp(stamp_ns: int) -> Time:
+    return Time(sec=int(stamp_ns // NS_PER_S), nanosec=int(stamp_ns % NS_PER_S))
+
+
+def header(stamp_ns: int, frame_id: str) -> Header:
+    return Header(stamp=ns_to_stamp(stamp_ns), frame_id=frame_id)
+
+
+def points_to_msg(points: np.ndarray) -> list[Point]:
+    return [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in np.asarray(points, float)]
+
+
+def points_from_msg(points: list[Point]) -> np.ndarray:
+    return np.array([[p.x, p.y, p.z] for p in points], float).reshape(-1, 3)
+
+
+def body_pose_to_msg(hdr: Header, marker_names: tuple[str, ...], markers: np.ndarray,
+                     joint_names: tuple[str, ...] = (), joint_angles: np.ndarray | None = None,
+                     torso_position: np.ndarray | None = None,
+                     torso_orientation: np.ndarray | None = None) -> BodyPose:
+    """awalker_msgs/BodyPose from markers (M, 3) m, joint angles (J,) rad, torso pose (xyz, xyzw)."""
+    msg = BodyPose(header=hdr, marker_names=list(marker_names), markers=points_to_msg(markers),
+                   joint_names=list(joint_names))
+    if joint_angles is not None:
+        msg.joint_angles = array.array("d", np.asarray(joint_angles, float).tobytes())
+    pose = Pose()
+    if torso_position is not None:
+        pose.position.x, pose.position.y, pose.position.z = (float(v) for v in torso_position)
+    if torso_orientation is not None:
+        q = pose.orientation
+        q.x, q.y, q.z, q.w = (float(v) for v in torso_orientation)
+    msg.torso = pose
+    return msg
+
+
+def body_pose_from_msg(msg: BodyPose) -> tuple[tuple[str, ...], np.ndarray]:
+    """(marker names, markers (M, 3))."""
+    return tuple(msg.marker_names), points_from_msg(msg.markers)
+
+
+def summary_to_msg(summary: core.PosteriorSummary, world_frame: str = "world") -> PosteriorSummary:
+    """awalker_msgs/PosteriorSummary stamped with the image stamp, poses in ``world_frame``."""
+    hdr = header(summary.stamp_ns, world_frame)
+    msg = PosteriorSummary(header=hdr, frame_index=int(summary.frame_index))
+    msg.map_pose = body_pose_to_msg(hdr, summary.marker_names, summary.map_markers, summary.joint_names,
+                                    summary.map_joint_angles, summary.map_torso_position,
+                                    summary.map_torso_orientation)
+    msg.mean_pose = body_pose_to_msg(hdr, summary.marker_names, summary.mean_markers)
+    walker = WalkerState(header=hdr, stance_leg=int(summary.map_stance_leg))
+    for name, value in summary.map_walker.items():
+        setattr(walker, name, float(value))
+    msg.map_walker = walker
+    msg.speed = float(summary.speed)
+    msg.speed_std = float(summary.speed_std)
+    msg.stance_left_probability = float(summary.stance_left_probability)
+    msg.effective_sample_size = float(summary.effective_sample_size)
+    msg.num_particles = int(summary.num_particles)
+    msg.resampled = bool(summary.resampled)
+    msg.contacts = [FootContact(foot=int(c.foot), position=Point(**dict(zip("xyz", map(float, c.position)))),
+                                probability=float(c.probability), heel_strike=bool(c.heel_strike))
+                    for c in summary.contacts]
+    msg.clouds = [ParticleCloud(marker_name=c.marker_name, points=points_to_msg(c.points),
+                                weights=array.array("f", np.asarray(c.weights, np.float32).tobytes()))
+                  for c in summary.clouds]
+    return msg
+
+
+def summary_from_msg(msg: PosteriorSummary) -> core.PosteriorSummary:
+    """Core PosteriorSummary from the message (inverse of ``summary_to_msg``)."""
+    names, map_markers = body_pose_from_msg(msg.map_pose)
+    _, mean_markers = body_pose_from_msg(msg.mean_pose)
+    torso = msg.map_pose.torso
+    walker = msg.map_walker
+    return core.PosteriorSummary(
+        frame_index=int(msg.frame_index), stamp_ns=stamp_to_ns(msg.header.stamp), marker_names=names,
+        joint_names=tuple(msg.map_pose.joint_names), map_markers=map_markers, mean_markers=mean_markers,
+        map_joint_angles=np.asarray(msg.map_pose.joint_angles, float),
+        map_torso_position=np.array([torso.position.x, torso.position.y, torso.position.z]),
+        map_torso_orientation=np.array([torso.orientation.x, torso.orientation.y, torso.orientation.z,
+                                        torso.orientation.w]),
+        map_stance_leg=int(walker.stance_leg),
+        map_walker={k: float(getattr(walker, k)) for k in core.WALKER_FIELDS},
+        speed=float(msg.speed), speed_std=float(msg.speed_std),
+        stance_left_probability=float(msg.stance_left_probability),
+        effective_sample_size=float(msg.effective_sample_size), num_particles=int(msg.num_particles),
+        resampled=bool(msg.resampled),
+        contacts=tuple(core.FootContactEstimate(int(c.foot), np.array([c.position.x, c.position.y, c.position.z]),
+                                                float(c.probability), bool(c.heel_strike)) for c in msg.contacts),
+        clouds=tuple(core.MarkerCloud(c.marker_name, points_from_msg(c.points), np.asarray(c.weights, float))
+                     for c in msg.clouds))

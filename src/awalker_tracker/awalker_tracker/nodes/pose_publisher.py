@@ -1,0 +1,188 @@
+"""Pose publisher node: posterior summaries -> JointState, MarkerArray (and tf when available).
+
+Subscribes ``/awalker/posterior`` (awalker_msgs/PosteriorSummary) and publishes, stamped with
+the image stamp of each summary:
+- ``/awalker/joint_states`` and ``/humans/bodies/<body_id>/joint_states`` (REP 155 style),
+  sensor_msgs/JointState with the MAP pose's joint names and angles;
+- ``/awalker/markers`` visualization_msgs/MarkerArray in the world frame: skeleton lines and
+  joints of the MAP pose, body cylinders (sizes from the body description), particle clouds of
+  head/pelvis/knees/ankles coloured by weight, foot contacts (heel strikes larger);
+- tf ``world -> <body_id>_pelvis`` when ``tf2_ros`` can be imported (not on PyPI; optional).
+"""
+from __future__ import annotations
+
+import numpy as np
+import rclpy
+from awalker_msgs.msg import PosteriorSummary
+from geometry_msgs.msg import Point, Vector3
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
+
+from awalker_tracker.model.body import BodyDescription
+from awalker_tracker.nodes.convert import points_from_msg
+
+BONES = (("pelvis", "thorax"), ("thorax", "head"), ("pelvis", "left_hip"), ("pelvis", "right_hip"),
+         ("left_hip", "left_knee"), ("left_knee", "left_ankle"), ("left_ankle", "left_heel"),
+         ("left_heel", "left_toe"), ("left_ankle", "left_toe"),
+         ("right_hip", "right_knee"), ("right_knee", "right_ankle"), ("right_ankle", "right_heel"),
+         ("right_heel", "right_toe"), ("right_ankle", "right_toe"))
+CLOUD_COLOURS = {"head": (0.2, 0.4, 1.0), "pelvis": (0.2, 0.4, 1.0), "left_knee": (0.1, 0.9, 0.1),
+                 "right_knee": (1.0, 0.1, 0.1), "left_ankle": (1.0, 1.0, 1.0), "right_ankle": (1.0, 0.9, 0.1)}
+
+
+def body_cylinders(body: BodyDescription) -> tuple[tuple[str, str, float], ...]:
+    """(start marker, end marker, radius m) of the cylinders drawn for the MAP body."""
+    def r(*pairs):
+        return float(np.mean(pairs))
+    legs = []
+    for side in ("left", "right"):
+        legs += [(f"{side}_hip", f"{side}_knee", r(body.upper_leg_radii_top, body.upper_leg_radii_bottom)),
+                 (f"{side}_knee", f"{side}_ankle", r(body.lower_leg_radii_top, body.lower_leg_radii_bottom)),
+                 (f"{side}_heel", f"{side}_toe", r(body.foot_radii_heel, body.foot_radii_toe))]
+    return (("pelvis", "thorax", r(body.torso_radii_bottom, body.torso_radii_top)),
+            ("thorax", "head", r(body.head_radii_bottom, body.head_radii_top)), *legs)
+
+
+def quaternion_z_to(direction: np.ndarray) -> tuple[float, float, float, float]:
+    """Shortest rotation (x, y, z, w) taking the z axis onto ``direction``."""
+    d = np.asarray(direction, float)
+    d = d / max(np.linalg.norm(d), 1e-12)
+    w = 1.0 + d[2]
+    if w < 1e-9:                     # opposite: half turn about x
+        return (1.0, 0.0, 0.0, 0.0)
+    q = np.array([-d[1], d[0], 0.0, w])
+    q /= np.linalg.norm(q)
+    return tuple(float(v) for v in q)
+
+
+def joint_state_from_summary(msg: PosteriorSummary) -> JointState:
+    return JointState(header=msg.header, name=list(msg.map_pose.joint_names),
+                      position=list(msg.map_pose.joint_angles))
+
+
+def marker_array_from_summary(msg: PosteriorSummary, cylinders: tuple[tuple[str, str, float], ...],
+                              body_id: str = "walker", clouds: bool = True) -> MarkerArray:
+    """MarkerArray of one posterior summary (ids stable per namespace, so each frame replaces the last)."""
+    hdr = msg.header
+    names = list(msg.map_pose.marker_names)
+    xyz = points_from_msg(msg.map_pose.markers)
+    index = {n: i for i, n in enumerate(names)}
+    out: list[Marker] = []
+
+    def marker(ns: str, mid: int, kind: int, rgba, scale) -> Marker:
+        m = Marker(header=hdr, ns=f"{body_id}/{ns}", id=mid, type=kind, action=Marker.ADD)
+        m.pose.orientation.w = 1.0
+        m.scale = Vector3(x=float(scale[0]), y=float(scale[1]), z=float(scale[2]))
+        m.color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
+        return m
+
+    bones = [b for b in BONES if b[0] in index and b[1] in index]
+    lines = marker("skeleton", 0, Marker.LINE_LIST, (1.0, 0.5, 0.0, 1.0), (0.015, 0, 0))
+    lines.points = [Point(x=float(v[0]), y=float(v[1]), z=float(v[2])) for a, b in bones for v in (xyz[index[a]], xyz[index[b]])]
+    out.append(lines)
+    joints = marker("joints", 0, Marker.SPHERE_LIST, (1.0, 1.0, 0.0, 1.0), (0.04, 0.04, 0.04))
+    joints.points = [Point(x=float(v[0]), y=float(v[1]), z=float(v[2])) for v in xyz]
+    out.append(joints)
+    for i, (a, b, radius) in enumerate(cylinders):
+        if a not in index or b not in index:
+            continue
+        start, end = xyz[index[a]], xyz[index[b]]
+        length = float(np.linalg.norm(end - start))
+        cyl = marker("body", i, Marker.CYLINDER, (0.6, 0.6, 0.9, 0.5), (2 * radius, 2 * radius, max(length, 1e-3)))
+        mid = 0.5 * (start + end)
+        cyl.pose.position = Point(x=float(mid[0]), y=float(mid[1]), z=float(mid[2]))
+        q = quaternion_z_to(end - start)
+        cyl.pose.orientation.x, cyl.pose.orientation.y, cyl.pose.orientation.z, cyl.pose.orientation.w = q
+        out.append(cyl)
+    if clouds:
+        for i, cloud in enumerate(msg.clouds):
+            weights = np.asarray(cloud.weights, float)
+            rgb = CLOUD_COLOURS.get(cloud.marker_name, (0.8, 0.8, 0.8))
+            pts = marker(f"cloud/{cloud.marker_name}", i, Marker.POINTS, (*rgb, 1.0), (0.01, 0.01, 0))
+            pts.points = list(cloud.points)
+            top = weights.max() if weights.size else 1.0
+            intensity = np.clip(weights / top, 0.05, 1.0) if top > 0 else np.ones_like(weights)
+            pts.colors = [ColorRGBA(r=rgb[0], g=rgb[1], b=rgb[2], a=float(a)) for a in intensity]
+            out.append(pts)
+    for i, contact in enumerate(msg.contacts):
+        if not np.isfinite(contact.position.x):
+            continue
+        size = 0.08 if contact.heel_strike else 0.05
+        colour = (1.0, 0.1, 0.1) if contact.heel_strike else (0.1, 0.8, 0.8)
+        dot = marker("contacts", i, Marker.SPHERE, (*colour, max(0.1, float(contact.probability))), (size, size, 0.01))
+        dot.pose.position = contact.position
+        out.append(dot)
+    return MarkerArray(markers=out)
+
+
+class PosePublisherNode(Node):
+    """Publishes JointState / MarkerArray (and tf) for every posterior summary."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("awalker_pose_publisher", **kwargs)
+        self.declare_parameter("posterior_topic", "/awalker/posterior",
+                               descriptor_text("awalker_msgs/PosteriorSummary input topic"))
+        self.declare_parameter("body_id", "walker", descriptor_text("REP 155 body id: /humans/bodies/<id>/..."))
+        self.declare_parameter("body_description", "",
+                               descriptor_text("body YAML (segment sizes, m) for the cylinders; empty = default"))
+        self.declare_parameter("publish_clouds", True, descriptor_text("publish posterior particle clouds"))
+        body_id = self.get_parameter("body_id").value
+        body_path = self.get_parameter("body_description").value
+        self.body_id = body_id
+        self.cylinders = body_cylinders(BodyDescription.from_yaml(body_path) if body_path else BodyDescription.default())
+        self.publish_clouds = bool(self.get_parameter("publish_clouds").value)
+        qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.joint_pub = self.create_publisher(JointState, "/awalker/joint_states", qos)
+        self.rep155_pub = self.create_publisher(JointState, f"/humans/bodies/{body_id}/joint_states", qos)
+        self.marker_pub = self.create_publisher(MarkerArray, "/awalker/markers", qos)
+        self.tf_broadcaster = _tf_broadcaster(self)
+        self.count = 0
+        self.create_subscription(PosteriorSummary, self.get_parameter("posterior_topic").value, self.on_summary, qos)
+
+    def set_body(self, body: BodyDescription) -> None:
+        self.cylinders = body_cylinders(body)
+
+    def on_summary(self, msg: PosteriorSummary) -> None:
+        joints = joint_state_from_summary(msg)
+        self.joint_pub.publish(joints)
+        self.rep155_pub.publish(joints)
+        self.marker_pub.publish(marker_array_from_summary(msg, self.cylinders, self.body_id, self.publish_clouds))
+        if self.tf_broadcaster is not None:
+            from geometry_msgs.msg import TransformStamped
+
+            t = TransformStamped(header=msg.header, child_frame_id=f"{self.body_id}_pelvis")
+            p, q = msg.map_pose.torso.position, msg.map_pose.torso.orientation
+            t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = p.x, p.y, p.z
+            t.transform.rotation = q
+            self.tf_broadcaster.sendTransform(t)
+        self.count += 1
+
+
+def descriptor_text(text: str):
+    from rcl_interfaces.msg import ParameterDescriptor
+
+    return ParameterDescriptor(description=text)
+
+
+def _tf_broadcaster(node: Node):
+    try:
+        from tf2_ros import TransformBroadcaster
+    except ImportError:
+        return None
+    return TransformBroadcaster(node)
+
+
+def main(args: list[str] | None = None) -> None:
+    rclpy.init(args=args)
+    node = PosePublisherNode()
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()

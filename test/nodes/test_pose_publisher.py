@@ -1,0 +1,120 @@
+"""Pose publisher node and summary message conversion (in-process, private rclpy context)."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from awalker_tracker.inference.posterior import LEFT, RIGHT, WALKER_FIELDS, FootContactEstimate, MarkerCloud, PosteriorSummary
+from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription
+
+
+def make_summary(stamp_ns: int, frame: int, rng) -> PosteriorSummary:
+    markers = rng.normal(size=(13, 3)) + [0, 0, 1]
+    return PosteriorSummary(
+        frame_index=frame, stamp_ns=stamp_ns, marker_names=MARKER_NAMES, joint_names=JOINT_NAMES,
+        map_markers=markers, mean_markers=markers + 0.01, map_joint_angles=rng.normal(size=len(JOINT_NAMES)),
+        map_torso_position=markers[0], map_torso_orientation=np.array([0, 0, np.sin(0.2), np.cos(0.2)]),
+        map_stance_leg=RIGHT, map_walker={k: float(i) for i, k in enumerate(WALKER_FIELDS)},
+        speed=1.3, speed_std=0.1, stance_left_probability=0.2, effective_sample_size=321.0, num_particles=500,
+        resampled=True,
+        contacts=(FootContactEstimate(LEFT, np.array([0.1, 0.2, 0.0]), 0.2, False),
+                  FootContactEstimate(RIGHT, np.array([0.4, 0.0, 0.0]), 0.8, True)),
+        clouds=(MarkerCloud("head", rng.normal(size=(20, 3)), rng.random(20) / 20),))
+
+
+def test_summary_message_roundtrip():
+    from awalker_tracker.nodes.convert import summary_from_msg, summary_to_msg
+
+    s = make_summary(1_700_000_000_123_456_789, 4, np.random.default_rng(0))
+    msg = summary_to_msg(s, "world")
+    assert msg.header.stamp.sec == 1_700_000_000 and msg.header.stamp.nanosec == 123_456_789
+    back = summary_from_msg(msg)
+    assert back.stamp_ns == s.stamp_ns and back.frame_index == 4 and back.marker_names == MARKER_NAMES
+    assert np.allclose(back.map_markers, s.map_markers) and np.allclose(back.mean_markers, s.mean_markers)
+    assert np.allclose(back.map_joint_angles, s.map_joint_angles) and back.joint_names == JOINT_NAMES
+    assert np.allclose(back.map_torso_orientation, s.map_torso_orientation)
+    assert back.map_walker == s.map_walker and back.map_stance_leg == RIGHT
+    assert back.contacts[1].heel_strike and np.allclose(back.contacts[0].position, [0.1, 0.2, 0])
+    assert np.allclose(back.clouds[0].weights, s.clouds[0].weights, atol=1e-7)
+    assert back.speed == 1.3 and back.resampled and back.effective_sample_size == 321.0
+
+
+def test_cylinder_geometry():
+    from awalker_tracker.nodes.convert import summary_to_msg
+    from awalker_tracker.nodes.pose_publisher import body_cylinders, marker_array_from_summary, quaternion_z_to
+
+    for d in ([0, 0, 1], [1, 0, 0], [0.3, -0.4, 0.5], [0, 0, -1]):
+        q = np.array(quaternion_z_to(np.array(d, float)))
+        x, y, z, w = q
+        rot_z = np.array([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)])
+        assert np.allclose(rot_z, np.array(d) / np.linalg.norm(d))
+    s = make_summary(10, 0, np.random.default_rng(1))
+    body = BodyDescription.default()
+    array = marker_array_from_summary(summary_to_msg(s), body_cylinders(body))
+    cyl = [m for m in array.markers if m.ns.endswith("/body")]
+    assert len(cyl) == 8
+    knee, ankle = s.map_markers[MARKER_NAMES.index("left_knee")], s.map_markers[MARKER_NAMES.index("left_ankle")]
+    shin = [m for m in cyl if np.isclose(m.scale.z, np.linalg.norm(ankle - knee))]
+    assert len(shin) == 1
+    assert np.allclose([shin[0].pose.position.x, shin[0].pose.position.y, shin[0].pose.position.z], (knee + ankle) / 2)
+    clouds = [m for m in array.markers if "/cloud/" in m.ns]
+    assert len(clouds) == 1 and len(clouds[0].points) == 20 and len(clouds[0].colors) == 20
+    assert all(m.header.stamp.nanosec == 10 for m in array.markers)
+
+
+def test_node_publishes_joint_states_and_markers_with_image_stamp(ros_context):
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import JointState
+    from visualization_msgs.msg import MarkerArray
+
+    from awalker_msgs.msg import PosteriorSummary as SummaryMsg
+    from awalker_tracker.nodes.convert import stamp_to_ns, summary_to_msg
+    from awalker_tracker.nodes.pose_publisher import PosePublisherNode
+
+    node = PosePublisherNode(context=ros_context)
+    probe = Node("probe", context=ros_context)
+    got: dict[str, list] = {"joints": [], "rep155": [], "markers": []}
+    qos = QoSProfile(depth=50)
+    probe.create_subscription(JointState, "/awalker/joint_states", got["joints"].append, qos)
+    probe.create_subscription(JointState, "/humans/bodies/walker/joint_states", got["rep155"].append, qos)
+    probe.create_subscription(MarkerArray, "/awalker/markers", got["markers"].append, qos)
+    pub = probe.create_publisher(SummaryMsg, "/awalker/posterior", qos)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(probe)
+    try:
+        deadline = time.monotonic() + 5
+        while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        rng = np.random.default_rng(2)
+        stamps = [1_000_000_000 + k * 33_333_333 for k in range(5)]
+        for k, stamp in enumerate(stamps):
+            pub.publish(summary_to_msg(make_summary(stamp, k, rng)))
+        while min(len(v) for v in got.values()) < len(stamps) and time.monotonic() < deadline + 5:
+            executor.spin_once(timeout_sec=0.05)
+        assert [stamp_to_ns(m.header.stamp) for m in got["joints"]] == stamps
+        assert [stamp_to_ns(m.header.stamp) for m in got["rep155"]] == stamps
+        assert [stamp_to_ns(m.markers[0].header.stamp) for m in got["markers"]] == stamps
+        assert list(got["joints"][0].name) == list(JOINT_NAMES)
+        assert all(m.header.frame_id == "world" for m in got["markers"][0].markers)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        probe.destroy_node()
+
+
+def test_bad_body_description_is_reported(ros_context, tmp_path):
+    from rclpy.parameter import Parameter
+
+    from awalker_tracker.errors import InputError
+    from awalker_tracker.nodes.pose_publisher import PosePublisherNode
+
+    bad = tmp_path / "body.yaml"
+    bad.write_text("body: {upper_leg_length: -1}\n")
+    with pytest.raises(InputError, match="body.yaml"):
+        PosePublisherNode(context=ros_context,
+                          parameter_overrides=[Parameter("body_description", value=str(bad))])
