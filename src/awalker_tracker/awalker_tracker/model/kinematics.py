@@ -1,0 +1,475 @@
+"""Conditional 3D kinematics (paper Sec. 4.3): a 3D body driven by the planar walker.
+
+State of N particles (``KinematicState``): torso orientation (heading = torso yaw, pitch,
+roll), hip abduction and rotation, knees, ankle flexion and inversion (13 DOFs, ``DOF_NAMES``);
+the two sagittal hip angles ("Hip X") are the walker's leg angles, so with them the body has
+3 torso-orientation DOFs and 12 joint angles as in the paper. The torso position is not free:
+it follows from the stance-foot ground contact.
+
+Each DOF psi follows eq. (6):
+    psi_t = psi_{t-1} + alpha (psi_{t-1} - psi_{t-2}) + dt^2 (k (psi_bar - psi_{t-1}) + eta),
+    eta ~ N(0, sigma^2) truncated so that psi_t stays within its joint limits,
+with Table 1's parameters (``TABLE1``; the joint column reconstructed as in MODEL.md Sec. 5).
+alpha is given for dt = 1/30 s; at another dt we use alpha^(30 dt) (square root at 1/60 s,
+as the paper does). k is in 1/s^2. The swing knee's rest angle is 5 x psi_hip with
+psi_hip = phi1 - phi2, the sagittal angle of the swing leg behind the stance leg (bent knee
+early in the stride, straight towards its end).
+
+Units of sigma (the paper does not state them): **deg/s^2**. Decided by sampling the prior
+(``benchmarks/bench_render.py`` prints the figures; numbers at dt = 1/30 s, 2000 particles,
+60 frames): with sigma in deg/s^2 the median per-frame change is 0.5 deg for the swing knee
+and 0.05-0.15 deg for the torso and ankles, the heading wanders ~10 deg/s, and the knee
+still bends ~50 deg early in each swing through its rest-angle spring: human-like. Read as
+rad/s^2, sigma = 300 alone moves a joint by sigma dt^2 = 0.33 rad (19 deg) in one frame and
+the velocity term accumulates it to several radians per second: torso and heading spin
+wildly and every limited joint sits on its limits. ``KinematicConfig.sigma_unit`` holds the
+conversion factor to rad (pi/180).
+
+Stance-foot contact: the foot's sole is a rocker, a circular arc of radius
+``body.sole_radius`` through the heel and toe ends of the sole line (bulging ``sole_sag`` below
+it). The contact is the arc's lowest point (angle ``contact_roll`` beta on the arc, clipped
+at the heel/toe ends where the foot then pivots about the end). As the foot pitches with the
+walker's stance leg (its pitch follows phi1 plus knee and ankle), the contact rolls from
+heel to toe, and the ground contact point moves by the rolled arc length sole_radius *
+d(beta): rolling without slip, and the foot never goes below the ground. The whole body is
+placed by putting this contact point at ``contact_point`` on the ground (z = 0); heading
+changes turn the body about it. At heel strike the contact passes to the other foot at
+the ground position under that foot's lowest point (its height is snapped to the ground: the
+paper's small "jump").
+
+``plane_origin`` maps the walker's sagittal x to the world: the walker's stance contact
+x (``walker.stance_contact_x``) lands on ``contact_point``, x grows along the heading.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+from scipy.special import ndtr, ndtri
+
+from awalker_tracker.model.body import (
+    JOINT_NAMES,
+    MARKER_NAMES,
+    BodyDescription,
+    BodyPoseBatch,
+    BodySegments,
+)
+from awalker_tracker.model.walker import LEFT, WalkerParams, WalkerState, stance_contact_x
+
+DOF_NAMES: tuple[str, ...] = (
+    "torso_pitch", "torso_roll", "heading",
+    "left_hip_abduction", "right_hip_abduction", "left_hip_rotation", "right_hip_rotation",
+    "left_knee", "right_knee",
+    "left_ankle_flexion", "right_ankle_flexion", "left_ankle_inversion", "right_ankle_inversion",
+)
+_D = len(DOF_NAMES)
+_SIDE = np.array([1.0, -1.0])  # +1 left, -1 right: mirrors abduction, rotation, inversion
+
+
+@dataclass(frozen=True)
+class JointPrior:
+    """One row of Table 1: eq. (6) parameters. alpha at dt = 1/30 s; k in 1/s^2; rest (rad);
+    sigma in the config's sigma unit (deg/s^2); limits (rad)."""
+
+    alpha: float
+    stiffness: float
+    rest: float
+    sigma: float
+    lower: float = -np.inf
+    upper: float = np.inf
+
+
+_EIGHTH = np.pi / 8
+TABLE1: dict[str, JointPrior] = {
+    "torso_side": JointPrior(0.9, 5.0, 0.0, 25.0),
+    "torso_front": JointPrior(0.9, 5.0, 0.0, 25.0),
+    "torso_up": JointPrior(0.75, 0.0, 0.0, 300.0),
+    "hip_front": JointPrior(0.5, 5.0, 0.0, 50.0, -_EIGHTH, _EIGHTH),
+    "hip_up": JointPrior(0.5, 5.0, 0.0, 50.0, -_EIGHTH, _EIGHTH),
+    "stance_knee": JointPrior(0.75, 20.0, 0.0, 50.0, 0.0, np.pi),
+    "swing_knee": JointPrior(0.9, 15.0, 0.0, 300.0, 0.0, np.pi),  # rest = 5 psi_hip (see module doc)
+    "ankle_side": JointPrior(0.9, 50.0, 0.0, 50.0, -_EIGHTH, _EIGHTH),
+    "ankle_front": JointPrior(0.9, 50.0, 0.0, 50.0, -_EIGHTH, _EIGHTH),
+}
+# Table 1 row for each DOF in DOF_NAMES (knees: chosen per particle by stance/swing role).
+_DOF_ROWS = ("torso_side", "torso_front", "torso_up", "hip_front", "hip_front", "hip_up", "hip_up",
+             "stance_knee", "stance_knee", "ankle_side", "ankle_side", "ankle_front", "ankle_front")
+
+
+@dataclass(frozen=True)
+class KinematicConfig:
+    """Conditional kinematics settings. ``dt`` (s): 1/30 or 1/60 as in the paper."""
+
+    dt: float = 1.0 / 30.0
+    table: dict[str, JointPrior] = field(default_factory=lambda: dict(TABLE1))
+    sigma_unit: float = np.pi / 180.0       # Table 1 sigma is in deg/s^2 (see module docstring)
+    swing_knee_rest_gain: float = 5.0       # psi_bar_swing_knee = gain * psi_hip
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"KinematicConfig.dt must be > 0 s, got {self.dt!r}")
+
+    def alpha(self, row: str) -> float:
+        """alpha for this dt: Table 1 value (for 1/30 s) ^ (30 dt)."""
+        return float(self.table[row].alpha ** (30.0 * self.dt))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Per-DOF (13,) arrays of alpha, k, rest, sigma (rad/s^2), lower, upper (stance knee rows)."""
+        rows = [self.table[r] for r in _DOF_ROWS]
+        return {
+            "alpha": np.array([self.alpha(r) for r in _DOF_ROWS]),
+            "stiffness": np.array([r.stiffness for r in rows]),
+            "rest": np.array([r.rest for r in rows]),
+            "sigma": np.array([r.sigma for r in rows]) * self.sigma_unit,
+            "lower": np.array([r.lower for r in rows]),
+            "upper": np.array([r.upper for r in rows]),
+        }
+
+
+@dataclass
+class KinematicState:
+    """Kinematic state of N particles (arrays with leading N); angles rad, positions m.
+
+    Pairs are [left, right]. ``previous`` holds all 13 DOFs of the previous frame (eq. 6 needs
+    psi_{t-2}) in ``DOF_NAMES`` order. ``contact_*`` describe the stance foot's rolling contact.
+    """
+
+    heading: np.ndarray         # (N,) torso yaw = walking direction, from world +x about +z
+    torso_lean: np.ndarray      # (N, 2) [pitch (forward lean +), roll (lean to the right +)]
+    hip_abduction: np.ndarray   # (N, 2) leg away from the midline +
+    hip_rotation: np.ndarray    # (N, 2) internal rotation +
+    knee: np.ndarray            # (N, 2) flexion + (0 = straight)
+    ankle: np.ndarray           # (N, 2, 2) [..., 0] dorsiflexion (toes up) +, [..., 1] inversion +
+    previous: np.ndarray        # (N, 13) DOFs one frame earlier
+    contact_point: np.ndarray   # (N, 2) world xy of the stance foot's ground contact
+    contact_roll: np.ndarray    # (N,) beta: angle of the contact on the rocker sole (+ toward the toe)
+    contact_leg: np.ndarray     # (N,) int8 LEFT/RIGHT: the foot holding the contact
+    plane_origin: np.ndarray    # (N, 2) world xy of the walker's sagittal x = 0
+
+    def __len__(self) -> int:
+        return int(self.heading.shape[0])
+
+    def dofs(self) -> np.ndarray:
+        """Current DOFs packed in ``DOF_NAMES`` order, (N, 13)."""
+        return np.column_stack([
+            self.torso_lean[:, 0], self.torso_lean[:, 1], self.heading,
+            self.hip_abduction, self.hip_rotation, self.knee, self.ankle[:, :, 0], self.ankle[:, :, 1],
+        ])
+
+    @staticmethod
+    def unpack(dofs: np.ndarray) -> dict[str, np.ndarray]:
+        """Named DOF arrays from a packed (N, 13) array (inverse of ``dofs``)."""
+        return {
+            "torso_lean": dofs[:, 0:2].copy(), "heading": dofs[:, 2].copy(),
+            "hip_abduction": dofs[:, 3:5].copy(), "hip_rotation": dofs[:, 5:7].copy(),
+            "knee": dofs[:, 7:9].copy(), "ankle": np.stack([dofs[:, 9:11], dofs[:, 11:13]], axis=2),
+        }
+
+    def copy(self) -> "KinematicState":
+        return KinematicState(*(getattr(self, f.name).copy() for f in fields(self)))
+
+    def take(self, indices: np.ndarray) -> "KinematicState":
+        return KinematicState(*(getattr(self, f.name)[indices] for f in fields(self)))
+
+
+# ---- rotations (vectorised) ---------------------------------------------------------------
+def _rot(axis: int, angle: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) about a coordinate axis (0 = x, 1 = y, 2 = z)."""
+    angle = np.asarray(angle, float)
+    c, s = np.cos(angle), np.sin(angle)
+    r = np.zeros(angle.shape + (3, 3))
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    r[..., axis, axis] = 1.0
+    r[..., i, i] = c
+    r[..., j, j] = c
+    r[..., i, j] = -s
+    r[..., j, i] = s
+    return r
+
+
+def _apply(rotation: np.ndarray, vector: np.ndarray) -> np.ndarray:
+    """rotation (..., 3, 3) @ vector (3,) or (..., 3)."""
+    return np.einsum("...ij,...j->...i", rotation, np.broadcast_to(vector, rotation.shape[:-1]))
+
+
+_LEG_SEGMENT = np.diag([1.0, -1.0, -1.0])                        # (fwd, left, up) -> (fwd, -left, down)
+_FOOT_SEGMENT = np.array([[0.0, 0, 1], [0, -1, 0], [1, 0, 0]])   # (fwd, left, up) -> (up, -left, fwd)
+
+
+@dataclass
+class _LocalPose:
+    """Body posed with the pelvis at the origin (world orientation), arrays over N (and legs)."""
+
+    torso: np.ndarray   # (N, 3, 3) columns forward, left, up
+    hips: np.ndarray    # (N, 2, 3)
+    thigh: np.ndarray   # (N, 2, 3, 3) columns forward, left, up of each thigh
+    knees: np.ndarray   # (N, 2, 3)
+    shank: np.ndarray   # (N, 2, 3, 3)
+    ankles: np.ndarray  # (N, 2, 3)
+    foot: np.ndarray    # (N, 2, 3, 3) columns along the foot (heel->toe), left, up
+
+
+def leg_angles(walker: WalkerState) -> np.ndarray:
+    """Global sagittal leg angles [left, right] (N, 2) from the walker's stance/swing angles."""
+    left_is_stance = walker.stance_leg == LEFT
+    left = np.where(left_is_stance, walker.stance_angle, walker.swing_angle)
+    right = np.where(left_is_stance, walker.swing_angle, walker.stance_angle)
+    return np.stack([left, right], axis=1)
+
+
+def _local_pose(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray) -> _LocalPose:
+    """Forward kinematics relative to the pelvis. legs (N, 2) sagittal leg angles, dofs (N, 13)."""
+    d = KinematicState.unpack(dofs)
+    heading = _rot(2, d["heading"])                                           # (N,3,3)
+    torso = heading @ _rot(1, d["torso_lean"][:, 0]) @ _rot(0, d["torso_lean"][:, 1])
+    hips = np.stack([_apply(torso, [0.0, s * body.hip_width / 2, 0.0]) for s in _SIDE], axis=1)
+    # Leg angle phi about the lateral axis (foot ahead for phi > 0), then abduction, rotation.
+    thigh = (heading[:, None] @ _rot(1, -legs) @ _rot(0, _SIDE * d["hip_abduction"])
+             @ _rot(2, -_SIDE * d["hip_rotation"]))
+    knees = hips + _apply(thigh, [0.0, 0.0, -body.upper_leg_length])
+    shank = thigh @ _rot(1, d["knee"])
+    ankles = knees + _apply(shank, [0.0, 0.0, -body.lower_leg_length])
+    foot = shank @ _rot(1, -d["ankle"][..., 0]) @ _rot(0, -_SIDE * d["ankle"][..., 1])
+    return _LocalPose(torso, hips, thigh, knees, shank, ankles, foot)
+
+
+def _sole_point(body: BodyDescription, ankles: np.ndarray, foot: np.ndarray, beta: np.ndarray) -> np.ndarray:
+    """Point at angle beta on the rocker sole (..., 3) for feet at ``ankles`` with frames ``foot``."""
+    rho = body.sole_radius
+    x_mid = body.foot_length / 2 - body.heel_offset
+    centre_local = np.array([x_mid, 0.0, -body.ankle_height - body.sole_sag + rho])
+    offset = np.stack([rho * np.sin(beta), np.zeros_like(beta), -rho * np.cos(beta)], axis=-1)
+    return ankles + np.einsum("...ij,...j->...i", foot, centre_local + offset)
+
+
+def _lowest_roll(body: BodyDescription, foot: np.ndarray) -> np.ndarray:
+    """beta of the rocker sole's lowest point, clipped to the sole's ends (heel/toe pivots)."""
+    along_z, up_z = foot[..., 2, 0], foot[..., 2, 2]
+    beta = np.arctan2(-along_z, up_z)
+    limit = body.sole_half_angle
+    return np.clip(beta, -limit, limit)
+
+
+def _pick(values: np.ndarray, leg: np.ndarray) -> np.ndarray:
+    """values (N, 2, ...) at the given leg index per particle -> (N, ...)."""
+    return values[np.arange(values.shape[0]), leg.astype(np.intp)]
+
+
+def _horizontal_direction(foot: np.ndarray) -> np.ndarray:
+    """Unit xy direction (N, 2) of a foot's heel->toe axis projected on the ground."""
+    xy = foot[:, :2, 0]
+    norm = np.linalg.norm(xy, axis=1, keepdims=True)
+    return xy / np.maximum(norm, 1e-9)
+
+
+def truncated_normal(rng: np.random.Generator, mean: np.ndarray, sigma: np.ndarray,
+                     lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Samples of N(mean, sigma^2) truncated to [lower, upper] (inverse CDF, broadcast shapes).
+
+    Sampled in the tail that keeps precision (mirror when the interval lies above the mean);
+    bounds far in a tail fall back to the nearest bound.
+    """
+    mean, sigma, lower, upper = np.broadcast_arrays(*(np.asarray(v, float) for v in (mean, sigma, lower, upper)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = (lower - mean) / sigma
+        b = (upper - mean) / sigma
+    flip = a > 0  # interval entirely above the mean: sample -x from [-b, -a]
+    lo = np.where(flip, -b, a)
+    hi = np.where(flip, -a, b)
+    cdf_lo, cdf_hi = ndtr(lo), ndtr(hi)
+    u = rng.random(mean.shape)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = ndtri(cdf_lo + u * (cdf_hi - cdf_lo))
+    z = np.where(flip, -z, z)
+    out = mean + sigma * z
+    out = np.where(np.isfinite(out), out, np.where(flip, lower, upper))
+    return np.clip(out, lower, upper)
+
+
+def _eq6(config: KinematicConfig, walker: WalkerState, current: np.ndarray, previous: np.ndarray,
+         rng: np.random.Generator) -> np.ndarray:
+    """One step of eq. (6) for all DOFs (N, 13) with truncated noise; knees by stance/swing role."""
+    n = current.shape[0]
+    p = {k: np.broadcast_to(v, (n, _D)).copy() for k, v in config.arrays().items()}
+    swing = config.table["swing_knee"]
+    knee_cols = np.array([7, 8])
+    is_swing = np.stack([walker.stance_leg != LEFT, walker.stance_leg == LEFT], axis=1)  # (N, 2) [left, right]
+    psi_hip = walker.stance_angle - walker.swing_angle
+    swing_values = {
+        "alpha": config.alpha("swing_knee"), "stiffness": swing.stiffness,
+        "rest": config.swing_knee_rest_gain * psi_hip[:, None], "sigma": swing.sigma * config.sigma_unit,
+        "lower": swing.lower, "upper": swing.upper,
+    }
+    for key, value in swing_values.items():
+        p[key][:, knee_cols] = np.where(is_swing, value, p[key][:, knee_cols])
+    dt2 = config.dt**2
+    mean = current + p["alpha"] * (current - previous) + dt2 * p["stiffness"] * (p["rest"] - current)
+    # psi_t = mean + dt^2 eta; truncate eta so that psi_t stays within the limits.
+    eta = truncated_normal(rng, 0.0, p["sigma"], (p["lower"] - mean) / dt2, (p["upper"] - mean) / dt2)
+    return np.clip(mean + dt2 * eta, p["lower"], p["upper"])
+
+
+def _contact_translation(body: BodyDescription, local: _LocalPose, leg: np.ndarray, beta: np.ndarray,
+                         ground_xy: np.ndarray) -> np.ndarray:
+    """Translation (N, 3) that puts the pelvis-relative sole point (leg, beta) on the ground at ground_xy."""
+    point = _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), beta)
+    return np.column_stack([ground_xy - point[:, :2], -point[:, 2]])
+
+
+def _plane_origin(params: WalkerParams, walker: WalkerState, contact_point: np.ndarray,
+                  heading: np.ndarray) -> np.ndarray:
+    along = np.stack([np.cos(heading), np.sin(heading)], axis=1)
+    return contact_point - stance_contact_x(params, walker)[:, None] * along
+
+
+def initial_kinematics(
+    config: KinematicConfig,
+    walker: WalkerState,
+    start_position_xy: np.ndarray,
+    heading: float | np.ndarray,
+    n: int,
+    rng: np.random.Generator,
+    *,
+    body: BodyDescription | None = None,
+    params: WalkerParams | None = None,
+    position_spread: float = 0.0,
+    heading_spread: float = 0.0,
+    joint_spread: float = 0.0,
+) -> KinematicState:
+    """N kinematic states near a rest pose: pelvis above ``start_position_xy`` (m), torso yaw
+    ``heading`` (rad); Gaussian spreads (m, rad, rad; joints truncated to their limits).
+
+    ``walker`` has N or 1 entries (broadcast). Zero joint velocities. The swing knee starts at
+    min(its rest angle 5 psi_hip, 0.6 rad) so the swing foot clears the ground.
+    """
+    body = body or BodyDescription.default()
+    params = params or body.walker_params()
+    if len(walker) == 1 and n > 1:
+        walker = walker.take(np.zeros(n, dtype=np.intp))
+    if len(walker) != n:
+        raise ValueError(f"initial_kinematics: walker has {len(walker)} entries, expected 1 or {n}")
+    p = config.arrays()
+    dofs = np.zeros((n, _D))
+    dofs[:, 2] = np.asarray(heading, float) + heading_spread * rng.standard_normal(n)
+    swing_knee = np.clip(config.swing_knee_rest_gain * (walker.stance_angle - walker.swing_angle), 0.05, 0.6)
+    stance_knee = np.full(n, 0.05)
+    left_stance = walker.stance_leg == LEFT
+    dofs[:, 7] = np.where(left_stance, stance_knee, swing_knee)
+    dofs[:, 8] = np.where(left_stance, swing_knee, stance_knee)
+    if joint_spread > 0:
+        cols = np.array([0, 1, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12])
+        lower = np.broadcast_to(p["lower"][cols], (n, cols.size))
+        upper = np.broadcast_to(p["upper"][cols], (n, cols.size))
+        dofs[:, cols] = truncated_normal(rng, dofs[:, cols], joint_spread, lower, upper)
+    legs = leg_angles(walker)
+    local = _local_pose(body, legs, dofs)
+    leg = walker.stance_leg.astype(np.int8)
+    beta = _lowest_roll(body, _pick(local.foot, leg))
+    pelvis_xy = np.asarray(start_position_xy, float)[None, :] + position_spread * rng.standard_normal((n, 2))
+    point = _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), beta)
+    contact_point = pelvis_xy + point[:, :2]
+    named = KinematicState.unpack(dofs)
+    return KinematicState(
+        heading=named["heading"], torso_lean=named["torso_lean"], hip_abduction=named["hip_abduction"],
+        hip_rotation=named["hip_rotation"], knee=named["knee"], ankle=named["ankle"], previous=dofs.copy(),
+        contact_point=contact_point, contact_roll=beta, contact_leg=leg.copy(),
+        plane_origin=_plane_origin(params, walker, contact_point, named["heading"]),
+    )
+
+
+def sample_kinematics(
+    config: KinematicConfig,
+    body: BodyDescription,
+    params: WalkerParams,
+    walker_prev: WalkerState | None,
+    walker: WalkerState,
+    events: object | None,
+    kin: KinematicState,
+    rng: np.random.Generator,
+) -> KinematicState:
+    """Sample k_t ~ p(k_t | d_t, k_{t-1}) for N particles (eq. 6 plus the contact constraint).
+
+    ``walker`` is the walker state after this frame's dynamics step; a change of
+    ``walker.stance_leg`` against ``kin.contact_leg`` is a heel strike (``walker_prev`` and
+    ``events`` are accepted for interface symmetry and not needed).
+    """
+    del walker_prev, events
+    current = kin.dofs()
+    new = _eq6(config, walker, current, kin.previous, rng)
+    local = _local_pose(body, leg_angles(walker), new)
+    old_leg = kin.contact_leg
+    old_foot = _pick(local.foot, old_leg)
+    beta = _lowest_roll(body, old_foot)
+    # Roll without slip: the ground contact advances by the arc length rolled on the sole.
+    contact = kin.contact_point + (body.sole_radius * (beta - kin.contact_roll))[:, None] * _horizontal_direction(old_foot)
+    new_leg = walker.stance_leg.astype(np.int8)
+    switched = new_leg != old_leg
+    if np.any(switched):
+        shift = _contact_translation(body, local, old_leg, beta, contact)
+        new_beta = _lowest_roll(body, _pick(local.foot, new_leg))
+        new_point = _sole_point(body, _pick(local.ankles, new_leg), _pick(local.foot, new_leg), new_beta)
+        contact = np.where(switched[:, None], new_point[:, :2] + shift[:, :2], contact)
+        beta = np.where(switched, new_beta, beta)
+    named = KinematicState.unpack(new)
+    return KinematicState(
+        heading=named["heading"], torso_lean=named["torso_lean"], hip_abduction=named["hip_abduction"],
+        hip_rotation=named["hip_rotation"], knee=named["knee"], ankle=named["ankle"], previous=current,
+        contact_point=contact, contact_roll=beta, contact_leg=new_leg,
+        plane_origin=_plane_origin(params, walker, contact, named["heading"]),
+    )
+
+
+def pose_body(body: BodyDescription, params: WalkerParams, walker: WalkerState, kin: KinematicState) -> BodyPoseBatch:
+    """World markers, joint angles and part poses of N bodies (vectorised).
+
+    The pelvis-relative pose comes from the walker's leg angles and the kinematic DOFs; the
+    body is then translated so that the contact foot's sole point at ``contact_roll`` sits on
+    the ground at ``contact_point``.
+    """
+    del params  # the sagittal leg angles come from the walker; the geometry from ``body``
+    legs = leg_angles(walker)
+    dofs = kin.dofs()
+    local = _local_pose(body, legs, dofs)
+    shift = _contact_translation(body, local, kin.contact_leg, kin.contact_roll, kin.contact_point)
+    n = len(kin)
+    pelvis = shift
+    torso_up = local.torso[:, :, 2]
+    thorax = pelvis + body.torso_length * torso_up
+    head = thorax + 0.5 * body.head_length * torso_up
+    hips = local.hips + shift[:, None]
+    knees = local.knees + shift[:, None]
+    ankles = local.ankles + shift[:, None]
+    heel_local = np.array([-body.heel_offset, 0.0, -body.ankle_height])
+    toe_local = np.array([body.foot_length - body.heel_offset, 0.0, -body.ankle_height])
+    heels = ankles + _apply(local.foot, heel_local)
+    toes = ankles + _apply(local.foot, toe_local)
+    markers = np.stack([pelvis, thorax, head, hips[:, 0], hips[:, 1], knees[:, 0], knees[:, 1],
+                        ankles[:, 0], ankles[:, 1], heels[:, 0], heels[:, 1], toes[:, 0], toes[:, 1]], axis=1)
+    assert markers.shape[1] == len(MARKER_NAMES)
+
+    foot_axis_height = body.foot_radii_heel[0]  # the foot cylinder's bottom touches the heel end of the sole line
+    foot_origin = ankles + _apply(local.foot, heel_local + np.array([0.0, 0.0, foot_axis_height]))
+    origin = np.stack([pelvis, thorax, hips[:, 0], hips[:, 1], knees[:, 0], knees[:, 1],
+                       foot_origin[:, 0], foot_origin[:, 1]], axis=1)
+    thigh = local.thigh @ _LEG_SEGMENT
+    shank = local.shank @ _LEG_SEGMENT
+    foot = local.foot @ _FOOT_SEGMENT
+    rotation = np.stack([local.torso, local.torso, thigh[:, 0], thigh[:, 1], shank[:, 0], shank[:, 1],
+                         foot[:, 0], foot[:, 1]], axis=1)
+
+    d = KinematicState.unpack(dofs)
+    per_leg = [legs, d["hip_abduction"], d["hip_rotation"], d["knee"], d["ankle"][..., 0], d["ankle"][..., 1]]
+    joints = np.column_stack([d["torso_lean"][:, 0], d["torso_lean"][:, 1], d["heading"]]
+                             + [a[:, 0] for a in per_leg] + [a[:, 1] for a in per_leg])
+    assert joints.shape == (n, len(JOINT_NAMES))
+    return BodyPoseBatch(markers=markers, joint_angles=joints, segments=BodySegments(origin, rotation))
+
+
+def sole_point_world(body: BodyDescription, walker: WalkerState, kin: KinematicState,
+                     leg: np.ndarray, beta: np.ndarray) -> np.ndarray:
+    """World position (N, 3) of the material point at angle ``beta`` on the rocker sole of foot
+    ``leg`` (LEFT/RIGHT per particle) for the bodies posed by ``pose_body`` (used to check slip)."""
+    local = _local_pose(body, leg_angles(walker), kin.dofs())
+    shift = _contact_translation(body, local, kin.contact_leg, kin.contact_roll, kin.contact_point)
+    leg = np.broadcast_to(np.asarray(leg, np.int8), (len(kin),))
+    return _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), np.asarray(beta, float)) + shift

@@ -1,0 +1,215 @@
+"""Conditional kinematics: joint limits, rolling stance foot without slip or penetration, turns."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription
+from awalker_tracker.model.kinematics import (
+    DOF_NAMES,
+    JointPrior,
+    KinematicConfig,
+    initial_kinematics,
+    leg_angles,
+    pose_body,
+    sample_kinematics,
+    sole_point_world,
+    truncated_normal,
+)
+from awalker_tracker.model.walker import LEFT, RIGHT, WalkerState
+
+BODY = BodyDescription.default()
+PARAMS = BODY.walker_params()
+M = {name: i for i, name in enumerate(MARKER_NAMES)}
+J = {name: i for i, name in enumerate(JOINT_NAMES)}
+
+
+def hand_made_walk(frames: int, n: int, half_angle: float = 0.35, step_frames: int = 16,
+                   fps: float = 30.0) -> list[WalkerState]:
+    """A walker-like sequence made by hand: legs swing linearly between +-a, swapping at heel strike."""
+    states, leg, origin = [], LEFT, 0.0
+    rate = 2 * half_angle * fps / step_frames
+    for f in range(frames):
+        if f > 0 and f % step_frames == 0:
+            leg = 1 - leg
+            origin += PARAMS.step_length(half_angle)
+        s = (f % step_frames) / step_frames
+        phi1 = half_angle - 2 * half_angle * s
+        states.append(WalkerState.from_arrays(np.full(n, phi1), np.full(n, -phi1), np.full(n, -rate),
+                                              np.full(n, rate), origin, leg))
+    return states
+
+
+def run(frames: int, n: int, seed: int = 0, config: KinematicConfig | None = None, heading_rate: float = 0.0,
+        **walk):
+    """Simulate the prior over a hand-made walk; returns walkers, states, poses per frame."""
+    config = config or KinematicConfig()
+    rng = np.random.default_rng(seed)
+    walkers = hand_made_walk(frames, n, **walk)
+    kin = initial_kinematics(config, walkers[0], [1.0, 2.0], 0.3, n, rng, body=BODY)
+    kin.previous[:, DOF_NAMES.index("heading")] -= heading_rate  # an initial turning velocity
+    states = [kin]
+    for f in range(1, frames):
+        kin = sample_kinematics(config, BODY, PARAMS, walkers[f - 1], walkers[f], None, kin, rng)
+        states.append(kin)
+    poses = [pose_body(BODY, PARAMS, w, k) for w, k in zip(walkers, states)]
+    return walkers, states, poses
+
+
+def test_alpha_is_square_rooted_at_60_hz():
+    assert KinematicConfig(dt=1 / 60).alpha("swing_knee") == pytest.approx(np.sqrt(0.9))
+    assert KinematicConfig(dt=1 / 30).alpha("torso_up") == pytest.approx(0.75)
+
+
+def test_truncated_normal_matches_scipy_and_bounds():
+    rng = np.random.default_rng(1)
+    lower, upper, mean, sigma = -0.2, 1.5, 0.4, 0.7
+    x = truncated_normal(rng, np.full(200_000, mean), sigma, lower, upper)
+    assert x.min() >= lower and x.max() <= upper
+    ref = stats.truncnorm((lower - mean) / sigma, (upper - mean) / sigma, loc=mean, scale=sigma)
+    assert x.mean() == pytest.approx(ref.mean(), abs=3e-3)
+    assert x.std() == pytest.approx(ref.std(), abs=3e-3)
+    # Interval deep in the upper tail: samples hug the lower bound, never leave the interval.
+    far = truncated_normal(rng, np.zeros(1000), 1.0, 9.0, 10.0)
+    assert far.min() >= 9.0 and far.max() <= 10.0 and np.median(far) < 9.2
+
+
+def test_joint_limits_hold_even_when_pushed():
+    config = KinematicConfig()
+    n = 400
+    rng = np.random.default_rng(2)
+    walkers = hand_made_walk(40, n)
+    kin = initial_kinematics(config, walkers[0], [0.0, 0.0], 0.0, n, rng, body=BODY, joint_spread=0.3)
+    # Large initial velocities drive limited joints into their limits.
+    kin.previous += rng.normal(0, 0.3, kin.previous.shape)
+    arrays = config.arrays()
+    limited = np.isfinite(arrays["lower"])
+    hit = np.zeros(limited.sum(), bool)
+    for f in range(1, 40):
+        kin = sample_kinematics(config, BODY, PARAMS, walkers[f - 1], walkers[f], None, kin, rng)
+        dofs = kin.dofs()
+        assert np.all(dofs[:, limited] >= arrays["lower"][limited] - 1e-12)
+        assert np.all(dofs[:, limited] <= arrays["upper"][limited] + 1e-12)
+        hit |= np.any(np.isclose(dofs[:, limited], arrays["upper"][limited]) |
+                      np.isclose(dofs[:, limited], arrays["lower"][limited]), axis=0)
+    assert hit.any(), "the test must actually push joints to their limits"
+
+
+def test_stance_foot_rolls_without_slip_or_penetration():
+    walkers, states, poses = run(70, 200, seed=3)
+    worst_slip, rolled = 0.0, 0.0
+    for f in range(len(states) - 1):
+        kin, nxt = states[f], states[f + 1]
+        same = nxt.contact_leg == kin.contact_leg
+        assert same.all() or (~same).all()  # the hand-made walk switches all particles together
+        if not same.all():
+            continue
+        # The material sole point in contact at frame f, seen at frame f + 1.
+        before = sole_point_world(BODY, walkers[f], kin, kin.contact_leg, kin.contact_roll)
+        after = sole_point_world(BODY, walkers[f + 1], nxt, kin.contact_leg, kin.contact_roll)
+        assert np.allclose(before[:, 2], 0.0, atol=1e-9)
+        worst_slip = max(worst_slip, np.abs(after[:, :2] - before[:, :2]).max())
+        rolled = max(rolled, np.abs(nxt.contact_roll - kin.contact_roll).max())
+    assert worst_slip < 1e-3, f"stance foot slips {worst_slip * 1e3:.2f} mm/frame"
+    assert rolled > 0.01, "the contact must actually roll along the sole"
+    for walker, kin, pose in zip(walkers, states, poses):
+        stance = kin.contact_leg
+        heel = pose.markers[np.arange(len(kin)), M["left_heel"] + stance, 2]
+        toe = pose.markers[np.arange(len(kin)), M["left_toe"] + stance, 2]
+        assert heel.min() >= -1e-9 and toe.min() >= -1e-9
+        # Sample the whole rocker sole: its lowest point is the contact, on the ground.
+        for beta in np.linspace(-BODY.sole_half_angle, BODY.sole_half_angle, 9):
+            z = sole_point_world(BODY, walker, kin, stance, np.full(len(kin), beta))[:, 2]
+            assert z.min() >= -1e-9
+
+
+def test_contact_rolls_heel_to_toe_and_switches_feet_continuously():
+    walkers, states, poses = run(50, 50, seed=4)
+    rolls = np.array([k.contact_roll.mean() for k in states[1:16]])
+    assert rolls[-1] - rolls[0] > 0.5 * BODY.sole_half_angle  # heel towards toe over a step
+    # At heel strike (frame 16) the contact passes to the other foot without a horizontal jump.
+    before, after = states[15], states[16]
+    assert np.all(after.contact_leg != before.contact_leg)
+    pelvis_jump = np.linalg.norm(poses[16].markers[:, M["pelvis"], :2] - poses[15].markers[:, M["pelvis"], :2], axis=1)
+    typical = np.linalg.norm(poses[15].markers[:, M["pelvis"], :2] - poses[14].markers[:, M["pelvis"], :2], axis=1)
+    assert pelvis_jump.max() < 2.5 * typical.mean() + 0.01
+
+
+def test_body_follows_walker_legs_and_speed():
+    walkers, states, poses = run(64, 100, seed=5)
+    # Sagittal hip angle == walker leg angle: the thigh axis projected on the sagittal plane.
+    for walker, kin, pose in zip(walkers[::7], states[::7], poses[::7]):
+        thigh = pose.markers[:, M["left_knee"]] - pose.markers[:, M["left_hip"]]
+        forward = np.stack([np.cos(kin.heading), np.sin(kin.heading)], axis=1)
+        ahead = np.einsum("ij,ij->i", thigh[:, :2], forward)
+        angle = np.arctan2(ahead, -thigh[:, 2])
+        abducted = np.abs(kin.hip_abduction[:, 0]) + np.abs(kin.hip_rotation[:, 0])
+        close = abducted < 0.02
+        assert np.allclose(angle[close], leg_angles(walker)[close, 0], atol=0.01)
+    # Segment lengths are kept.
+    pose = poses[30]
+    for a, b, length in [("left_hip", "left_knee", BODY.upper_leg_length),
+                         ("right_knee", "right_ankle", BODY.lower_leg_length),
+                         ("pelvis", "thorax", BODY.torso_length)]:
+        assert np.allclose(np.linalg.norm(pose.markers[:, M[a]] - pose.markers[:, M[b]], axis=1), length)
+    # The body walks at about the walker's speed (hand-made walk: step_length(0.35) per 16 frames).
+    walker_speed = PARAMS.step_length(0.35) / (16 / 30)
+    travel = np.linalg.norm(poses[-1].markers[:, M["pelvis"], :2] - poses[0].markers[:, M["pelvis"], :2], axis=1)
+    body_speed = travel / (63 / 30)
+    assert np.median(body_speed) == pytest.approx(walker_speed, rel=0.25)
+    # Pelvis near the leg length above the ground.
+    z = np.array([p.markers[:, M["pelvis"], 2] for p in poses])
+    assert 0.8 * BODY.leg_length < z.min() and z.max() < BODY.leg_length + 0.03  # toe pivot lifts the hip a little
+
+
+def test_turning_rotates_about_the_stance_foot():
+    rate = np.radians(2.0)  # per frame
+    # A steady turn: heading velocity kept (alpha = 1), no heading noise.
+    config = KinematicConfig(table={**KinematicConfig().table, "torso_up": JointPrior(1.0, 0.0, 0.0, 0.0)})
+    walkers, states, poses = run(48, 20, seed=6, config=config, heading_rate=rate)
+    heading_change = states[-1].heading - states[0].heading
+    assert np.all(np.abs(heading_change) > np.radians(20))  # it does turn
+    for f in range(len(states) - 1):
+        kin, nxt = states[f], states[f + 1]
+        if np.any(nxt.contact_leg != kin.contact_leg):
+            continue
+        before = sole_point_world(BODY, walkers[f], kin, kin.contact_leg, kin.contact_roll)
+        after = sole_point_world(BODY, walkers[f + 1], nxt, kin.contact_leg, kin.contact_roll)
+        assert np.abs(after[:, :2] - before[:, :2]).max() < 1e-3
+    # The walking direction follows the heading.
+    step = poses[-1].markers[:, M["pelvis"], :2] - poses[-9].markers[:, M["pelvis"], :2]
+    direction = np.arctan2(step[:, 1], step[:, 0])
+    mid_heading = states[-5].heading
+    assert np.all(np.abs(np.angle(np.exp(1j * (direction - mid_heading)))) < np.radians(15))
+    # plane_origin maps the walker's stance contact onto the contact point.
+    kin, walker = states[-1], walkers[-1]
+    along = np.stack([np.cos(kin.heading), np.sin(kin.heading)], axis=1)
+    contact_x = walker.contact_origin - PARAMS.foot_radius * walker.stance_angle
+    assert np.allclose(kin.plane_origin + contact_x[:, None] * along, kin.contact_point)
+
+
+def test_pose_body_is_vectorised_consistently():
+    walkers, states, poses = run(20, 6, seed=7)
+    walker, kin, pose = walkers[-1], states[-1], poses[-1]
+    for i in range(6):
+        single = pose_body(BODY, PARAMS, walker.take(np.array([i])), kin.take(np.array([i])))
+        assert np.allclose(single.markers[0], pose.markers[i])
+        assert np.allclose(single.segments.rotation[0], pose.segments.rotation[i])
+    rot = pose.segments.rotation
+    assert np.allclose(rot @ np.swapaxes(rot, -1, -2), np.eye(3), atol=1e-12)
+    assert np.allclose(np.linalg.det(rot), 1.0)
+    assert pose.joint_angles.shape == (6, len(JOINT_NAMES))
+    assert np.allclose(pose.joint_angles[:, J["torso_yaw"]], kin.heading)
+
+
+def test_swing_knee_bends_early_in_the_stride_and_straightens_late():
+    walkers, states, _ = run(64, 300, seed=8)
+    swing_knee = np.degrees([np.where(w.stance_leg == LEFT, k.knee[:, 1], k.knee[:, 0]).mean()
+                             for w, k in zip(walkers, states)])
+    for stride in (swing_knee[16:32], swing_knee[32:48]):
+        assert stride[0] < 10                      # straight (former stance knee) at toe-off
+        assert stride.max() > 45                   # bends through the rest angle 5 psi_hip
+        assert np.argmax(stride) < 13              # peaks before the end of the swing
+        assert stride[-1] < stride.max() - 20      # and straightens towards heel strike
+    assert RIGHT == 1
