@@ -148,3 +148,23 @@ def test_eval_command_errors(tmp_path, capsys):
     evaluation.write_poses_csv(tmp_path / "poses.csv", walking_truth())
     assert main(["eval", str(tmp_path)]) == 2
     assert "no ground truth found" in capsys.readouterr().err
+
+
+def test_truth_read_from_a_bag(tmp_path):
+    from awalker_tools.bagio import SequenceWriter
+    from awalker_tracker.vision.camera import Camera
+
+    truth = walking_truth()
+    cam = Camera.look_at("cam0", 32, 24, 30.0, np.array([0.5, -5.0, 1.0]), np.array([0.5, 0.0, 1.0]))
+    bag = tmp_path / "seq.bag"
+    with SequenceWriter(bag, [cam]) as writer:
+        for stamp, markers in zip(truth.stamps_ns, truth.markers):
+            writer.write_frame(int(stamp), {"cam0": np.zeros((24, 32, 3), np.uint8)})
+            writer.write_ground_truth(int(stamp), markers)
+    back = evaluation.truth_from_bag(bag)
+    assert np.array_equal(back.stamps_ns, truth.stamps_ns) and np.allclose(back.markers, truth.markers)
+    run = tmp_path / "run"
+    run.mkdir()
+    evaluation.write_poses_csv(run / "poses.csv", shifted(truth, NAMES, np.array([0.005, 0.0, 0.0])))
+    assert main(["eval", str(run), "--truth", str(bag)]) == 0
+    assert json.loads((run / "eval.json").read_text())["absolute_mm"]["mean"] == pytest.approx(5.0)

@@ -297,30 +297,15 @@ def format_table(result: dict[str, object], label: str = "") -> str:
     return "\n".join(lines)
 
 
-def truth_from_bag(path: Path, topic: str = "/awalker/ground_truth") -> PoseTrack:
-    """Ground-truth markers from the awalker_msgs/BodyPose messages of a bag (frame = message order)."""
-    from rosbags.highlevel import AnyReader
+def truth_from_bag(path: Path) -> PoseTrack:
+    """Ground-truth markers (/awalker/ground_truth, awalker_msgs/BodyPose) of a bag; frame = message order."""
+    from awalker_tracker.model.body import MARKER_NAMES
 
-    from awalker_tools.typestore import typestore
+    from awalker_tools.bagio import GROUND_TRUTH_TOPIC, SequenceReader
 
-    path = Path(path)
-    try:
-        with AnyReader([path], default_typestore=typestore()) as reader:
-            connections = [c for c in reader.connections if c.topic == topic]
-            if not connections:
-                raise InputError(f"{path}: no {topic} topic (expected awalker_msgs/BodyPose ground truth)")
-            stamps, names, markers = [], None, []
-            for connection, _, raw in reader.messages(connections=connections):
-                msg = reader.deserialize(raw, connection.msgtype)
-                stamps.append(int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec))
-                names = names or tuple(msg.marker_names)
-                if tuple(msg.marker_names) != names:
-                    raise InputError(f"{path}: {topic} changes its marker names between messages")
-                markers.append([[p.x, p.y, p.z] for p in msg.markers])
-    except InputError:
-        raise
-    except Exception as exc:  # rosbags raises several types for unreadable bags
-        raise InputError(f"{path}: cannot read ground truth from bag ({exc})") from None
-    order = np.argsort(stamps, kind="stable")
-    return PoseTrack(np.arange(len(stamps)), np.asarray(stamps, np.int64)[order], names,
-                     np.asarray(markers, float)[order])
+    with SequenceReader(path) as reader:
+        truth = reader.ground_truth()
+    if truth is None:
+        raise InputError(f"{path}: no {GROUND_TRUTH_TOPIC} messages (expected awalker_msgs/BodyPose ground truth)")
+    stamps, markers = truth
+    return PoseTrack(np.arange(len(stamps)), stamps, MARKER_NAMES, markers)
