@@ -20,6 +20,8 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
+            'awalker_tracker_node = awalker_tracker.nodes.tracker:main',
+            'awalker_pose_publisher = awalker_tracker.nodes.pose_publisher:main',
         ],
     },
 )
