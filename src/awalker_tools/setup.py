@@ -20,6 +20,7 @@ setup(
     entry_points={
         'console_scripts': [
             'awalker = awalker_tools.cli:main',
+            'awalker_replay = awalker_tools.replay:main',
         ],
     },
 )

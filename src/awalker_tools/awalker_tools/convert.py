@@ -1,0 +1,244 @@
+"""Convert videos or image folders plus a calibration YAML into a sequence bag.
+
+Several cameras are synchronised by frame index: frame i of every source gets the same stamp.
+Stamps come from a timestamps file (one per frame, seconds, increasing) or from the frame rate
+(the video's, or ``fps``) starting at ``start_time``.
+"""
+from __future__ import annotations
+
+import re
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from decimal import Decimal, InvalidOperation
+from pathlib import Path
+
+import cv2
+import numpy as np
+import yaml
+
+from awalker_tracker.errors import InputError
+from awalker_tracker.vision.camera import Camera, load_calibration
+
+from awalker_tools.bagio import BODY_DESCRIPTION_TOPIC, START_DESCRIPTION_TOPIC, SequenceWriter
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
+PROGRESS_PERIOD_S = 2.0
+START_KEYS = ("frame", "position", "heading", "speed", "step_length", "stance_leg")
+
+
+@dataclass(frozen=True)
+class Source:
+    """Frames of one camera: a video file (kind "video") or a folder of images (kind "images")."""
+
+    camera: str
+    kind: str
+    path: Path
+
+
+def parse_source(text: str, kind: str) -> Source:
+    """'CAM=PATH' -> Source; InputError if malformed."""
+    cam, sep, path = text.partition("=")
+    if not sep or not cam or not path:
+        raise InputError(f"--{'video' if kind == 'video' else 'images'} {text!r}: expected CAM=PATH (e.g. cam0=walk.mp4)")
+    return Source(cam, kind, Path(path))
+
+
+def _natural_key(path: Path) -> list:
+    return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", path.name)]
+
+
+def image_files(folder: Path) -> list[Path]:
+    """Image files in ``folder`` in natural order (frame2 before frame10)."""
+    if not folder.is_dir():
+        raise InputError(f"{folder}: image folder not found")
+    files = sorted((p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES), key=_natural_key)
+    if not files:
+        raise InputError(f"{folder}: no images ({', '.join(IMAGE_SUFFIXES)}) in folder")
+    return files
+
+
+def _check_size(rgb: np.ndarray, camera: Camera, where: str) -> np.ndarray:
+    if rgb.shape[:2] != (camera.height, camera.width):
+        raise InputError(f"{where}: image is {rgb.shape[1]}x{rgb.shape[0]}, calibration of camera {camera.name} "
+                         f"says {camera.width}x{camera.height}")
+    return rgb
+
+
+def read_frames(source: Source, camera: Camera) -> Iterator[np.ndarray]:
+    """HxWx3 uint8 RGB frames of a source, checked against the camera's size."""
+    if source.kind == "images":
+        for path in image_files(source.path):
+            bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+            if bgr is None:
+                raise InputError(f"{path}: cannot read image")
+            yield _check_size(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), camera, str(path))
+        return
+    capture = open_video(source.path)
+    try:
+        index = 0
+        while True:
+            ok, bgr = capture.read()
+            if not ok:
+                break
+            yield _check_size(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), camera, f"{source.path} frame {index}")
+            index += 1
+        if index == 0:
+            raise InputError(f"{source.path}: video has no readable frames")
+    finally:
+        capture.release()
+
+
+def open_video(path: Path) -> cv2.VideoCapture:
+    if not path.is_file():
+        raise InputError(f"{path}: video file not found")
+    capture = cv2.VideoCapture(str(path))
+    if not capture.isOpened():
+        capture.release()
+        raise InputError(f"{path}: cannot open video (not a video file or codec not supported by OpenCV)")
+    return capture
+
+
+def video_fps(path: Path) -> float:
+    capture = open_video(path)
+    try:
+        return float(capture.get(cv2.CAP_PROP_FPS) or 0.0)
+    finally:
+        capture.release()
+
+
+def read_timestamps(path: Path) -> list[int]:
+    """Timestamps file: one stamp per frame in seconds (decimal), '#' comments; -> ns, strictly increasing."""
+    try:
+        lines = Path(path).read_text().splitlines()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read timestamps file ({exc.strerror or exc})") from None
+    stamps: list[int] = []
+    for number, line in enumerate(lines, start=1):
+        text = line.split("#", 1)[0].strip().rstrip(",")
+        if not text:
+            continue
+        try:
+            value = Decimal(text.split(",")[0].split()[0])
+        except InvalidOperation:
+            raise InputError(f"{path}:{number}: expected a timestamp in seconds, got {line.strip()!r}") from None
+        if not value.is_finite() or value < 0:
+            raise InputError(f"{path}:{number}: timestamp must be a finite number >= 0 s, got {text!r}")
+        ns = int(value * 1_000_000_000)
+        if stamps and ns <= stamps[-1]:
+            raise InputError(f"{path}:{number}: timestamps must increase strictly, {text} s is not after the "
+                             f"previous one ({stamps[-1] / 1e9:.9f} s)")
+        stamps.append(ns)
+    if not stamps:
+        raise InputError(f"{path}: no timestamps found (expected one number of seconds per line)")
+    return stamps
+
+
+def read_description(path: Path, kind: str) -> str:
+    """A start/body description YAML file's text, checked to parse as a mapping."""
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read {kind} description ({exc.strerror or exc})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise InputError(f"{path}: {kind} description is not valid YAML ({exc})") from None
+    if not isinstance(data, dict):
+        raise InputError(f"{path}: {kind} description must be a YAML mapping")
+    if kind == "start":
+        start = data.get("start")
+        if not isinstance(start, dict):
+            raise InputError(f"{path}: start description needs a 'start:' mapping with {', '.join(START_KEYS)}")
+        missing = [k for k in ("position", "heading") if k not in start]
+        if missing:
+            raise InputError(f"{path}: start description is missing {', '.join(missing)}")
+        position = start["position"]
+        if not (isinstance(position, list) and len(position) == 2
+                and all(isinstance(v, (int, float)) for v in position)):
+            raise InputError(f"{path}: start.position must be [x, y] in metres, got {position!r}")
+        if start.get("stance_leg", "left") not in ("left", "right"):
+            raise InputError(f"{path}: start.stance_leg must be left or right, got {start['stance_leg']!r}")
+    return text
+
+
+def convert(
+    calibration: Path,
+    out: Path,
+    sources: list[Source],
+    storage: str = "mcap",
+    compressed: bool = False,
+    image_format: str = "png",
+    timestamps: Path | None = None,
+    fps: float | None = None,
+    start_time: float = 0.0,
+    start_description: Path | None = None,
+    body_description: Path | None = None,
+) -> int:
+    """Write the bag; returns the number of frames. Progress lines go to stderr."""
+    if not sources:
+        raise InputError("convert: give at least one --video CAM=PATH or --images CAM=DIR")
+    cameras = {c.name: c for c in load_calibration(calibration)}
+    seen: set[str] = set()
+    for source in sources:
+        if source.camera not in cameras:
+            raise InputError(f"{calibration}: no camera {source.camera!r} (source {source.path}); "
+                             f"calibration has {sorted(cameras)}")
+        if source.camera in seen:
+            raise InputError(f"convert: camera {source.camera} given twice")
+        seen.add(source.camera)
+    if fps is not None and not fps > 0:
+        raise InputError(f"convert: --fps must be > 0, got {fps}")
+    stamps = read_timestamps(timestamps) if timestamps is not None else None
+    if stamps is None and fps is None:
+        rates = {s.path: video_fps(s.path) for s in sources if s.kind == "video"}
+        if not rates or any(r <= 0 for r in rates.values()):
+            raise InputError("convert: cannot tell the frame rate; give --fps F or --timestamps FILE"
+                             + (f" (videos report {rates})" if rates else " (image folders have no frame rate)"))
+        if len({round(r, 3) for r in rates.values()}) > 1:
+            raise InputError(f"convert: videos have different frame rates {rates}; give --fps or --timestamps")
+        fps = next(iter(rates.values()))
+    texts = {}
+    if start_description is not None:
+        texts[START_DESCRIPTION_TOPIC] = read_description(start_description, "start")
+    if body_description is not None:
+        texts[BODY_DESCRIPTION_TOPIC] = read_description(body_description, "body")
+    # Open every source before creating the bag, so a bad one fails without leaving output behind.
+    for source in sources:
+        if source.kind == "video":
+            open_video(source.path).release()
+        else:
+            image_files(source.path)
+    used = [cameras[s.camera] for s in sources]
+    streams = {s.camera: read_frames(s, cameras[s.camera]) for s in sources}
+    start_ns = int(Decimal(str(start_time)) * 1_000_000_000)
+    frames = 0
+    last_print = time.monotonic()
+    with SequenceWriter(out, used, storage=storage, compressed=compressed, image_format=image_format) as writer:
+        while True:
+            images = {cam: next(stream, None) for cam, stream in streams.items()}
+            ended = sorted(cam for cam, img in images.items() if img is None)
+            if ended:
+                if len(ended) < len(images):
+                    print(f"convert: {', '.join(ended)} ended after {frames} frames; stopping there "
+                          "(cameras are synchronised by frame index)", file=sys.stderr)
+                break
+            if stamps is not None:
+                if frames >= len(stamps):
+                    raise InputError(f"{timestamps}: {len(stamps)} timestamps but the sources have more frames")
+                stamp = stamps[frames]
+            else:
+                stamp = start_ns + round(frames * 1e9 / fps)  # type: ignore[operator]
+            if frames == 0:
+                for topic, text in texts.items():
+                    writer.write_text(topic, stamp, text)
+            writer.write_frame(stamp, images)  # type: ignore[arg-type]
+            frames += 1
+            if time.monotonic() - last_print >= PROGRESS_PERIOD_S:
+                last_print = time.monotonic()
+                print(f"convert: {frames} frames written", file=sys.stderr)
+        if stamps is not None and frames < len(stamps):
+            print(f"convert: note: {len(stamps)} timestamps for {frames} frames; the rest are unused", file=sys.stderr)
+    print(f"convert: wrote {frames} frames from {len(sources)} camera(s) to {out}", file=sys.stderr)
+    return frames

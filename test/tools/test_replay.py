@@ -1,0 +1,181 @@
+"""Replay a bag into a subscriber node in the same process: every frame once, in order, bytes intact."""
+from __future__ import annotations
+
+import struct
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from awalker_tools.bagio import SequenceReader, open_reader, iter_messages
+from awalker_tools.replay import (
+    Batch,
+    ReplayConfig,
+    Replayer,
+    ReplayNode,
+    header_stamp_ns,
+    iter_batches,
+    run_replay,
+)
+from awalker_tools.typestore import typestore
+from awalker_tracker.errors import InputError
+
+from replay_helpers import CAMERAS, FRAME_PERIOD_NS, Receiver, make_bag
+
+
+def _spin_for(executor: SingleThreadedExecutor, seconds: float) -> None:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.01)
+
+
+def _expected_bytes(images: list[dict], cam: str) -> list[bytes]:
+    return [frame[cam].tobytes() for frame in images]
+
+
+def test_lockstep_delivers_every_frame_once_in_order_with_bytes(ros_context, tmp_path: Path) -> None:
+    bag = tmp_path / "bag"
+    stamps, images = make_bag(bag, frames=8)
+    receiver = Receiver(context=ros_context)
+    node = ReplayNode(context=ros_context, parameter_overrides=[
+        Parameter("bag", value=str(bag)), Parameter("lockstep", value=True),
+        Parameter("wait_for_subscribers", value=5.0), Parameter("ack_timeout", value=10.0),
+    ])
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(receiver)
+    executor.add_node(node)
+    try:
+        summary = run_replay(executor, node.replayer)
+        _spin_for(executor, 0.2)
+        assert summary.stopped is None, summary.lines()
+        assert summary.frames == 8 and summary.acks == 8
+        for cam in CAMERAS:
+            assert [s for s, _ in receiver.images[cam]] == stamps, cam
+            assert [b for _, b in receiver.images[cam]] == _expected_bytes(images, cam)
+        assert receiver.infos == stamps
+        assert receiver.texts == ["start: {frame: 0, position: [0, 0], heading: 0}"]
+        assert summary.published["/awalker/ground_truth"] == 8
+        # The camera pose is latched: a subscriber that joins after the replay still gets it.
+        from geometry_msgs.msg import PoseStamped
+
+        late = Node("late", context=ros_context)
+        poses: list = []
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        late.create_subscription(PoseStamped, "/cam1/camera_pose", poses.append, latched)
+        executor.add_node(late)
+        deadline = time.monotonic() + 5
+        while not poses and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        with SequenceReader(bag) as reader:
+            cam1 = reader.cameras[1]
+        assert len(poses) == 1 and poses[0].header.frame_id == "world"
+        p = poses[0].pose.position
+        np.testing.assert_allclose([p.x, p.y, p.z], cam1.position)
+        q = poses[0].pose.orientation
+        np.testing.assert_allclose(np.abs(np.dot([q.x, q.y, q.z, q.w], cam1.quaternion)), 1.0, atol=1e-9)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        receiver.destroy_node()
+
+
+def test_rate_mode_delivers_all_frames_at_the_scaled_rate(ros_context, tmp_path: Path) -> None:
+    bag = tmp_path / "bag"
+    stamps, images = make_bag(bag, frames=10, compressed=True)
+    receiver = Receiver(compressed=True, ack=False, context=ros_context)
+    replay_node = Node("replay", context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(receiver)
+    executor.add_node(replay_node)
+    rate = 2.0
+    try:
+        replayer = Replayer(replay_node, bag, ReplayConfig(rate=rate, wait_for_subscribers=5.0))
+        summary = run_replay(executor, replayer)
+        _spin_for(executor, 0.3)
+        assert summary.stopped is None and summary.frames == 10 and summary.acks == 0
+        with SequenceReader(bag) as reader:
+            raw = {cam: [bytes(m.data) for _, _, _, m in reader.messages([f"/{cam}/image_raw/compressed"])]
+                   for cam in CAMERAS}
+        for cam in CAMERAS:
+            assert [s for s, _ in receiver.images[cam]] == stamps
+            assert [b for _, b in receiver.images[cam]] == raw[cam]
+        # Frames are paced: 9 periods of 33.3 ms at rate 2 take at least ~150 ms (lower bound only).
+        paced = (stamps[-1] - stamps[0]) / 1e9 / rate
+        assert summary.duration_s >= 0.9 * paced
+    finally:
+        executor.shutdown()
+
+
+def test_topic_filter_and_ack_timeout(ros_context, tmp_path: Path) -> None:
+    bag = tmp_path / "bag"
+    make_bag(bag, frames=3)
+    node = Node("replay", context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    try:
+        replayer = Replayer(node, bag, ReplayConfig(lockstep=True, topics=("/cam0/image_raw",),
+                                                     wait_for_subscribers=0.0, ack_timeout=0.3))
+        summary = run_replay(executor, replayer)
+        assert summary.published == {"/cam0/image_raw": 1}
+        assert summary.stopped is not None and "no ack on /awalker/ack" in summary.stopped
+        assert "STOPPED" in summary.lines()[0]
+    finally:
+        executor.shutdown()
+
+
+def test_bad_replay_inputs(ros_context, tmp_path: Path) -> None:
+    bag = tmp_path / "bag"
+    make_bag(bag, frames=2)
+    node = Node("replay", context=ros_context)
+    with pytest.raises(InputError, match=r"--topics \['/nope'\] not in the bag"):
+        Replayer(node, bag, ReplayConfig(topics=("/nope",)))
+    with pytest.raises(InputError, match="lockstep needs image topics"):
+        Replayer(node, bag, ReplayConfig(lockstep=True, topics=("/cam0/camera_info",)))
+    with pytest.raises(InputError, match="rate must be > 0"):
+        Replayer(node, bag, ReplayConfig(rate=0.0))
+    with pytest.raises(InputError, match="bag not found"):
+        Replayer(node, tmp_path / "missing", ReplayConfig())
+    with pytest.raises(InputError, match="parameter 'bag' is required"):
+        ReplayNode(context=ros_context)
+    node.destroy_node()
+
+
+def test_header_stamp_from_cdr_matches_deserialised_header() -> None:
+    ts = typestore()
+    types = ts.types
+    msg = types["sensor_msgs/msg/Image"](
+        types["std_msgs/msg/Header"](types["builtin_interfaces/msg/Time"](1_700_000_123, 456_789), "f"),
+        1, 1, "mono8", 0, 1, np.array([5], np.uint8),
+    )
+    raw = ts.serialize_cdr(msg, "sensor_msgs/msg/Image")
+    assert header_stamp_ns(raw) == 1_700_000_123_000_456_789
+    big_endian = bytes([0, 0, 0, 0]) + struct.pack(">iI", 12, 34) + b"\0" * 8
+    assert header_stamp_ns(big_endian) == 12_000_000_034
+    with pytest.raises(ValueError):
+        header_stamp_ns(b"\0\1\0\0")
+
+
+def test_batches_group_each_frame_with_its_side_messages(tmp_path: Path) -> None:
+    bag = tmp_path / "bag"
+    stamps, _ = make_bag(bag, frames=4)
+    reader = open_reader(bag)
+    try:
+        image_topics = {"/cam0/image_raw", "/cam1/image_raw"}
+        batches: list[Batch] = list(iter_batches(iter_messages(reader, bag), image_topics))
+    finally:
+        reader.close()
+    assert [b.stamp_ns for b in batches] == stamps
+    first_topics = [c.topic for c, _ in batches[0].messages]
+    assert first_topics[0] in ("/tf_static", "/awalker/start_description")
+    for batch in batches:
+        topics = [c.topic for c, _ in batch.messages]
+        assert sorted(t for t in topics if t in image_topics) == sorted(image_topics)
+        assert topics.count("/awalker/ground_truth") == 1
+        assert topics.count("/cam0/camera_info") == 1
+    assert batches[1].log_ns - batches[0].log_ns == FRAME_PERIOD_NS
