@@ -112,3 +112,16 @@ def summary_from_msg(msg: PosteriorSummary) -> core.PosteriorSummary:
                                                 float(c.probability), bool(c.heel_strike)) for c in msg.contacts),
         clouds=tuple(core.MarkerCloud(c.marker_name, points_from_msg(c.points), np.asarray(c.weights, float))
                      for c in msg.clouds))
+
+
+def camera_from_msgs(name: str, info, pose_stamped) -> "Camera":
+    """Camera from sensor_msgs/CameraInfo and geometry_msgs/PoseStamped (world_from_optical frame)."""
+    from scipy.spatial.transform import Rotation
+
+    from awalker_tracker.vision.camera import Camera
+
+    q = pose_stamped.pose.orientation
+    p = pose_stamped.pose.position
+    return Camera(name, int(info.width), int(info.height), np.asarray(info.k, float).reshape(3, 3),
+                  np.asarray(info.d, float), Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix(),
+                  np.array([p.x, p.y, p.z], float))

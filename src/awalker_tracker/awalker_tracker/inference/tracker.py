@@ -1,0 +1,349 @@
+"""The composed tracking model and the online tracker (paper Sec. 4-5).
+
+State of one particle: walker state d_t (phi1, phi2, rates, contact origin, stance leg), control
+statistics (stiffness, Rao-Blackwellised stiffness mean, toe-off impulse), kinematic DOFs k_t,
+plus the posed body and a stride-averaged speed (both derived, kept for the likelihood and
+summaries). Transition (eq. 8): stochastic walker dynamics with control, then conditional
+kinematics, then the body pose. Likelihood: any function of (previous states, states,
+observation); the image likelihood of ``vision.likelihood`` in the pipeline, a marker
+likelihood in tests.
+
+Initialisation (paper Sec. 6: "sampled with a large variance about" a coarse hand-set state):
+from a ``StartDescription`` (ground position under the pelvis, heading, speed, step length,
+stance leg) each particle gets a speed and step length around the given ones, the cyclic
+gait of that speed and step length from the gait table, a random phase within the step (the
+gait is simulated forward 0..K-1 frames, K = frames per step), then its kinematics around the
+start position and heading.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, fields, is_dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from scipy.spatial.transform import Rotation
+
+from awalker_tracker.errors import InputError
+from awalker_tracker.inference.posterior import ParticleOutputs, PosteriorSummary, summarize
+from awalker_tracker.inference.smc import AncestryHistory, FilterStep, ParticleFilter, SMCConfig
+from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription, BodyPoseBatch
+from awalker_tracker.model.walker import LEFT, RIGHT, WalkerParams, WalkerState, hip_velocity
+
+# ----------------------------------------------------------------------------- start description
+
+
+@dataclass(frozen=True)
+class StartDescription:
+    """Coarse initial state (YAML ``start:`` mapping): frame index, ground xy under the pelvis (m),
+    heading (rad, walking direction from world +x about +z), speed (m/s), step length (m), stance leg."""
+
+    frame: int = 0
+    position: tuple[float, float] = (0.0, 0.0)
+    heading: float = 0.0
+    speed: float = 1.3
+    step_length: float = 0.7
+    stance_leg: int = LEFT
+
+    @classmethod
+    def from_yaml_text(cls, text: str, where: str = "start description") -> "StartDescription":
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            raise InputError(f"{where}: not valid YAML ({exc})") from None
+        if not isinstance(data, dict) or not isinstance(data.get("start"), dict):
+            raise InputError(f"{where}: expected a top-level 'start:' mapping with frame, position [x, y], "
+                             "heading (rad), speed (m/s), step_length (m), stance_leg (left|right)")
+        s = data["start"]
+        known = {"frame", "position", "heading", "speed", "step_length", "stance_leg"}
+        unknown = sorted(set(s) - known)
+        if unknown:
+            raise InputError(f"{where}: unknown start field(s) {', '.join(unknown)}; expected {sorted(known)}")
+        missing = sorted({"position", "heading", "speed", "step_length", "stance_leg"} - set(s))
+        if missing:
+            raise InputError(f"{where}: start is missing {', '.join(missing)}")
+        try:
+            position = tuple(float(v) for v in s["position"])
+            frame, heading = int(s.get("frame", 0)), float(s["heading"])
+            speed, step_length = float(s["speed"]), float(s["step_length"])
+        except (TypeError, ValueError):
+            raise InputError(f"{where}: start values must be numbers (position a list of two), got {s}") from None
+        if len(position) != 2 or not np.all(np.isfinite([*position, heading, speed, step_length])):
+            raise InputError(f"{where}: start.position must be [x, y] and all values finite, got {s}")
+        if frame < 0 or speed <= 0 or step_length <= 0:
+            raise InputError(f"{where}: start.frame must be >= 0, speed and step_length > 0, got {s}")
+        leg = str(s["stance_leg"]).lower()
+        if leg not in ("left", "right"):
+            raise InputError(f"{where}: start.stance_leg must be 'left' or 'right', got {s['stance_leg']!r}")
+        return cls(frame, position, heading, speed, step_length, LEFT if leg == "left" else RIGHT)
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> "StartDescription":
+        path = Path(path)
+        try:
+            return cls.from_yaml_text(path.read_text(), str(path))
+        except OSError as exc:
+            raise InputError(f"{path}: cannot read start description ({exc.strerror})") from None
+
+    def to_yaml_text(self) -> str:
+        return yaml.safe_dump({"start": {
+            "frame": self.frame, "position": [float(v) for v in self.position], "heading": float(self.heading),
+            "speed": float(self.speed), "step_length": float(self.step_length),
+            "stance_leg": "left" if self.stance_leg == LEFT else "right"}}, sort_keys=False)
+
+
+# ----------------------------------------------------------------------------- configuration
+
+
+@dataclass(frozen=True)
+class InitialSpread:
+    """Spread of the initial particles around the start description (standard deviations)."""
+
+    position_m: float = 0.10
+    heading_rad: float = 0.10
+    speed_fraction: float = 0.15       # relative to the start speed
+    step_length_fraction: float = 0.10
+    joint_rad: float = 0.05
+    random_phase: bool = True          # uniform phase within the first step
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Tracker settings: filter (N, tau, gamma, seed), frame period dt (s), initial spread."""
+
+    smc: SMCConfig = SMCConfig()
+    dt: float = 1.0 / 30.0
+    spread: InitialSpread = InitialSpread()
+    speed_time_constant_s: float = 0.5   # speed = hip velocity averaged over about one step
+    fallen_log_penalty: float = 1.0e3    # log-likelihood removed from fallen walkers
+    cloud_size: int = 200
+    history_payload: tuple[str, ...] = ("markers", "joint_angles", "stance_leg", "heel_strike")
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.dt) and self.dt > 0):
+            raise ValueError(f"TrackerConfig.dt must be > 0 s, got {self.dt}")
+
+
+# ----------------------------------------------------------------------------- particle states
+
+
+def where_arrays(mask: np.ndarray, new: Any, old: Any) -> Any:
+    """Per particle: fields of ``new`` where ``mask`` else of ``old`` (same dataclass type)."""
+    if is_dataclass(new):
+        return type(new)(**{f.name: where_arrays(mask, getattr(new, f.name), getattr(old, f.name))
+                            for f in fields(new)})
+    m = mask.reshape(mask.shape + (1,) * (np.ndim(new) - 1))
+    return np.where(m, new, old)
+
+
+@dataclass
+class TrackerStates:
+    """N particles: walker, control, kinematics, the posed body and derived quantities."""
+
+    walker: WalkerState
+    control: Any                  # model.control.ControlState
+    kin: Any                      # model.kinematics.KinematicState
+    pose: BodyPoseBatch
+    speed: np.ndarray             # (N,) stride-averaged walking speed (m/s)
+    fallen: np.ndarray            # (N,) bool, the walker fell at some point
+
+    def __len__(self) -> int:
+        return len(self.walker)
+
+    def take(self, indices: np.ndarray) -> "TrackerStates":
+        pose = BodyPoseBatch(self.pose.markers[indices], self.pose.joint_angles[indices],
+                             self.pose.segments.take(indices))
+        return TrackerStates(self.walker.take(indices), self.control.take(indices), self.kin.take(indices),
+                             pose, self.speed[indices], self.fallen[indices])
+
+
+LikelihoodFn = Callable[[TrackerStates | None, TrackerStates, Any], np.ndarray]
+
+
+class TrackerModel:
+    """SMC model (``initial``, ``transition``, ``log_likelihood``) of the physics-based tracker."""
+
+    def __init__(self, body: BodyDescription, start: StartDescription, likelihood: LikelihoodFn,
+                 config: TrackerConfig = TrackerConfig(), params: WalkerParams | None = None,
+                 gait_table: Any = None, prior: Any = None, kinematics: Any = None) -> None:
+        from awalker_tracker.model import control, gaits, kinematics as kin_mod
+
+        self.body = body
+        self.start = start
+        self.config = config
+        self.likelihood = likelihood
+        self.params = params or body.walker_params()
+        self.gaits = gait_table if gait_table is not None else gaits.GaitTable.load()
+        self.prior = prior if prior is not None else control.ControlPrior.from_gait_table(self.gaits)
+        self.kin_config = kinematics if kinematics is not None else kin_mod.KinematicConfig(dt=config.dt)
+        self._control = control
+        self._gaits = gaits
+        self._kin = kin_mod
+
+    # -- SMC protocol ---------------------------------------------------------------------
+    def initial(self, n: int, rng: np.random.Generator) -> TrackerStates:
+        s, sp = self.start, self.config.spread
+        speed = s.speed * np.exp(sp.speed_fraction * rng.standard_normal(n))
+        step = s.step_length * np.exp(sp.step_length_fraction * rng.standard_normal(n))
+        walker = self._gaits.gait_initial_state(self.params, speed, step, contact_origin=0.0,
+                                               stance_leg=s.stance_leg, table=self.gaits)
+        if len(walker) == 1 and n > 1:
+            walker = walker.take(np.zeros(n, np.intp))
+        _, _, stiffness, impulse = self.gaits.lookup(speed, step)
+        control = self._control.initial_control(self.prior, n, rng, stiffness=np.asarray(stiffness, float),
+                                                toe_off_impulse=np.asarray(impulse, float))
+        if sp.random_phase:
+            walker, control = self._random_phase(walker, control, speed, step, rng)
+        kin = self._kin.initial_kinematics(
+            self.kin_config, walker, np.asarray(s.position, float), s.heading, n, rng, body=self.body,
+            params=self.params, position_spread=sp.position_m, heading_spread=sp.heading_rad,
+            joint_spread=sp.joint_rad)
+        pose = self._kin.pose_body(self.body, self.params, walker, kin)
+        return TrackerStates(walker, control, kin, pose, speed.copy(), np.zeros(n, bool))
+
+    def _random_phase(self, walker: WalkerState, control: Any, speed: np.ndarray, step: np.ndarray,
+                      rng: np.random.Generator) -> tuple[WalkerState, Any]:
+        """Advance each particle by a uniform number of frames within its first step."""
+        frames_per_step = np.maximum(1, np.floor(step / speed / self.config.dt)).astype(int)
+        offsets = (rng.random(walker.stance_angle.size) * frames_per_step).astype(int)
+        for j in range(int(offsets.max())):
+            moved, moved_control, _ = self._control.sample_transition(
+                self.params, self.prior, walker, control, self.config.dt, rng)
+            keep = offsets > j
+            walker = where_arrays(keep, moved, walker)
+            control = where_arrays(keep, moved_control, control)
+        return walker, control
+
+    def transition(self, states: TrackerStates, rng: np.random.Generator) -> tuple[TrackerStates, Any]:
+        walker, control, events = self._control.sample_transition(
+            self.params, self.prior, states.walker, states.control, self.config.dt, rng)
+        kin = self._kin.sample_kinematics(self.kin_config, self.body, self.params, states.walker, walker,
+                                          events, states.kin, rng)
+        pose = self._kin.pose_body(self.body, self.params, walker, kin)
+        forward, _ = hip_velocity(self.params, walker)
+        gain = min(1.0, self.config.dt / self.config.speed_time_constant_s)
+        speed = states.speed + gain * (forward - states.speed)
+        fallen = states.fallen | np.asarray(events.fallen, bool)
+        return TrackerStates(walker, control, kin, pose, speed, fallen), events
+
+    def log_likelihood(self, prev: TrackerStates | None, states: TrackerStates, obs: Any) -> np.ndarray:
+        loglik = np.asarray(self.likelihood(prev, states, obs), float)
+        return loglik - self.config.fallen_log_penalty * states.fallen
+
+    # -- outputs --------------------------------------------------------------------------
+    def outputs(self, states: TrackerStates, events: Any | None) -> ParticleOutputs:
+        n = len(states)
+        contact = np.column_stack([states.kin.contact_point, np.zeros(n)])
+        struck = np.zeros(n, bool) if events is None else np.asarray(events.heel_strike, bool)
+        c = states.control
+        walker_fields = {k: getattr(states.walker, k) for k in
+                         ("stance_angle", "swing_angle", "stance_rate", "swing_rate", "contact_origin")}
+        walker_fields.update({k: np.asarray(getattr(c, k), float) for k in
+                              ("stiffness", "stiffness_mean_mean", "stiffness_mean_variance", "toe_off_impulse")})
+        return ParticleOutputs(
+            markers=states.pose.markers, joint_angles=states.pose.joint_angles,
+            torso_position=states.pose.markers[:, MARKER_NAMES.index("pelvis")],
+            torso_orientation=Rotation.from_matrix(states.pose.segments.rotation[:, 0]).as_quat(),
+            speed=states.speed, stance_leg=states.walker.stance_leg, contact_point=contact,
+            heel_strike=struck, strike_point=contact, walker=walker_fields)
+
+
+# ----------------------------------------------------------------------------- online tracker
+
+
+@dataclass
+class MapTrajectory:
+    """MAP state sequence (lineage of the final best particle), one row per tracked frame."""
+
+    frames: np.ndarray          # (F,) frame indices of the input
+    stamps_ns: np.ndarray       # (F,)
+    markers: np.ndarray         # (F, 13, 3)
+    joint_angles: np.ndarray    # (F, J)
+    stance_leg: np.ndarray      # (F,)
+    heel_strike: np.ndarray     # (F,) bool
+    marker_names: tuple[str, ...] = MARKER_NAMES
+    joint_names: tuple[str, ...] = JOINT_NAMES
+
+
+class Tracker:
+    """Online tracker: push one observation per frame, get posterior summaries (lag tau frames)."""
+
+    def __init__(self, model: TrackerModel, config: TrackerConfig | None = None) -> None:
+        self.model = model
+        self.config = config or model.config
+        self.filter = ParticleFilter(model, self.config.smc)
+        self.history = AncestryHistory()
+        self._frames: list[tuple[int, int]] = []   # (frame index, stamp) in push order
+        self._last_step: FilterStep | None = None
+
+    def push(self, frame_index: int, stamp_ns: int, obs: Any) -> list[PosteriorSummary]:
+        """Add the observation of one frame; returns the summaries completed (in frame order)."""
+        if self._frames and stamp_ns <= self._frames[-1][1]:
+            raise ValueError(f"frame stamps must increase: {stamp_ns} after {self._frames[-1][1]}")
+        self._frames.append((int(frame_index), int(stamp_ns)))
+        return [self._summarize(s) for s in self.filter.push(obs)]
+
+    def finish(self) -> list[PosteriorSummary]:
+        """Flush the frames still waiting for look-ahead observations."""
+        return [self._summarize(s) for s in self.filter.finish()]
+
+    def _summarize(self, step: FilterStep) -> PosteriorSummary:
+        frame_index, stamp_ns = self._frames[step.frame]
+        out = self.model.outputs(step.states, step.info)
+        payload = {"markers": out.markers.astype(np.float32), "joint_angles": out.joint_angles.astype(np.float32),
+                   "stance_leg": out.stance_leg.copy(), "heel_strike": out.heel_strike.copy()}
+        self.history.append(None if step.frame == 0 else step.ancestors, payload)
+        self._last_step = step
+        return summarize(frame_index, stamp_ns, step.log_weights, out, MARKER_NAMES, JOINT_NAMES,
+                         step.resampled, cloud_size=self.config.cloud_size)
+
+    def map_trajectory(self) -> MapTrajectory:
+        """Lineage of the highest-weight particle of the last completed frame."""
+        if self._last_step is None:
+            raise ValueError("no frame has been completed yet")
+        traj = self.history.trajectory(self._last_step.best_index)
+        count = len(self.history)
+        frames = np.array([f for f, _ in self._frames[:count]], np.int64)
+        stamps = np.array([s for _, s in self._frames[:count]], np.int64)
+        return MapTrajectory(frames, stamps, traj["markers"].astype(float), traj["joint_angles"].astype(float),
+                             traj["stance_leg"], traj["heel_strike"].astype(bool))
+
+
+def marker_likelihood(sigma_m: float = 0.03, names: tuple[str, ...] = MARKER_NAMES) -> LikelihoodFn:
+    """Likelihood of observed 3D markers (obs: (13, 3) array, NaN = unobserved), isotropic Gaussian.
+
+    For tests and benchmarks of the dynamics/kinematics part of the tracker without images.
+    """
+    rows = [MARKER_NAMES.index(n) for n in names]
+
+    def loglik(prev: TrackerStates | None, states: TrackerStates, obs: np.ndarray) -> np.ndarray:
+        obs = np.asarray(obs, float)[rows]
+        seen = np.all(np.isfinite(obs), axis=1)
+        d = states.pose.markers[:, rows][:, seen] - obs[seen]
+        return -0.5 * np.sum(d * d, axis=(1, 2)) / sigma_m**2
+
+    return loglik
+
+
+@dataclass(frozen=True)
+class ImageObservation:
+    """Image features of one frame from every camera (camera order of the likelihood's cameras)."""
+
+    features: tuple[Any, ...]                    # vision.features.FrameFeatures per camera
+    occlusion_masks: tuple[np.ndarray | None, ...] = ()
+
+
+def image_likelihood(body: BodyDescription, cameras: list[Any]) -> LikelihoodFn:
+    """The image likelihood of paper Sec. 5.1 (eq. 9-12) over ``cameras`` (vision.likelihood)."""
+    from awalker_tracker.vision.likelihood import log_likelihood
+
+    parts = body.parts
+
+    def loglik(prev: TrackerStates | None, states: TrackerStates, obs: ImageObservation) -> np.ndarray:
+        prev_segments = states.pose.segments if prev is None else prev.pose.segments
+        masks = list(obs.occlusion_masks) or [None] * len(cameras)
+        return log_likelihood(parts, states.pose.segments, prev_segments, cameras, list(obs.features), masks)
+
+    return loglik
