@@ -44,6 +44,7 @@ lasts > 0.3 s, far longer than a 1/30 s or 1/60 s frame.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -233,6 +234,12 @@ class StepEvents:
     strike_position: np.ndarray    # (N,) float: sagittal x (m) of the new contact point (NaN if none)
     fallen: np.ndarray             # (N,) bool: walker fell (state frozen at the frame start)
     time_since_strike: np.ndarray  # (N,) s since the last heel strike, at the end of the frame
+    toe_off_impulse: np.ndarray    # (N,) iota (m/s) applied at the strike (NaN if none)
+    pre_strike_rates: np.ndarray   # (N, 2) (phi1', phi2') just before the strike (NaN if none)
+
+
+#: iota given as a function of (walker indices, pre-impact phi1', pre-impact phi2') -> iota (m/s)
+ImpulseSampler = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
 
 def _rk4(k: _Consts, p1, p2, w1, w2, kappa, h):
@@ -271,7 +278,7 @@ def _strike_in_substep(params: WalkerParams, k: _Consts, idx: np.ndarray, p1, p2
     """Locate strikes of walkers ``idx`` in a sub-step of size h from (p1..w2)[idx]; apply the impact.
 
     Returns (valid mask over idx, theta, post-impact or end-of-sub-step arrays, new origin, new leg,
-    strike x, pre-impact rates). With ``finish`` the remaining (1 - theta) h is integrated after the impact.
+    strike x, pre-impact rates, iota used). With ``finish`` the remaining (1 - theta) h is integrated after the impact.
     """
     kap = kappa[idx] if np.ndim(kappa) else kappa
     sp1, sp2, sw1, sw2 = p1[idx], p2[idx], w1[idx], w2[idx]
@@ -279,12 +286,17 @@ def _strike_in_substep(params: WalkerParams, k: _Consts, idx: np.ndarray, p1, p2
     q1, q2, v1, v2 = _rk4(k, sp1, sp2, sw1, sw2, kap, theta * h)
     valid = (q1 < 0.0) & (v1 + v2 < 0.0)
     pre = WalkerState(q1, q2, v1, v2, origin[idx], leg[idx])
-    post = heel_strike(params, pre, iota[idx] if np.ndim(iota) else iota)
+    if callable(iota):
+        used = np.asarray(iota(idx, v1, v2), float)
+    else:
+        used = iota[idx] if np.ndim(iota) else iota
+    used = np.broadcast_to(used, idx.shape)
+    post = heel_strike(params, pre, used)
     n1, n2, nv1, nv2 = post.stance_angle, post.swing_angle, post.stance_rate, post.swing_rate
     if finish:
         n1, n2, nv1, nv2 = _rk4(k, n1, n2, nv1, nv2, kap, (1.0 - theta) * h)
     strike_x = post.contact_origin - k.R * post.stance_angle
-    return valid, theta, (n1, n2, nv1, nv2), post.contact_origin, post.stance_leg, strike_x, (v1, v2)
+    return valid, theta, (n1, n2, nv1, nv2), post.contact_origin, post.stance_leg, strike_x, (v1, v2), used
 
 
 def fallen_mask(params: WalkerParams, state: WalkerState, time_since_strike: np.ndarray | None = None,
@@ -309,7 +321,7 @@ def advance(
     params: WalkerParams,
     state: WalkerState,
     stiffness: np.ndarray | float,
-    toe_off_impulse: np.ndarray | float,
+    toe_off_impulse: np.ndarray | float | ImpulseSampler,
     dt: float,
     substeps: int | None = None,
     time_since_strike: np.ndarray | None = None,
@@ -318,7 +330,8 @@ def advance(
     """Advance N walkers by one frame of ``dt`` seconds with RK4 sub-steps and heel strikes.
 
     ``stiffness`` kappa (N m/rad per kg) and ``toe_off_impulse`` iota (m/s) are scalars or (N,)
-    and held constant over the frame; iota is used if the walker strikes in this frame.
+    and held constant over the frame; iota is used if the walker strikes in this frame. iota may
+    also be an :data:`ImpulseSampler`, called once per sub-step with strikes, with the pre-impact rates.
     ``substeps`` defaults to :func:`substeps_for` (4 per 1/30 s). ``time_since_strike`` (s, (N,))
     carries the no-strike fall criterion between calls; it is returned updated in the events.
     Fallen walkers keep their input state (frozen, never NaN) and are flagged in the events.
@@ -330,10 +343,10 @@ def advance(
         raise ValueError("substeps must be >= 1")
     h = dt / substeps
     kappa = np.asarray(stiffness, float)
-    iota = np.asarray(toe_off_impulse, float)
     if kappa.ndim:
         kappa = np.broadcast_to(kappa, (n,))
-    if iota.ndim:
+    iota = toe_off_impulse if callable(toe_off_impulse) else np.asarray(toe_off_impulse, float)
+    if not callable(iota) and iota.ndim:
         iota = np.broadcast_to(iota, (n,))
     tss = np.zeros(n) if time_since_strike is None else np.asarray(time_since_strike, float)
 
@@ -343,6 +356,8 @@ def advance(
     struck = np.zeros(n, bool)
     fraction = np.zeros(n)
     strike_x = np.full(n, np.nan)
+    used_iota = np.full(n, np.nan)
+    pre_rates = np.full((n, 2), np.nan)
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         for i in range(substeps):
             s0 = p1 + p2
@@ -351,7 +366,7 @@ def advance(
             cand = (s0 > 0.0) & (s1 <= 0.0) & ~struck
             if cand.any():
                 idx = np.flatnonzero(cand)
-                valid, theta, (a1, a2, b1, b2), new_origin, new_leg, sx, _ = _strike_in_substep(
+                valid, theta, (a1, a2, b1, b2), new_origin, new_leg, sx, (r1, r2), ui = _strike_in_substep(
                     params, k, idx, p1, p2, w1, w2, origin, leg, kappa, iota, h, s0, s1, finish=True)
                 idx, sel = idx[valid], valid
                 n1[idx], n2[idx], nw1[idx], nw2[idx] = a1[sel], a2[sel], b1[sel], b2[sel]
@@ -359,6 +374,8 @@ def advance(
                 struck[idx] = True
                 fraction[idx] = (i + theta[sel]) / substeps
                 strike_x[idx] = sx[sel]
+                used_iota[idx] = ui[sel]
+                pre_rates[idx, 0], pre_rates[idx, 1] = r1[sel], r2[sel]
             p1, p2, w1, w2 = n1, n2, nw1, nw2
     new_tss = np.where(struck, (1.0 - fraction) * dt, tss + dt)
     out = WalkerState(p1, p2, w1, w2, origin, leg)
@@ -370,8 +387,10 @@ def advance(
         struck &= ~fallen
         fraction[fallen] = 0.0
         strike_x[fallen] = np.nan
+        used_iota[fallen] = np.nan
+        pre_rates[fallen] = np.nan
     fraction = np.minimum(fraction, np.nextafter(1.0, 0.0))
-    return out, StepEvents(struck, fraction, strike_x, fallen, new_tss)
+    return out, StepEvents(struck, fraction, strike_x, fallen, new_tss, used_iota, pre_rates)
 
 
 def simulate_to_strike(
@@ -407,7 +426,7 @@ def simulate_to_strike(
             cand = active & (s0 > 0.0) & (s1 <= 0.0)
             if cand.any():
                 idx = np.flatnonzero(cand)
-                valid, theta, post, new_origin, new_leg, _, (v1, v2) = _strike_in_substep(
+                valid, theta, post, new_origin, new_leg, _, (v1, v2), _ = _strike_in_substep(
                     params, k, idx, p1, p2, w1, w2, origin, leg, kappa, iota, step, s0, s1, finish=False)
                 idx, sel = idx[valid], valid
                 for arr, val in zip(out, post):
