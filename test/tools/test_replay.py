@@ -95,8 +95,11 @@ def test_rate_mode_delivers_all_frames_at_the_scaled_rate(ros_context, tmp_path:
     executor.add_node(replay_node)
     rate = 2.0
     try:
-        replayer = Replayer(replay_node, bag, ReplayConfig(rate=rate, wait_for_subscribers=5.0))
+        announced: list[int] = []
+        replayer = Replayer(replay_node, bag, ReplayConfig(rate=rate, wait_for_subscribers=5.0),
+                            on_frame=announced.append)
         summary = run_replay(executor, replayer)
+        assert announced == stamps
         _spin_for(executor, 0.3)
         assert summary.stopped is None and summary.frames == 10 and summary.acks == 0
         with SequenceReader(bag) as reader:

@@ -26,7 +26,7 @@ import importlib
 import struct
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -178,8 +178,16 @@ def _qos(latched: bool, depth: int) -> QoSProfile:
 class Replayer:
     """Publishes a bag through ``node``; drive it with ``step()`` / ``next_wait()`` (see run_replay)."""
 
-    def __init__(self, node: Node, bag_path: str | Path, config: ReplayConfig = ReplayConfig()) -> None:
+    def __init__(
+        self,
+        node: Node,
+        bag_path: str | Path,
+        config: ReplayConfig = ReplayConfig(),
+        on_frame: Callable[[int], None] | None = None,
+    ) -> None:
+        """``on_frame(stamp_ns)`` is called right after each frame's messages were published."""
         self.node = node
+        self._on_frame = on_frame
         self.path = Path(bag_path)
         self.config = config.validated(f"replay {self.path}")
         self.summary = ReplaySummary(str(self.path))
@@ -361,6 +369,8 @@ class Replayer:
                 self._publish_camera_poses(raw)
         if batch.stamp_ns is not None:
             self.summary.frames += 1
+            if self._on_frame is not None:
+                self._on_frame(batch.stamp_ns)
 
     def _publish_camera_poses(self, raw: bytes) -> None:
         from geometry_msgs.msg import PoseStamped
