@@ -138,7 +138,7 @@ def test_bad_replay_inputs(ros_context, tmp_path: Path) -> None:
     node = Node("replay", context=ros_context)
     with pytest.raises(InputError, match=r"--topics \['/nope'\] not in the bag"):
         Replayer(node, bag, ReplayConfig(topics=("/nope",)))
-    with pytest.raises(InputError, match="lockstep needs image topics"):
+    with pytest.raises(InputError, match="lockstep needs camera image topics"):
         Replayer(node, bag, ReplayConfig(lockstep=True, topics=("/cam0/camera_info",)))
     with pytest.raises(InputError, match="rate must be > 0"):
         Replayer(node, bag, ReplayConfig(rate=0.0))
@@ -182,3 +182,39 @@ def test_batches_group_each_frame_with_its_side_messages(tmp_path: Path) -> None
         assert topics.count("/awalker/ground_truth") == 1
         assert topics.count("/cam0/camera_info") == 1
     assert batches[1].log_ns - batches[0].log_ns == FRAME_PERIOD_NS
+
+
+def _fake(topic: str, stamp: int | None = None) -> tuple[object, int, bytes]:
+    from types import SimpleNamespace
+
+    raw = b"\x00\x01\x00\x00" + struct.pack("<iI", 0, stamp or 0) + b"\x00" * 8
+    return SimpleNamespace(topic=topic), (stamp or 0) * 10, raw
+
+
+def _layout(batches: list[Batch]) -> list[tuple[int | None, list[str]]]:
+    return [(b.stamp_ns, [f"{c.topic}@{header_stamp_ns(r)}" for c, r in b.messages]) for b in batches]
+
+
+def test_batches_reassemble_frames_interleaved_out_of_stamp_order() -> None:
+    images = {"/c0/image_raw", "/c1/image_raw"}
+    stream = [_fake("/tf_static", 1), _fake("/c0/image_raw", 1), _fake("/c0/camera_info", 1),
+              _fake("/c0/image_raw", 2), _fake("/c1/image_raw", 1), _fake("/c1/camera_info", 1),
+              _fake("/c1/image_raw", 2), _fake("/gt", 2), _fake("/c0/image_raw", 3), _fake("/c1/image_raw", 3)]
+    assert _layout(list(iter_batches(iter(stream), images))) == [
+        (1, ["/tf_static@1", "/c0/image_raw@1", "/c0/camera_info@1", "/c1/image_raw@1", "/c1/camera_info@1"]),
+        (2, ["/c0/image_raw@2", "/c1/image_raw@2", "/gt@2"]),
+        (3, ["/c0/image_raw@3", "/c1/image_raw@3"]),
+    ]
+
+
+def test_batches_emit_a_frame_a_camera_skipped_once_a_newer_frame_is_complete() -> None:
+    images = {"/c0/image_raw", "/c1/image_raw"}
+    stream = [_fake("/c0/image_raw", 1), _fake("/c1/image_raw", 1), _fake("/c0/image_raw", 2),
+              _fake("/c0/image_raw", 3), _fake("/c1/image_raw", 3), _fake("/c0/image_raw", 4),
+              _fake("/c1/image_raw", 4), _fake("/note", 9)]
+    batches = list(iter_batches(iter(stream), images))
+    assert [b.stamp_ns for b in batches] == [1, 2, 3, 4]
+    assert _layout(batches)[1] == (2, ["/c0/image_raw@2"])
+    assert _layout(batches)[3] == (4, ["/c0/image_raw@4", "/c1/image_raw@4", "/note@9"])
+    no_images = list(iter_batches(iter([_fake("/a", 1), _fake("/b", 2)]), set()))
+    assert [(b.stamp_ns, len(b.messages), b.log_ns) for b in no_images] == [(None, 1, 10), (None, 1, 20)]

@@ -123,34 +123,70 @@ def header_stamp_ns(raw: bytes | memoryview) -> int:
     return sec * 1_000_000_000 + nanosec
 
 
+def is_camera_image_topic(topic: str, msgtype: str) -> bool:
+    """Topics that define frames: ``/<cam>/image_raw`` (Image) and ``/<cam>/image_raw/compressed``."""
+    return (msgtype == IMAGE and topic.endswith("/image_raw")) or (
+        msgtype == COMPRESSED_IMAGE and topic.endswith("/image_raw/compressed"))
+
+
 def iter_batches(
     messages: Iterator[tuple[Connection, int, bytes]], image_topics: set[str]
 ) -> Iterator[Batch]:
-    """Group bag messages into frames: a batch closes before the first image with a new stamp.
+    """Group bag messages into frames (batches), in stamp order.
 
-    Messages before the first image (e.g. /tf_static) join the first frame; messages after an
-    image (camera_info, ground truth) join that image's frame. Without images every message
-    is its own batch.
+    A frame is opened by the first image (of ``image_topics``) with a new header stamp and holds
+    every image with that stamp; other messages join the frame of the latest image (messages
+    before the first image join the first frame). A frame is emitted once a newer image has
+    arrived and it is complete (every image topic delivered), or a newer frame is complete (a
+    camera skipped it). So camera streams interleaved out of stamp order in the bag (recorded
+    with receive times) still give whole frames. Without image topics every message is its
+    own batch.
     """
-    current: list[tuple[Connection, bytes]] = []
-    first_log: int | None = None
-    stamp: int | None = None
+    if not image_topics:
+        for conn, log_ns, raw in messages:
+            yield Batch(log_ns, None, ((conn, bytes(raw)),))
+        return
+    frames: dict[int, tuple[int, list[tuple[Connection, bytes]], set[str]]] = {}  # stamp -> (log, msgs, topics)
+    before_first: list[tuple[Connection, bytes]] = []  # messages waiting for the next frame
+    before_first_log = 0  # bag time of the first of them
+    latest: int | None = None
+
+    def complete(stamp: int) -> bool:
+        return frames[stamp][2] == image_topics
+
+    def ready() -> Iterator[Batch]:
+        while frames:
+            oldest = min(frames)
+            if oldest == latest:
+                return
+            if not complete(oldest) and not any(complete(s) for s in frames if s not in (oldest, latest)):
+                return
+            log_ns, msgs, _ = frames.pop(oldest)
+            yield Batch(log_ns, oldest, tuple(msgs))
+
     for conn, log_ns, raw in messages:
         raw = bytes(raw)
         if conn.topic in image_topics:
-            image_stamp = header_stamp_ns(raw)
-            if stamp is not None and image_stamp != stamp:
-                yield Batch(first_log, stamp, tuple(current))  # type: ignore[arg-type]
-                current, first_log = [], None
-            stamp = image_stamp
-        if first_log is None:
-            first_log = log_ns
-        current.append((conn, raw))
-        if not image_topics:
-            yield Batch(log_ns, None, tuple(current))
-            current, first_log = [], None
-    if current:
-        yield Batch(first_log, stamp, tuple(current))  # type: ignore[arg-type]
+            stamp = header_stamp_ns(raw)
+            if stamp not in frames:
+                frames[stamp] = (before_first_log if before_first else log_ns, before_first, set())
+                before_first = []
+            frames[stamp][1].append((conn, raw))
+            frames[stamp][2].add(conn.topic)
+            latest = stamp
+            yield from ready()
+        elif latest is None or latest not in frames:
+            if not before_first:  # before any image, or after the latest image's frame was emitted
+                before_first_log = log_ns
+            before_first.append((conn, raw))
+        else:
+            frames[latest][1].append((conn, raw))
+    latest = None
+    for stamp in sorted(frames):
+        log_ns, msgs, _ = frames.pop(stamp)
+        yield Batch(log_ns, stamp, tuple(msgs))
+    if before_first:  # trailing messages with no frame after them
+        yield Batch(before_first_log, None, tuple(before_first))
 
 
 def message_class(msgtype: str) -> type:
@@ -238,10 +274,11 @@ class Replayer:
             }
         else:
             self._pose_publishers = {}
-        self._image_topics = {c.topic for c in read if c.msgtype in (IMAGE, COMPRESSED_IMAGE)}
+        self._image_topics = {c.topic for c in read if is_camera_image_topic(c.topic, c.msgtype)}
         if cfg.lockstep and not self._image_topics:
-            raise InputError(f"{self.path}: lockstep needs image topics ({IMAGE} or {COMPRESSED_IMAGE}) "
-                             f"to define frames; selected topics are {sorted(c.topic for c in selected)}")
+            raise InputError(f"{self.path}: lockstep needs camera image topics (/<cam>/image_raw {IMAGE} or "
+                             f"/<cam>/image_raw/compressed {COMPRESSED_IMAGE}) to define frames; selected topics "
+                             f"are {sorted(c.topic for c in selected)}")
         self._ack_sub = None
         self._acked_stamp = -1
         if cfg.lockstep:
