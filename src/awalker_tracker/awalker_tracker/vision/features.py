@@ -1,0 +1,200 @@
+"""Per-camera image features for one frame: appearance log-likelihood-ratio maps and grid flow.
+
+``FeatureExtractor`` is fed a camera's RGB frames in order and returns ``FrameFeatures`` for
+each: per part class (head, torso, legs, feet) the clipped map log p_fg,c(m) - log p_bg(m)
+on the image downsampled by ``downsample`` (paper Sec. 5.1 and footnote 1: the likelihood
+sums these ratios over the pixels a hypothesised body covers), and the flow grid of
+``vision.flow``.
+
+Learning, in order of preference (all automatic, no hand labels needed):
+1. Background: frames known to be background-only (``background_frames`` > 0, e.g. the
+   frames before the start description's ``frame``) give the per-pixel mean and pooled
+   covariance. Otherwise the first ``median_frames`` frames are buffered and the background
+   is their robust temporal median (``fit_background_robust``); until then the maps are
+   zero (no appearance information).
+2. Foreground: at the first frame after the background is known, the mixtures are fitted to
+   the pixels that differ from the background, labelled by (a) a class-label image passed
+   with that frame (the body projected at the start pose, or a user's label mask), else
+   (b) horizontal bands of the largest foreground blob at the body's proportions.
+Maps are zero before the models exist; the flow is valid from the second frame on.
+Occlusion mask (255 / True = occluded): its pixels get ratio 0, cells it touches are invalid.
+"""
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from awalker_tracker.model.body import PART_CLASSES, BodyDescription
+from awalker_tracker.vision.background import (
+    BackgroundModel,
+    fit_background,
+    fit_background_robust,
+    measurements,
+)
+from awalker_tracker.vision.flow import FlowConfig, FlowGrid, GridFlow, to_grey
+from awalker_tracker.vision.foreground import ForegroundModel, learn_foreground
+
+
+@dataclass(frozen=True)
+class FeatureConfig:
+    """Feature extraction settings. downsample: map pixel = downsample x downsample image px."""
+
+    downsample: int = 4
+    background_frames: int = 0        # known background-only frames at the start (0 = unknown)
+    median_frames: int = 20           # frames buffered for the robust median when none are known
+    outlier_probability: float = 0.02  # uniform outlier share of both appearance densities
+    llr_clip: float = 25.0            # |log-likelihood ratio| bound per pixel (a safety net)
+    adapt_rate: float = 0.0           # background adaptation per frame (0 = frozen)
+    flow: FlowConfig = field(default_factory=FlowConfig)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not 0 < self.outlier_probability < 1 or self.downsample < 1 or self.background_frames < 0 or self.median_frames < 1 or self.llr_clip <= 0:
+            raise ValueError(f"invalid FeatureConfig {self}")
+        if not 0.0 <= self.adapt_rate <= 1.0:
+            raise ValueError("FeatureConfig.adapt_rate must be in [0, 1]")
+
+
+@dataclass(frozen=True, eq=False)
+class FrameFeatures:
+    """Features of one camera frame: llr (C, h, w) float32 per ``classes``; flow grid; sizes in px."""
+
+    classes: tuple[str, ...]
+    llr: np.ndarray
+    downsample: int
+    image_width: int
+    image_height: int
+    flow: FlowGrid
+
+    @property
+    def map_shape(self) -> tuple[int, int]:
+        return int(self.llr.shape[1]), int(self.llr.shape[2])
+
+
+def _map_mask(mask: np.ndarray | None, downsample: int, shape: tuple[int, int]) -> np.ndarray | None:
+    """A full-resolution occlusion mask -> (h, w) bool: any occluded pixel in a block occludes it."""
+    if mask is None:
+        return None
+    m = np.asarray(mask) > 0
+    h, w = shape
+    if m.shape == (h, w):
+        return m
+    return m[: h * downsample, : w * downsample].reshape(h, downsample, w, downsample).any(axis=(1, 3))
+
+
+def _cell_mask(mask: np.ndarray | None, rows: int, cols: int, size: int) -> np.ndarray | None:
+    if mask is None:
+        return None
+    m = np.asarray(mask) > 0
+    return m[: rows * size, : cols * size].reshape(rows, size, cols, size).any(axis=(1, 3))
+
+
+class FeatureExtractor:
+    """Streaming feature extraction for one camera (see the module docstring)."""
+
+    def __init__(self, config: FeatureConfig = FeatureConfig(), body: BodyDescription | None = None,
+                 classes: tuple[str, ...] = PART_CLASSES, verbose: bool = False) -> None:
+        self.config = config
+        self.body = body or BodyDescription.default()
+        self.classes = classes
+        self.verbose = verbose
+        self.background: BackgroundModel | None = None
+        self.foreground: ForegroundModel | None = None
+        self.frame_index = 0
+        self.background_frames = config.background_frames
+        self._buffer: list[np.ndarray] = []
+        self._flow = GridFlow(config.flow)
+        self._prev_grey: np.ndarray | None = None
+
+    @property
+    def ready(self) -> bool:
+        """True once background and foreground models exist (maps carry information)."""
+        return self.background is not None and self.foreground is not None
+
+    def set_background_frames(self, count: int) -> None:
+        """Declare the first ``count`` frames background-only (e.g. from the start description).
+        Ignored once the background exists or when frames beyond ``count`` were already seen."""
+        if self.background is None and int(count) > self.frame_index:
+            self.background_frames = int(count)
+
+    def learn(self, rgb: np.ndarray, class_labels: np.ndarray | None = None,
+              background: BackgroundModel | None = None) -> None:
+        """Fit the foreground mixtures on ``rgb`` (optionally with a class-label image, full or map
+        resolution); ``background`` replaces the learned background if given."""
+        m = measurements(rgb, self.config.downsample)
+        if background is not None:
+            self.background = background
+        if self.background is None:
+            raise ValueError("learn: no background model yet")
+        labels = None if class_labels is None else self._labels_at_map(class_labels, m.shape[:2])
+        self.foreground = learn_foreground(m, self.background, labels, self.body, self.classes, seed=self.config.seed)
+        self._log(f"foreground mixtures learned at frame {self.frame_index} "
+                  f"({'label image' if labels is not None else 'height bands of the foreground blob'})")
+
+    def _labels_at_map(self, labels: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+        labels = np.asarray(labels)
+        if labels.shape == shape:
+            return labels
+        d = self.config.downsample
+        return labels[d // 2 :: d, d // 2 :: d][: shape[0], : shape[1]]
+
+    def _log(self, text: str) -> None:
+        if self.verbose:
+            print(f"features: {text}", file=sys.stderr, flush=True)
+
+    def process(self, rgb: np.ndarray, occlusion_mask: np.ndarray | None = None,
+                class_labels: np.ndarray | None = None) -> FrameFeatures:
+        """Features of the next frame (RGB (H, W, 3) uint8); updates the models as described above."""
+        cfg = self.config
+        image = np.asarray(rgb)
+        if image.ndim != 3 or image.shape[2] != 3:
+            raise ValueError(f"expected an (H, W, 3) RGB image, got shape {image.shape}")
+        height, width = image.shape[:2]
+        grey = to_grey(image)
+        m = measurements(image, cfg.downsample)
+        map_mask = _map_mask(occlusion_mask, cfg.downsample, m.shape[:2])
+        if self.background is not None and self.background.shape != m.shape[:2]:
+            raise ValueError(f"frame size {width}x{height} differs from the first frames'")
+        # ---- model learning ----------------------------------------------------------------
+        if self.background is None:
+            known = self.background_frames > 0
+            if known and self.frame_index < self.background_frames:
+                self._buffer.append(m)
+            elif known and self._buffer:
+                self.background = fit_background(np.stack(self._buffer))
+                self._buffer = []
+            else:
+                self.background_frames = 0     # nothing known to be background: robust median
+                self._buffer.append(m)
+                if len(self._buffer) >= cfg.median_frames:
+                    self.background = fit_background_robust(np.stack(self._buffer))
+                    self._buffer = []
+            if self.background is not None:
+                self._log(f"background learned at frame {self.frame_index}")
+        if self.background is not None and self.foreground is None and (
+                self.background_frames == 0 or self.frame_index >= self.background_frames):
+            labels = None if class_labels is None else self._labels_at_map(class_labels, m.shape[:2])
+            self.foreground = learn_foreground(m, self.background, labels, self.body, self.classes, seed=cfg.seed)
+            self._log(f"foreground mixtures learned at frame {self.frame_index}")
+        # ---- maps ------------------------------------------------------------------------
+        if self.ready:
+            llr = self.foreground.log_likelihood_ratios(m, self.background, cfg.llr_clip, cfg.outlier_probability)
+            if cfg.adapt_rate > 0:
+                self.background = self.background.adapt(m, cfg.adapt_rate)
+        else:
+            llr = np.zeros((len(self.classes),) + m.shape[:2], np.float32)
+        if map_mask is not None:
+            llr[:, map_mask] = 0.0
+        # ---- flow ------------------------------------------------------------------------
+        if self._prev_grey is None or self._prev_grey.shape != grey.shape:
+            flow = FlowGrid.empty(height, width, cfg.flow.cell_size)
+        else:
+            flow = self._flow.estimate(self._prev_grey, grey)
+        cell_mask = _cell_mask(occlusion_mask, *flow.shape, cfg.flow.cell_size)
+        if cell_mask is not None:
+            flow = FlowGrid(flow.centers, flow.flow, flow.covariance, flow.valid & ~cell_mask, flow.cell_size)
+        self._prev_grey = grey
+        self.frame_index += 1
+        return FrameFeatures(self.classes, llr, cfg.downsample, width, height, flow)

@@ -1,0 +1,170 @@
+"""Foreground appearance: a 3-component Gaussian mixture per part class (paper Sec. 5.1).
+
+Each part class (head, torso, legs, feet) has a mixture over the same 5-D measurement as the
+background (``background.measurements``), pixels IID within a part. The paper fitted them to
+hand-labelled regions; here they are fitted automatically (``learn_foreground``) to the pixels
+of one frame that (a) differ from the background model and (b) carry a part-class label. The
+label image comes from projecting the body at the start pose (``render_labels`` mapped to
+classes), from a user's label mask, or, when neither exists, from ``band_labels``: the largest
+foreground blob is cut into horizontal bands at the body's proportions (head at the top, then
+torso, legs, feet at the bottom) — adequate for an upright walker seen from the side or front.
+
+EM with full covariances, a ridge on the covariances (the background floor) so mixtures stay
+proper on few or uniform pixels, deterministic farthest-point initialisation.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from awalker_tracker.model.body import PART_CLASSES, BodyDescription
+from awalker_tracker.vision.background import DEFAULT_FLOOR_STD, MEASUREMENT_DIM, BackgroundModel
+
+NUM_COMPONENTS = 3
+# log of the uniform density over the measurement range: colour 0-255 (3 dims), gradients
+# -128..128 grey levels per pixel (2 dims).
+OUTLIER_LOG_DENSITY = -5.0 * np.log(256.0)
+
+
+@dataclass(frozen=True, eq=False)
+class GaussianMixture:
+    """weights (K,), means (K, 5), covariances (K, 5, 5)."""
+
+    weights: np.ndarray
+    means: np.ndarray
+    covariances: np.ndarray
+
+    def log_likelihood(self, m: np.ndarray) -> np.ndarray:
+        """log p(m) for measurements (..., 5) -> (...) float32 (log-sum-exp over components)."""
+        flat = m.reshape(-1, MEASUREMENT_DIM).astype(np.float32)
+        comp = _component_log_densities(flat, self.means, self.covariances) + np.log(self.weights)[None, :]
+        top = comp.max(axis=1, keepdims=True)
+        out = top[:, 0] + np.log(np.exp(comp - top).sum(axis=1))
+        return out.reshape(m.shape[:-1]).astype(np.float32)
+
+
+def _component_log_densities(x: np.ndarray, means: np.ndarray, covs: np.ndarray) -> np.ndarray:
+    out = np.empty((x.shape[0], len(means)), np.float32)
+    for k in range(len(means)):     # K = 3 components: a loop over components, not pixels
+        chol = np.linalg.cholesky(covs[k])
+        z = (x - means[k].astype(np.float32)) @ np.linalg.inv(chol).T.astype(np.float32)
+        log_det = 2.0 * np.sum(np.log(np.diag(chol)))
+        out[:, k] = -0.5 * np.sum(z * z, axis=1) - 0.5 * (log_det + MEASUREMENT_DIM * np.log(2 * np.pi))
+    return out
+
+
+def fit_mixture(samples: np.ndarray, components: int = NUM_COMPONENTS, iterations: int = 40,
+                floor_std: tuple[float, ...] = DEFAULT_FLOOR_STD, seed: int = 0,
+                max_samples: int = 4000) -> GaussianMixture:
+    """EM fit of a full-covariance Gaussian mixture to samples (M, 5); ridge = floor_std^2."""
+    x = np.asarray(samples, np.float64).reshape(-1, MEASUREMENT_DIM)
+    if len(x) == 0:
+        raise ValueError("fit_mixture: no samples")
+    rng = np.random.default_rng(seed)
+    if len(x) > max_samples:
+        x = x[rng.choice(len(x), max_samples, replace=False)]
+    ridge = np.diag(np.square(np.asarray(floor_std, float)))
+    k = min(components, len(x))
+    # Farthest-point initialisation (deterministic given the seed).
+    centres = [x[rng.integers(len(x))]]
+    for _ in range(1, k):
+        d2 = np.min([np.sum((x - c) ** 2, axis=1) for c in centres], axis=0)
+        centres.append(x[int(np.argmax(d2))])
+    means = np.array(centres)
+    cov0 = np.cov(x.T) + ridge if len(x) > 1 else ridge
+    covs = np.repeat(cov0[None], k, axis=0)
+    weights = np.full(k, 1.0 / k)
+    for _ in range(iterations):
+        log_r = _component_log_densities(x.astype(np.float32), means, covs).astype(np.float64) + np.log(weights)
+        log_r -= log_r.max(axis=1, keepdims=True)
+        r = np.exp(log_r)
+        r /= r.sum(axis=1, keepdims=True)
+        nk = r.sum(axis=0) + 1e-9
+        weights = nk / nk.sum()
+        means = (r.T @ x) / nk[:, None]
+        for j in range(k):
+            d = x - means[j]
+            covs[j] = (r[:, j, None] * d).T @ d / nk[j] + ridge
+    return GaussianMixture(weights, means, covs)
+
+
+@dataclass(frozen=True, eq=False)
+class ForegroundModel:
+    """One mixture per part class, in ``classes`` order."""
+
+    classes: tuple[str, ...]
+    mixtures: tuple[GaussianMixture, ...]
+
+    def log_likelihood_ratios(self, m: np.ndarray, background: BackgroundModel, clip: float,
+                              outlier_probability: float = 0.02) -> np.ndarray:
+        """log p_fg,c(m) - log p_bg(m) per class and pixel, (C, h, w) float32.
+
+        Both densities are mixed with a uniform outlier density over the measurement range
+        (``OUTLIER_LOG_DENSITY``) with probability ``outlier_probability``: a pixel the tight
+        background Gaussian cannot explain is then not worth hundreds of nats, and the ratio
+        keeps discriminating between classes (a red torso pixel supports the torso class far
+        more than the legs). Ratios are finally clipped to +-clip."""
+        eps = float(outlier_probability)
+        floor = np.float32(np.log(eps) + OUTLIER_LOG_DENSITY)
+        keep = np.float32(np.log1p(-eps))
+        log_bg = np.logaddexp(background.log_likelihood(m) + keep, floor)
+        out = np.empty((len(self.classes),) + m.shape[:2], np.float32)
+        for c, mixture in enumerate(self.mixtures):
+            np.clip(np.logaddexp(mixture.log_likelihood(m) + keep, floor) - log_bg, -clip, clip, out=out[c])
+        return out
+
+
+def band_labels(foreground: np.ndarray, body: BodyDescription | None = None) -> np.ndarray:
+    """Part-class labels (h, w) int8 (-1 = none, else index into ``PART_CLASSES``) from a
+    foreground mask: the largest blob cut into horizontal bands at the body's proportions."""
+    body = body or BodyDescription.default()
+    mask = np.asarray(foreground, np.uint8)
+    labels = np.full(mask.shape, -1, np.int8)
+    count, comp, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    if count <= 1:
+        return labels
+    blob = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    top = stats[blob, cv2.CC_STAT_TOP]
+    height = stats[blob, cv2.CC_STAT_HEIGHT]
+    # Fractions of the standing height from the top: head, torso, legs (to the ankle), feet.
+    total = body.height
+    cuts = np.cumsum([body.head_length, body.torso_length,
+                      body.upper_leg_length + body.lower_leg_length]) / total
+    rows = (np.arange(mask.shape[0]) - top + 0.5) / max(height, 1)
+    band = np.searchsorted(cuts, rows)           # 0 head, 1 torso, 2 legs, 3 feet
+    order = [PART_CLASSES.index(n) for n in ("head", "torso", "legs", "feet")]
+    row_class = np.asarray(order)[np.clip(band, 0, 3)]
+    inside = comp == blob
+    labels[inside] = np.broadcast_to(row_class[:, None], mask.shape)[inside]
+    return labels
+
+
+def learn_foreground(m: np.ndarray, background: BackgroundModel, class_labels: np.ndarray | None = None,
+                     body: BodyDescription | None = None, classes: tuple[str, ...] = PART_CLASSES,
+                     min_pixels: int = 8, seed: int = 0) -> ForegroundModel:
+    """Fit one mixture per class to pixels that differ from the background (``class_labels``
+    (h, w) int: class index or -1; None -> ``band_labels``). A class with too few labelled
+    foreground pixels uses all its labelled pixels, or failing that all foreground pixels."""
+    moving = background.foreground_mask(m)
+    labels = band_labels(moving, body) if class_labels is None else np.asarray(class_labels)
+    if labels.shape != m.shape[:2]:
+        raise ValueError(f"label image shape {labels.shape} does not match the measurement map {m.shape[:2]}")
+    fallback = m[moving] if moving.sum() >= min_pixels else m.reshape(-1, MEASUREMENT_DIM)
+    mixtures = []
+    for c in range(len(classes)):
+        chosen = m[(labels == c) & moving]
+        if len(chosen) < min_pixels:
+            chosen = m[labels == c] if np.count_nonzero(labels == c) >= min_pixels else fallback
+        mixtures.append(fit_mixture(chosen, seed=seed + c))
+    return ForegroundModel(tuple(classes), tuple(mixtures))
+
+
+def class_labels_from_parts(part_labels: np.ndarray, part_classes: tuple[str, ...],
+                            classes: tuple[str, ...] = PART_CLASSES) -> np.ndarray:
+    """Map a part-index image (e.g. ``render_labels``; -1 = background) to class indices (int8, -1 = none);
+    ``part_classes[i]`` is the class name of part i."""
+    lookup = np.array([classes.index(c) for c in part_classes] + [-1], np.int8)
+    labels = np.asarray(part_labels).astype(np.int64)
+    return lookup[np.where(labels < 0, len(part_classes), labels)]

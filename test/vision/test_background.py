@@ -1,0 +1,78 @@
+"""Background model: per-pixel mean, shared covariance, robust learning with a moving person."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from awalker_tracker.vision.background import (
+    DEFAULT_FLOOR_STD,
+    learn_background,
+    learn_background_robust,
+    measurements,
+)
+from vision_scene import background_image, noisy, side_camera
+
+CAM = side_camera()
+
+
+def test_measurements_are_colour_and_gradient():
+    image = np.zeros((8, 12, 3), np.uint8)
+    image[:, :, 0] = (np.arange(12) * 10)[None, :]      # red ramp: intensity slope 10/3 per px
+    m = measurements(image, 1)
+    assert m.shape == (8, 12, 5)
+    assert np.allclose(m[:, 1:-1, 0], image[:, 1:-1, 0])
+    assert np.allclose(m[:, 1:-1, 3], 10 / 3, atol=1e-5)   # dI/dx
+    assert np.allclose(m[:, :, 4], 0)                       # dI/dy
+    assert measurements(np.zeros((9, 13, 3), np.uint8), 2).shape == (4, 6, 5)
+    with pytest.raises(ValueError):
+        measurements(np.zeros((8, 8)), 1)
+
+
+def test_background_mean_and_covariance_from_noisy_frames():
+    rng = np.random.default_rng(0)
+    clean = background_image(CAM)
+    frames = [noisy(clean, rng, std=4.0) for _ in range(12)]
+    model = learn_background(frames, downsample=2)
+    truth = measurements(clean, 2)
+    assert np.median(np.abs(model.mean[..., :3] - truth[..., :3])) < 0.6
+    # Noise of std 4 averaged over 2x2 pixels -> std 2; plus the floor.
+    expected_var = 4.0 ** 2 / 4 + DEFAULT_FLOOR_STD[0] ** 2
+    assert np.diag(model.covariance)[:3] == pytest.approx([expected_var] * 3, rel=0.25)
+    assert np.all(np.linalg.eigvalsh(model.covariance) > 0)
+
+
+def test_robust_background_ignores_a_moving_person():
+    rng = np.random.default_rng(1)
+    clean = background_image(CAM)
+    frames = []
+    for f in range(15):
+        image = noisy(clean, rng)
+        x = 20 + 18 * f                                     # a red 'person' walking across
+        image[60:200, x : x + 30] = (200, 40, 40)
+        frames.append(image)
+    truth = measurements(clean, 2)[..., :3]
+    robust = learn_background_robust(frames, downsample=2)
+    plain = learn_background(frames, downsample=2)
+    robust_err = np.abs(robust.mean[..., :3] - truth)
+    plain_err = np.abs(plain.mean[..., :3] - truth)
+    assert np.percentile(robust_err, 99) < 3.0
+    assert np.percentile(plain_err, 99) > 8.0            # the non-robust mean is smeared by the person
+    # The person is foreground against the robust model, the background is not.
+    m = measurements(frames[7], 2)
+    mask = robust.foreground_mask(m)
+    person = np.zeros(mask.shape, bool)
+    person[30:100, (20 + 18 * 7) // 2 : (50 + 18 * 7) // 2] = True
+    assert mask[person].mean() > 0.95
+    assert mask[~person].mean() < 0.01
+
+
+def test_adaptation_moves_background_but_not_foreground_pixels():
+    rng = np.random.default_rng(2)
+    clean = background_image(CAM)
+    model = learn_background([noisy(clean, rng) for _ in range(5)], downsample=2)
+    brighter = measurements(np.clip(clean.astype(int) + 3, 0, 255).astype(np.uint8), 2)
+    fg = np.zeros(model.shape, bool)
+    fg[:10] = True
+    adapted = model.adapt(brighter, 0.5, foreground=fg)
+    assert np.allclose(adapted.mean[:10], model.mean[:10])
+    assert np.median(adapted.mean[10:, :, 0] - model.mean[10:, :, 0]) == pytest.approx(1.5, abs=0.3)

@@ -1,0 +1,99 @@
+"""Grid flow: accuracy on known motion, covariance from the gradient tensor, eq. (9)."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from scipy.stats import multivariate_t
+
+from awalker_tracker.vision.flow import FlowConfig, FlowGrid, GridFlow, student_t_log_likelihood, to_grey
+from awalker_tracker.vision.render import render
+from vision_scene import BODY, background_image, render_frames, side_camera, walking_poses
+
+
+def shifted_pair(dx: float, dy: float) -> tuple[np.ndarray, np.ndarray]:
+    cam = side_camera(400, 300)
+    big = background_image(cam, seed=4)
+    warp = np.float32([[1, 0, dx], [0, 1, dy]])
+    return big[20:260, 20:340], cv2.warpAffine(big, warp, (400, 300), flags=cv2.INTER_CUBIC)[20:260, 20:340]
+
+
+@pytest.mark.parametrize("motion", [(2.3, -1.2), (-0.6, 0.4), (5.5, 3.0)])
+def test_translation_is_recovered_on_every_textured_cell(motion):
+    a, b = shifted_pair(*motion)
+    grid = GridFlow(FlowConfig(cell_size=16)).estimate(to_grey(a), to_grey(b))
+    assert grid.shape == (15, 20)
+    assert grid.valid.mean() > 0.9
+    error = np.linalg.norm(grid.flow - np.asarray(motion), axis=-1)[grid.valid]
+    assert np.median(error) < 0.2
+    assert np.percentile(error, 90) < 0.5
+    assert np.allclose(grid.centers[0, 0], [7.5, 7.5]) and np.allclose(grid.centers[1, 2], [39.5, 23.5])
+
+
+def test_walker_flow_matches_rendered_motion():
+    """Median endpoint error over cells covered by the body (>= 70 %) against the rendered motion."""
+    cam = side_camera(640, 480, 600.0)
+    poses = walking_poses(4)
+    frames, _ = render_frames(cam, poses, background_image(cam))
+    seg_a, seg_b = poses[1].segments(), poses[2].segments()
+    result = render(BODY, seg_a, cam)
+    v, u = np.nonzero(result.labels >= 0)
+    part = result.labels[v, u]
+    local = result.local[v, u]
+    world_a = seg_a.origin[0][part] + np.einsum("kij,kj->ki", seg_a.rotation[0][part], local)
+    world_b = seg_b.origin[0][part] + np.einsum("kij,kj->ki", seg_b.rotation[0][part], local)
+    motion = cam.project(world_b)[0] - cam.project(world_a)[0]
+    grid = GridFlow(FlowConfig(cell_size=16)).estimate(to_grey(frames[1]), to_grey(frames[2]))
+    cell = (v // 16) * grid.shape[1] + (u // 16)
+    counts = np.bincount(cell, minlength=grid.shape[0] * grid.shape[1])
+    mean_motion = np.stack([np.bincount(cell, motion[:, i], minlength=counts.size) for i in range(2)], -1)
+    covered = np.flatnonzero(counts >= 0.7 * 256)
+    assert covered.size >= 15
+    truth = mean_motion[covered] / counts[covered, None]
+    error = np.linalg.norm(grid.flow.reshape(-1, 2)[covered] - truth, axis=1)
+    assert np.median(np.linalg.norm(truth, axis=1)) > 2.0       # the body does move
+    assert np.median(error) < 1.5
+    # Background cells far from the body: zero motion.
+    far = counts == 0
+    assert np.median(np.linalg.norm(grid.flow.reshape(-1, 2)[far], axis=1)) < 0.2
+
+
+def test_covariance_follows_the_gradient_tensor():
+    rng = np.random.default_rng(0)
+    flat = np.full((64, 64), 120, np.uint8)
+    stripes = np.tile((127 + 60 * np.sin(np.arange(64) / 2.0)).astype(np.uint8), (64, 1))  # vary along x only
+    texture = cv2.GaussianBlur(rng.uniform(0, 255, (64, 64)).astype(np.uint8), (3, 3), 0)
+    image = np.concatenate([flat, stripes, texture], axis=1)
+    grid = GridFlow(FlowConfig(cell_size=32)).estimate(image, image)
+    valid = grid.valid.reshape(2, 3, 2)
+    assert not valid[:, 0].any()                    # untextured: no estimate
+    assert not valid[:, 1].any()                    # 1-D texture: aperture problem
+    assert valid[:, 2].all()
+    # On the 1-D texture the tensor's inverse is much larger along y than along x.
+    big = GridFlow(FlowConfig(cell_size=32, min_texture=0.0)).estimate(image, image)
+    c = big.covariance[0, 2]
+    assert c[1, 1] > 10 * c[0, 0]
+    assert np.allclose(big.covariance[0, 4], big.covariance[0, 4].T)
+    assert big.covariance[0, 4][0, 0] < 1.5 and big.covariance[0, 4][1, 1] < 1.5
+
+
+def test_student_t_is_eq9_with_two_degrees_of_freedom():
+    rng = np.random.default_rng(1)
+    offsets = []
+    for _ in range(20):
+        a = rng.normal(size=(2, 2))
+        cov = a @ a.T + 0.2 * np.eye(2)
+        v, u = rng.normal(size=2) * 2, rng.normal(size=2)
+        ours = student_t_log_likelihood(v, u, np.linalg.inv(cov), np.linalg.slogdet(cov)[1])
+        offsets.append(ours - multivariate_t(loc=u, shape=cov, df=2).logpdf(v))
+    assert np.ptp(offsets) < 1e-9                  # equal up to the constant c
+    info = np.eye(2)
+    assert student_t_log_likelihood(np.zeros(2), np.zeros(2), info, 0.0) > student_t_log_likelihood(
+        np.ones(2), np.zeros(2), info, 0.0)
+
+
+def test_empty_grid_and_size_mismatch():
+    grid = FlowGrid.empty(480, 640, 16)
+    assert grid.shape == (30, 40) and not grid.valid.any()
+    with pytest.raises(ValueError):
+        GridFlow().estimate(np.zeros((10, 10), np.uint8), np.zeros((12, 10), np.uint8))
