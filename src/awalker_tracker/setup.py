@@ -22,6 +22,7 @@ setup(
         'console_scripts': [
             'awalker_tracker_node = awalker_tracker.nodes.tracker:main',
             'awalker_pose_publisher = awalker_tracker.nodes.pose_publisher:main',
+            'awalker_features = awalker_tracker.nodes.features:main',
         ],
     },
 )

@@ -1,0 +1,265 @@
+"""Features node: one camera's images -> per-frame appearance ratio maps and grid flow.
+
+Subscribes (camera ``<cam>`` from the ``camera_name`` parameter):
+- ``/<cam>/image_raw`` (sensor_msgs/Image: rgb8, bgr8, mono8, rgba8, bgra8) and
+  ``/<cam>/image_raw/compressed`` (sensor_msgs/CompressedImage: jpeg/png), sensor-data QoS
+  (a best-effort reader also receives the replay's reliable publications);
+- optional ``/<cam>/occlusion_mask`` (mono8, 255 = occluded; used for the frame with the same
+  stamp when it arrives before the image) and ``/<cam>/foreground_labels`` (mono8 class label
+  image for learning the foreground: 0 = none, k = 1 + index into PART_CLASSES);
+- ``/awalker/start_description`` (latched std_msgs/String): the frames before its ``frame``
+  are background-only (``background_frames`` = -1, the default);
+- ``/awalker/body_description`` (latched): body proportions for the unlabelled foreground bands.
+Publishes ``/<cam>/features`` (awalker_msgs/ImageFeatures, reliable, depth 10), stamped with
+the image stamp, for every image it can decode — also during background learning (zero maps),
+so lockstep replay never waits. Undecodable images and out-of-order stamps are logged with the
+topic and counted (``stats``), and skipped.
+
+Message conversions (``image_from_msg``, ``features_to_msg``, ``features_from_msg``) are plain
+functions the tracker side reuses.
+"""
+from __future__ import annotations
+
+import array
+import sys
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+import rclpy
+from awalker_msgs.msg import FlowGrid as FlowGridMsg
+from awalker_msgs.msg import ImageFeatures
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import CompressedImage, Image
+from std_msgs.msg import Header, String
+
+from awalker_tracker.errors import InputError
+from awalker_tracker.model.body import PART_CLASSES, BodyDescription
+from awalker_tracker.nodes.convert import stamp_to_ns
+from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor, FrameFeatures
+from awalker_tracker.vision.flow import FlowConfig, FlowGrid
+
+START_TOPIC = "/awalker/start_description"
+BODY_TOPIC = "/awalker/body_description"
+IMAGE_ENCODINGS = ("rgb8", "bgr8", "mono8", "rgba8", "bgra8")
+
+
+# ---- message conversion -------------------------------------------------------------------
+def image_from_msg(msg: Image | CompressedImage, topic: str = "image") -> np.ndarray:
+    """RGB uint8 (H, W, 3) from sensor_msgs/Image or CompressedImage; InputError naming ``topic``."""
+    if isinstance(msg, CompressedImage):
+        data = np.frombuffer(bytes(msg.data), np.uint8)
+        decoded = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+        if decoded is None:
+            raise InputError(f"{topic}: cannot decode CompressedImage format {msg.format!r}; expected jpeg or png")
+        return cv2.cvtColor(decoded, cv2.COLOR_BGR2RGB)
+    encoding = msg.encoding.lower()
+    if encoding not in IMAGE_ENCODINGS:
+        raise InputError(f"{topic}: unsupported encoding {msg.encoding!r}; expected one of {', '.join(IMAGE_ENCODINGS)}")
+    channels = {"mono8": 1, "rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4}[encoding]
+    height, width, step = int(msg.height), int(msg.width), int(msg.step)
+    data = np.frombuffer(bytes(msg.data), np.uint8)
+    if width <= 0 or height <= 0 or step < width * channels or data.size < step * height:
+        raise InputError(f"{topic}: image {width}x{height} {encoding} with step {step} has {data.size} bytes; "
+                         f"expected at least {max(step, width * channels) * height}")
+    pixels = data[: step * height].reshape(height, step)[:, : width * channels].reshape(height, width, channels)
+    if encoding == "mono8":
+        return np.repeat(pixels, 3, axis=2)
+    if encoding.startswith("bgr"):
+        return np.ascontiguousarray(pixels[..., 2::-1])
+    return np.ascontiguousarray(pixels[..., :3])
+
+
+def mono_from_msg(msg: Image, topic: str) -> np.ndarray:
+    """uint8 (H, W) from a mono8 Image (masks, label images)."""
+    if msg.encoding.lower() != "mono8":
+        raise InputError(f"{topic}: encoding {msg.encoding!r}; expected mono8")
+    return image_from_msg(msg, topic)[..., 0]
+
+
+def _floats(values: np.ndarray) -> array.array:
+    return array.array("f", np.ascontiguousarray(values, np.float32).tobytes())
+
+
+def features_to_msg(features: FrameFeatures, hdr: Header, camera_name: str) -> ImageFeatures:
+    """awalker_msgs/ImageFeatures of one frame (``hdr``: image stamp, optical frame id)."""
+    flow = features.flow
+    rows, cols = flow.shape
+    grid = FlowGridMsg(rows=rows, cols=cols, cell_size=int(flow.cell_size))
+    grid.center_x = _floats(flow.centers[..., 0])
+    grid.center_y = _floats(flow.centers[..., 1])
+    grid.flow_x = _floats(flow.flow[..., 0])
+    grid.flow_y = _floats(flow.flow[..., 1])
+    grid.covariance = _floats(flow.covariance)
+    grid.valid = array.array("B", flow.valid.astype(np.uint8).tobytes())
+    h, w = features.map_shape
+    msg = ImageFeatures(header=hdr, camera_name=camera_name, image_width=int(features.image_width),
+                        image_height=int(features.image_height), part_classes=list(features.classes),
+                        map_width=w, map_height=h, downsample=int(features.downsample), flow=grid)
+    msg.log_likelihood_ratio = _floats(features.llr)
+    return msg
+
+
+def features_from_msg(msg: ImageFeatures) -> FrameFeatures:
+    """FrameFeatures from awalker_msgs/ImageFeatures; InputError on inconsistent sizes or NaN."""
+    where = f"ImageFeatures of camera {msg.camera_name!r}"
+    classes = tuple(msg.part_classes)
+    h, w, d = int(msg.map_height), int(msg.map_width), int(msg.downsample)
+    llr = np.asarray(msg.log_likelihood_ratio, np.float32)
+    if d < 1 or llr.size != len(classes) * h * w:
+        raise InputError(f"{where}: {llr.size} ratios for {len(classes)} classes x {h} x {w} (downsample {d})")
+    g = msg.flow
+    rows, cols, n = int(g.rows), int(g.cols), int(g.rows) * int(g.cols)
+    arrays = [np.asarray(a, np.float32) for a in (g.center_x, g.center_y, g.flow_x, g.flow_y)]
+    cov = np.asarray(g.covariance, np.float32)
+    valid = np.asarray(g.valid, np.uint8)
+    if any(a.size != n for a in arrays) or cov.size != 4 * n or valid.size != n or int(g.cell_size) < 1:
+        raise InputError(f"{where}: flow grid arrays do not match {rows} x {cols} cells")
+    if not (np.all(np.isfinite(llr)) and all(np.all(np.isfinite(a)) for a in arrays) and np.all(np.isfinite(cov))):
+        raise InputError(f"{where}: NaN or infinity in the maps or the flow grid")
+    flow = FlowGrid(np.stack(arrays[:2], -1).reshape(rows, cols, 2), np.stack(arrays[2:], -1).reshape(rows, cols, 2),
+                    cov.reshape(rows, cols, 2, 2), valid.reshape(rows, cols) > 0, int(g.cell_size))
+    return FrameFeatures(classes, llr.reshape(len(classes), h, w), d, int(msg.image_width), int(msg.image_height), flow)
+
+
+# ---- node -----------------------------------------------------------------------------------
+@dataclass
+class FeatureNodeStats:
+    frames: int = 0
+    skipped: int = 0
+    seconds: float = 0.0
+
+
+class FeatureNode(Node):
+    """Image features for one camera (see the module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        camera = next((p.value for p in kwargs.get("parameter_overrides", []) if p.name == "camera_name"), None)
+        super().__init__(f"awalker_features_{camera}" if camera else "awalker_features", **kwargs)
+
+        def declare(name: str, value: Any, text: str) -> Any:
+            return self.declare_parameter(name, value, ParameterDescriptor(description=text)).value
+
+        self.camera_name = str(declare("camera_name", "", "camera name: /<camera_name>/image_raw[/compressed]"))
+        downsample = declare("downsample", 4, "likelihood-ratio map pixel = downsample x downsample image pixels")
+        cell = declare("flow_cell_size", 16, "flow grid cell side (px)")
+        scale = declare("flow_scale", 1.0, "dense flow computed at this image scale (0-1]")
+        floor = declare("flow_floor_std", 1.0, "px added to each flow cell's standard deviation")
+        self.background_param = int(declare("background_frames", -1,
+                                            "background-only frames at the start; -1: the start description's "
+                                            "frame; 0: none (robust temporal median)"))
+        median = declare("median_frames", 20, "frames for the robust median background when none are known")
+        outlier = declare("outlier_probability", 0.02, "uniform outlier share of the appearance densities")
+        clip = declare("llr_clip", 25.0, "bound on each pixel's log-likelihood ratio")
+        adapt = declare("adapt_rate", 0.0, "background adaptation rate per frame (0 = frozen)")
+        self.verbose = bool(declare("verbose", False, "log model learning to stderr"))
+        if not self.camera_name:
+            raise InputError("awalker_features: parameter 'camera_name' is required (e.g. -p camera_name:=cam0)")
+        try:
+            self.config = FeatureConfig(
+                downsample=int(downsample), background_frames=max(self.background_param, 0),
+                median_frames=int(median), outlier_probability=float(outlier), llr_clip=float(clip),
+                adapt_rate=float(adapt), flow=FlowConfig(cell_size=int(cell), scale=float(scale), floor_std=float(floor)))
+        except ValueError as exc:
+            raise InputError(f"awalker_features ({self.camera_name}): {exc}") from None
+        self.extractor = FeatureExtractor(self.config, verbose=self.verbose)
+        self.stats = FeatureNodeStats()
+        self._last_stamp = -1
+        self._masks: dict[int, np.ndarray] = {}
+        self._labels: np.ndarray | None = None
+        cam = self.camera_name
+        self.image_topic = f"/{cam}/image_raw"
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.create_subscription(Image, self.image_topic, lambda m: self._on_image(m, self.image_topic),
+                                 qos_profile_sensor_data)
+        self.create_subscription(CompressedImage, f"{self.image_topic}/compressed",
+                                 lambda m: self._on_image(m, f"{self.image_topic}/compressed"), qos_profile_sensor_data)
+        self.create_subscription(Image, f"/{cam}/occlusion_mask", self._on_mask, QoSProfile(depth=30))
+        self.create_subscription(Image, f"/{cam}/foreground_labels", self._on_labels, latched)
+        self.create_subscription(String, START_TOPIC, self._on_start, latched)
+        self.create_subscription(String, BODY_TOPIC, self._on_body, latched)
+        self.publisher = self.create_publisher(ImageFeatures, f"/{cam}/features", reliable)
+
+    # -- side inputs ------------------------------------------------------------------------
+    def _on_start(self, msg: String) -> None:
+        from awalker_tracker.inference.tracker import StartDescription
+
+        try:
+            start = StartDescription.from_yaml_text(msg.data, START_TOPIC)
+        except InputError as exc:
+            self.get_logger().error(f"{exc}; background frames unknown")
+            return
+        if self.background_param < 0:
+            self.extractor.set_background_frames(start.frame)
+
+    def _on_body(self, msg: String) -> None:
+        try:
+            self.extractor.body = BodyDescription.from_yaml_text(msg.data, BODY_TOPIC)
+        except InputError as exc:
+            self.get_logger().error(f"{exc}; using the default body proportions")
+
+    def _on_mask(self, msg: Image) -> None:
+        topic = f"/{self.camera_name}/occlusion_mask"
+        try:
+            self._masks[stamp_to_ns(msg.header.stamp)] = mono_from_msg(msg, topic)
+        except InputError as exc:
+            self.get_logger().error(str(exc))
+        while len(self._masks) > 30:
+            self._masks.pop(min(self._masks))
+
+    def _on_labels(self, msg: Image) -> None:
+        try:
+            labels = mono_from_msg(msg, f"/{self.camera_name}/foreground_labels").astype(np.int16) - 1
+        except InputError as exc:
+            self.get_logger().error(str(exc))
+            return
+        if labels.max() >= len(PART_CLASSES):
+            self.get_logger().error(f"/{self.camera_name}/foreground_labels: values must be 0..{len(PART_CLASSES)}")
+            return
+        self._labels = labels
+
+    # -- images -----------------------------------------------------------------------------
+    def _on_image(self, msg: Image | CompressedImage, topic: str) -> None:
+        stamp = stamp_to_ns(msg.header.stamp)
+        started = time.perf_counter()
+        if stamp <= self._last_stamp:
+            self._skip(f"{topic}: stamp {stamp} ns is not after the previous frame's {self._last_stamp} ns")
+            return
+        try:
+            rgb = image_from_msg(msg, topic)
+            mask = self._masks.pop(stamp, None)
+            features = self.extractor.process(rgb, mask, self._labels)
+        except (InputError, ValueError) as exc:
+            self._skip(f"{topic} at {stamp} ns: {exc}")
+            return
+        self._last_stamp = stamp
+        hdr = Header(stamp=msg.header.stamp, frame_id=msg.header.frame_id or f"{self.camera_name}_optical_frame")
+        self.publisher.publish(features_to_msg(features, hdr, self.camera_name))
+        self.stats.frames += 1
+        self.stats.seconds += time.perf_counter() - started
+
+    def _skip(self, text: str) -> None:
+        self.stats.skipped += 1
+        self.get_logger().error(f"{text}; frame skipped ({self.stats.skipped} so far)")
+
+
+def main(args: list[str] | None = None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = FeatureNode()
+        rclpy.spin(node)
+    except InputError as exc:
+        print(f"awalker_features: error: {exc}", file=sys.stderr)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()

@@ -1,0 +1,156 @@
+"""Features node in an rclpy executor: every image -> one ImageFeatures with its stamp; conversions."""
+from __future__ import annotations
+
+import time
+
+import cv2
+import numpy as np
+import pytest
+
+from awalker_tracker.errors import InputError
+from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
+from awalker_tracker.vision.flow import FlowConfig
+
+
+def scene_frames():
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "vision"))
+    from vision_scene import background_image, noisy, render_frames, side_camera, walking_poses
+
+    cam = side_camera()
+    bg = background_image(cam)
+    rng = np.random.default_rng(0)
+    frames, _ = render_frames(cam, walking_poses(4), bg)
+    return [noisy(bg, rng) for _ in range(3)] + frames
+
+
+def image_msg(rgb: np.ndarray, stamp_ns: int, encoding: str = "rgb8"):
+    from sensor_msgs.msg import Image
+
+    from awalker_tracker.nodes.convert import header
+
+    data = rgb if encoding == "rgb8" else rgb[..., ::-1]
+    msg = Image(header=header(stamp_ns, "cam_optical_frame"), height=rgb.shape[0], width=rgb.shape[1],
+                encoding=encoding, step=rgb.shape[1] * 3)
+    msg.data = np.ascontiguousarray(data).tobytes()
+    return msg
+
+
+def test_image_conversion_and_errors():
+    from sensor_msgs.msg import CompressedImage
+
+    from awalker_tracker.nodes.features import image_from_msg
+
+    rng = np.random.default_rng(1)
+    rgb = rng.integers(0, 255, (6, 5, 3), dtype=np.uint8)
+    assert np.array_equal(image_from_msg(image_msg(rgb, 1)), rgb)
+    assert np.array_equal(image_from_msg(image_msg(rgb, 1, "bgr8")), rgb)
+    png = CompressedImage(format="png")
+    png.data = cv2.imencode(".png", rgb[..., ::-1])[1].tobytes()
+    assert np.array_equal(image_from_msg(png), rgb)
+    bad = image_msg(rgb, 1)
+    bad.encoding = "yuv422"
+    with pytest.raises(InputError, match=r"/cam/image_raw: unsupported encoding 'yuv422'; expected one of rgb8"):
+        image_from_msg(bad, "/cam/image_raw")
+    short = image_msg(rgb, 1)
+    short.height = 9
+    with pytest.raises(InputError, match="bytes"):
+        image_from_msg(short, "/cam/image_raw")
+    junk = CompressedImage(format="jpeg")
+    junk.data = b"not an image"
+    with pytest.raises(InputError, match="cannot decode"):
+        image_from_msg(junk, "/cam/image_raw/compressed")
+
+
+def test_features_message_roundtrip():
+    from awalker_tracker.nodes.convert import header
+    from awalker_tracker.nodes.features import features_from_msg, features_to_msg
+
+    frames = scene_frames()
+    extractor = FeatureExtractor(FeatureConfig(background_frames=3, downsample=2, flow=FlowConfig(cell_size=8)))
+    out = [extractor.process(f) for f in frames][-1]
+    msg = features_to_msg(out, header(5, "cam_optical_frame"), "cam")
+    back = features_from_msg(msg)
+    assert back.classes == out.classes and back.downsample == 2 and back.map_shape == out.map_shape
+    assert np.array_equal(back.llr, out.llr)
+    assert np.array_equal(back.flow.flow, out.flow.flow) and np.array_equal(back.flow.valid, out.flow.valid)
+    assert np.array_equal(back.flow.covariance, out.flow.covariance)
+    assert np.array_equal(back.flow.centers, out.flow.centers) and back.flow.cell_size == 8
+    msg.log_likelihood_ratio = msg.log_likelihood_ratio[:-1]
+    with pytest.raises(InputError, match="ratios"):
+        features_from_msg(msg)
+
+
+def test_node_publishes_features_for_every_image(ros_context):
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import CompressedImage, Image
+    from std_msgs.msg import String
+
+    from awalker_msgs.msg import ImageFeatures
+    from awalker_tracker.nodes.convert import header, stamp_to_ns
+    from awalker_tracker.nodes.features import FeatureNode, features_from_msg
+
+    frames = scene_frames()
+    node = FeatureNode(context=ros_context, parameter_overrides=[
+        Parameter("camera_name", value="cam"), Parameter("downsample", value=2), Parameter("flow_cell_size", value=8)])
+    probe = Node("probe", context=ros_context)
+    received: list = []
+    probe.create_subscription(ImageFeatures, "/cam/features", received.append, QoSProfile(depth=50))
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    start_pub = probe.create_publisher(String, "/awalker/start_description", latched)
+    image_pub = probe.create_publisher(Image, "/cam/image_raw", QoSProfile(depth=50))
+    compressed_pub = probe.create_publisher(CompressedImage, "/cam/image_raw/compressed", QoSProfile(depth=50))
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(probe)
+    try:
+        start_pub.publish(String(data="start: {frame: 3, position: [0.0, 0.0], heading: 0.0, speed: 1.3, "
+                                      "step_length: 0.7, stance_leg: left}\n"))
+        deadline = time.monotonic() + 10
+        while (node.extractor.background_frames != 3 or image_pub.get_subscription_count() == 0
+               or compressed_pub.get_subscription_count() == 0) and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        assert node.extractor.background_frames == 3      # learned from the start description
+        stamps = [2_000_000_000 + k * 33_333_333 for k in range(len(frames))]
+        for k, (stamp, rgb) in enumerate(zip(stamps, frames)):
+            if k == 4:
+                msg = CompressedImage(header=header(stamp, "cam_optical_frame"), format="png")
+                msg.data = cv2.imencode(".png", rgb[..., ::-1])[1].tobytes()
+                compressed_pub.publish(msg)
+            else:
+                image_pub.publish(image_msg(rgb, stamp))
+            if k == 2:
+                bad = image_msg(rgb, stamp + 1)
+                bad.encoding = "yuv422"
+                image_pub.publish(bad)                      # logged, counted, skipped
+            while len(received) < k + 1 and time.monotonic() < deadline + 10:
+                executor.spin_once(timeout_sec=0.05)
+        for _ in range(5):
+            executor.spin_once(timeout_sec=0.05)
+        assert [stamp_to_ns(m.header.stamp) for m in received] == stamps
+        assert node.stats.skipped == 1 and node.stats.frames == len(frames)
+        # Same maps as the core extractor fed the same frames.
+        reference = FeatureExtractor(FeatureConfig(background_frames=3, downsample=2, flow=FlowConfig(cell_size=8)))
+        expected = [reference.process(f) for f in frames]
+        for msg, exp in zip(received, expected):
+            got = features_from_msg(msg)
+            assert msg.camera_name == "cam" and msg.header.frame_id == "cam_optical_frame"
+            assert np.allclose(got.llr, exp.llr) and np.array_equal(got.flow.valid, exp.flow.valid)
+        assert not np.any(features_from_msg(received[2]).llr)        # background learning: no information
+        assert features_from_msg(received[-1]).llr.max() > 5         # the person is seen
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        probe.destroy_node()
+
+
+def test_node_requires_a_camera_name(ros_context):
+    from awalker_tracker.nodes.features import FeatureNode
+
+    with pytest.raises(InputError, match="camera_name"):
+        FeatureNode(context=ros_context)
