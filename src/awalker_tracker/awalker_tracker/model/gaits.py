@@ -1,0 +1,423 @@
+"""Cyclic gaits of the Anthropomorphic Walker (paper eq. 3, Fig. 3-4) and the packaged gait table.
+
+For a speed v (m/s) and step length s (m) the start pose is double support with the legs at
++a / -a, s = 2 (R a + (L - R) sin a), and one step lasts T = s / v. Newton's method with a
+finite-difference Jacobian finds x = (phi1'_0, phi2'_0, kappa, iota) such that simulating from
+(a, -a, phi1'_0, phi2'_0) strikes the ground at time T and the post-impact state equals the
+start state (legs swapped). The residual (4,) is
+
+    [t_strike - T (s), phi1+ - a (rad), phi1'+ - phi1'_0 (rad/s), phi2'+ - phi2'_0 (rad/s)]
+
+(phi2+ = -phi1+ at a strike, so the pose residual is one number). :func:`solve_grid` sweeps a
+speed x step-length grid with continuation from solved neighbours plus several fresh starting
+guesses; :class:`GaitTable` holds the result (``data/cyclic_gaits.json``).
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from .dynamics import simulate_to_strike
+from .walker import LEFT, WalkerParams, WalkerState
+
+TABLE_VERSION = 1
+#: RK4 step (s) of the simulations inside the gait solver.
+SOLVER_STEP = 1.0 / 480.0
+#: Converged when max |residual| is below this (s, rad, rad/s).
+RESIDUAL_TOLERANCE = 1e-9
+KMH = 1.0 / 3.6  # m/s per km/h
+
+
+def double_support_angle(params: WalkerParams, step_length: np.ndarray | float) -> np.ndarray:
+    """Leg angle a (rad) with both feet down for a step length (m): inverse of WalkerParams.step_length."""
+    s = np.asarray(step_length, float)
+    r, al = params.foot_radius, params.leg_length - params.foot_radius
+    a = s / (2.0 * params.leg_length)
+    for _ in range(30):
+        f = 2.0 * (r * a + al * np.sin(a)) - s
+        a = a - f / (2.0 * (r + al * np.cos(a)))
+    return a
+
+
+def cyclic_residual(params: WalkerParams, speed: float, step_length: float, unknowns: np.ndarray,
+                    step: float = SOLVER_STEP) -> np.ndarray:
+    """Residuals of eq. (3) for one or several unknown vectors x = (phi1'_0, phi2'_0, kappa, iota).
+
+    ``unknowns`` has shape (4,) or (K, 4); returns (4,) or (K, 4); NaN where no strike happened.
+    """
+    x = np.atleast_2d(np.asarray(unknowns, float))
+    a = float(double_support_angle(params, step_length))
+    duration = step_length / speed
+    start = WalkerState.from_arrays(a, -a, x[:, 0], x[:, 1])
+    post, times, _ = simulate_to_strike(params, start, x[:, 2], x[:, 3], step=step, max_time=1.5 * duration + 0.2)
+    res = np.stack([times - duration, post.stance_angle - a, post.stance_rate - x[:, 0],
+                    post.swing_rate - x[:, 1]], axis=1)
+    return res[0] if np.ndim(unknowns) == 1 else res
+
+
+@dataclass(frozen=True)
+class GaitSolution:
+    """Result of solving eq. (3) at one (speed, step length)."""
+
+    speed: float
+    step_length: float
+    unknowns: np.ndarray        # (phi1'_0, phi2'_0, kappa, iota)
+    residual: float             # max |residual| (s, rad, rad/s mixed)
+    converged: bool
+    reason: str
+    iterations: int
+    pre_collision_rates: np.ndarray  # (phi1'-, phi2'-) just before the strike (rad/s)
+
+
+def _pre_collision_rates(params: WalkerParams, speed: float, step_length: float, x: np.ndarray) -> np.ndarray:
+    """(phi1', phi2') just before the heel strike of the gait x (rad/s)."""
+    a = float(double_support_angle(params, step_length))
+    start = WalkerState.from_arrays(a, -a, x[0], x[1])
+    _, _, pre = simulate_to_strike(params, start, x[2], x[3], step=SOLVER_STEP, max_time=1.5 * step_length / speed + 0.2)
+    return pre[0]
+
+
+def _newton(residual: Callable[[np.ndarray], np.ndarray], x0: np.ndarray, max_iterations: int,
+            tolerance: float) -> tuple[np.ndarray, float, str, int]:
+    """Damped Newton with a forward-difference Jacobian; ``residual`` maps (K, 4) -> (K, 4) in one batch.
+
+    Returns (x, max |residual|, reason, iterations).
+    """
+    x = np.asarray(x0, float).copy()
+    res = residual(x[None])[0]
+    if not np.all(np.isfinite(res)):
+        return x, np.inf, "no heel strike from the starting guess", 0
+    norm = float(np.max(np.abs(res)))
+    for iteration in range(max_iterations + 1):
+        if norm < tolerance:
+            return x, norm, "converged", iteration
+        if iteration == max_iterations:
+            break
+        eps = 1e-7 * np.maximum(1.0, np.abs(x))
+        jac = (residual(x[None, :] + np.diag(eps)) - res[None, :]).T / eps[None, :]
+        if not np.all(np.isfinite(jac)):
+            return x, norm, "jacobian undefined (a probe missed the heel strike)", iteration
+        try:
+            delta = np.linalg.solve(jac, -res)
+        except np.linalg.LinAlgError:
+            return x, norm, "singular jacobian", iteration
+        lam = 1.0                                   # backtracking on max |residual|
+        while lam > 1e-3:
+            trial = x + lam * delta
+            trial_res = residual(trial[None])[0]
+            if np.all(np.isfinite(trial_res)):
+                trial_norm = float(np.max(np.abs(trial_res)))
+                if trial_norm < norm * (1.0 - 1e-4 * lam) or trial_norm < tolerance:
+                    break
+            lam *= 0.5
+        else:
+            return x, norm, "line search failed (no descent)", iteration
+        x, res, norm = trial, trial_res, trial_norm
+    return x, norm, "max iterations", max_iterations
+
+
+def solve_point(params: WalkerParams, speed: float, step_length: float, guess: np.ndarray,
+                max_iterations: int = 30, tolerance: float = RESIDUAL_TOLERANCE) -> GaitSolution:
+    """Solve eq. (3) at one point by damped Newton from ``guess`` (FD Jacobian columns simulated as one batch)."""
+    x, norm, reason, iterations = _newton(lambda xs: cyclic_residual(params, speed, step_length, xs),
+                                          guess, max_iterations, tolerance)
+    converged = reason == "converged"
+    if converged and x[3] < 0.0:
+        converged, reason = False, "solved but non-physical (iota < 0: the toe-off would pull)"
+    elif converged and x[2] < 0.0:
+        reason = "converged (kappa < 0: a slightly repelling hip spring)"
+    pre = _pre_collision_rates(params, speed, step_length, x) if np.isfinite(norm) else np.full(2, np.nan)
+    return GaitSolution(speed, step_length, x, norm, converged, reason, iterations, pre)
+
+
+def symmetric_residual(params: WalkerParams, speed: float, step_length: float, unknowns: np.ndarray,
+                       step: float = SOLVER_STEP) -> np.ndarray:
+    """Residual (K, 4) of the mirror-symmetric cyclic gait: both legs vertical at T/2, impact maps q'- to q'+.
+
+    The walker is symmetric under x -> -x with time reversal, so a gait whose legs are both
+    vertical at mid-step retraces its first half mirrored: its pre-collision rates equal its start
+    rates, and it is cyclic iff the impact (with iota) leaves the rates unchanged. These are the
+    human-like gaits (mid-swing at mid-stance); they form one smooth family over the grid.
+    """
+    from .dynamics import _consts, _rk4, heel_strike  # the solver's fixed-step integrator
+
+    x = np.atleast_2d(np.asarray(unknowns, float))
+    a = float(double_support_angle(params, step_length))
+    half = 0.5 * step_length / speed
+    n = max(1, int(np.ceil(half / step)))
+    k = _consts(params)
+    p1, p2 = np.full(len(x), a), np.full(len(x), -a)
+    w1, w2 = x[:, 0].copy(), x[:, 1].copy()
+    with np.errstate(invalid="ignore", over="ignore"):
+        for _ in range(n):
+            p1, p2, w1, w2 = _rk4(k, p1, p2, w1, w2, x[:, 2], half / n)
+    pre = WalkerState.from_arrays(-a, a, x[:, 0], x[:, 1])
+    post = heel_strike(params, pre, x[:, 3])
+    return np.stack([p1, p2, post.stance_rate - x[:, 0], post.swing_rate - x[:, 1]], axis=1)
+
+
+def solve_symmetric_point(params: WalkerParams, speed: float, step_length: float, guess: np.ndarray,
+                          max_iterations: int = 30, tolerance: float = RESIDUAL_TOLERANCE) -> GaitSolution:
+    """Find a mirror-symmetric gait (see :func:`symmetric_residual`), then polish it on eq. (3) itself."""
+    x, norm, reason, _ = _newton(lambda xs: symmetric_residual(params, speed, step_length, xs), guess,
+                                 max_iterations, tolerance)
+    if reason != "converged":
+        return GaitSolution(speed, step_length, x, np.inf, False, f"symmetric gait: {reason}", 0, np.full(2, np.nan))
+    return solve_point(params, speed, step_length, x, max_iterations, tolerance)
+
+
+def is_symmetric(solution: GaitSolution, tolerance: float = 1e-5) -> bool:
+    """Pre-collision rates equal the start rates (legs vertical together at mid-step)."""
+    return bool(np.all(np.abs(solution.pre_collision_rates - solution.unknowns[:2]) < tolerance))
+
+
+def default_guesses(params: WalkerParams, speed: float, step_length: float) -> list[np.ndarray]:
+    """Fresh starting guesses for a point with no solved neighbour (dimensionless kappa 0.05-1)."""
+    a = float(double_support_angle(params, step_length))
+    duration = step_length / speed
+    mean_rate = 2.0 * a / duration
+    gl = params.gravity * params.leg_length
+    guesses = []
+    for kappa_dimless in (0.1, 0.02, 0.4):
+        for swing_factor in (-0.5, 0.5):
+            iota = 0.1 * params.speed_unit * (speed / params.speed_unit)
+            guesses.append(np.array([-mean_rate, swing_factor * mean_rate, kappa_dimless * gl, iota]))
+    return guesses
+
+
+def grid_axes(speeds_kmh: tuple[float, float, int] = (2.0, 7.0, 11),
+              step_lengths: tuple[float, float, int] = (0.5, 1.2, 15)) -> tuple[np.ndarray, np.ndarray]:
+    """Speeds (m/s) and step lengths (m) of the default grid: 2-7 km/h x 0.5-1.2 m."""
+    return np.linspace(*speeds_kmh[:2], speeds_kmh[2]) * KMH, np.linspace(*step_lengths[:2], step_lengths[2])
+
+
+@dataclass(frozen=True)
+class GaitTable:
+    """Solved cyclic gaits on a speed x step-length grid (arrays indexed [speed, step_length])."""
+
+    params: WalkerParams
+    speeds: np.ndarray            # (S,) m/s
+    step_lengths: np.ndarray      # (P,) m
+    stance_rate: np.ndarray       # (S, P) phi1'_0 rad/s, just after heel strike
+    swing_rate: np.ndarray        # (S, P) phi2'_0 rad/s
+    stiffness: np.ndarray         # (S, P) kappa, N m/rad per kg
+    toe_off_impulse: np.ndarray   # (S, P) iota, m/s
+    pre_stance_rate: np.ndarray   # (S, P) phi1' just before heel strike
+    pre_swing_rate: np.ndarray    # (S, P) phi2' just before heel strike
+    residual: np.ndarray          # (S, P) max |residual| of eq. (3)
+    converged: np.ndarray         # (S, P) bool
+    reason: tuple[tuple[str, ...], ...] = field(default=())
+    solver_step: float = SOLVER_STEP
+    version: int = TABLE_VERSION
+
+    # ---- persistence -------------------------------------------------------------------
+    def to_json(self) -> dict:
+        return {
+            "version": self.version,
+            "description": "Cyclic gaits of the Anthropomorphic Walker (eq. 3); arrays indexed [speed][step_length]; "
+                           "rates rad/s, stiffness N m/rad per kg, toe_off_impulse m/s, residual max |.| of "
+                           "(t_strike - T [s], phi1+ - a [rad], rate errors [rad/s]).",
+            "params": asdict(self.params),
+            "solver_step": self.solver_step,
+            "speeds": self.speeds.tolist(),
+            "step_lengths": self.step_lengths.tolist(),
+            **{name: _nan_to_none(getattr(self, name)) for name in (
+                "stance_rate", "swing_rate", "stiffness", "toe_off_impulse", "pre_stance_rate",
+                "pre_swing_rate", "residual")},
+            "converged": self.converged.tolist(),
+            "reason": [list(r) for r in self.reason],
+        }
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_json(), indent=1) + "\n")
+
+    @classmethod
+    def from_json(cls, data: dict, source: str = "<gait table>") -> "GaitTable":
+        try:
+            params = WalkerParams(**data["params"])
+            arrays = {name: np.array(data[name], dtype=float) for name in (
+                "stance_rate", "swing_rate", "stiffness", "toe_off_impulse", "pre_stance_rate",
+                "pre_swing_rate", "residual")}
+            table = cls(params=params, speeds=np.array(data["speeds"], float),
+                        step_lengths=np.array(data["step_lengths"], float), **arrays,
+                        converged=np.array(data["converged"], bool),
+                        reason=tuple(tuple(r) for r in data.get("reason", ())),
+                        solver_step=float(data.get("solver_step", SOLVER_STEP)),
+                        version=int(data.get("version", 0)))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"{source}: not a gait table ({exc!r}); regenerate with `awalker gaits solve`") from exc
+        shape = (table.speeds.size, table.step_lengths.size)
+        for name in ("stiffness", "toe_off_impulse", "stance_rate", "swing_rate", "converged"):
+            if getattr(table, name).shape != shape:
+                raise InputError(f"{source}: {name} has shape {getattr(table, name).shape}, expected {shape}")
+        return table
+
+    @classmethod
+    def load(cls, path: str | Path | None = None) -> "GaitTable":
+        """The packaged table (awalker_tracker/data/cyclic_gaits.json) or the JSON file at ``path``."""
+        if path is None:
+            text = resources.files("awalker_tracker").joinpath("data/cyclic_gaits.json").read_text()
+            return cls.from_json(json.loads(text), "awalker_tracker/data/cyclic_gaits.json")
+        path = Path(path)
+        if not path.is_file():
+            raise InputError(f"{path}: gait table not found")
+        try:
+            data = json.loads(path.read_text())
+        except json.JSONDecodeError as exc:
+            raise InputError(f"{path}: not JSON ({exc})") from exc
+        return cls.from_json(data, str(path))
+
+    # ---- queries -----------------------------------------------------------------------
+    def lookup(self, speed: np.ndarray | float, step_length: np.ndarray | float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(stance_rate, swing_rate, stiffness, toe_off_impulse) bilinearly interpolated.
+
+        Only converged grid cells are used; queries are clamped to the grid. Raises InputError
+        when the enclosing cell has no converged corner.
+        """
+        v = np.clip(np.asarray(speed, float), self.speeds[0], self.speeds[-1])
+        s = np.clip(np.asarray(step_length, float), self.step_lengths[0], self.step_lengths[-1])
+        i = np.clip(np.searchsorted(self.speeds, v, side="right") - 1, 0, self.speeds.size - 2)
+        j = np.clip(np.searchsorted(self.step_lengths, s, side="right") - 1, 0, self.step_lengths.size - 2)
+        tv = (v - self.speeds[i]) / (self.speeds[i + 1] - self.speeds[i])
+        ts = (s - self.step_lengths[j]) / (self.step_lengths[j + 1] - self.step_lengths[j])
+        corners = [(i, j, (1 - tv) * (1 - ts)), (i + 1, j, tv * (1 - ts)), (i, j + 1, (1 - tv) * ts),
+                   (i + 1, j + 1, tv * ts)]
+        weight_sum = np.zeros(np.shape(v))
+        outputs = [np.zeros(np.shape(v)) for _ in range(4)]
+        for ci, cj, w in corners:
+            ok = self.converged[ci, cj]
+            w = np.where(ok, w, 0.0)
+            weight_sum = weight_sum + w
+            for out, name in zip(outputs, ("stance_rate", "swing_rate", "stiffness", "toe_off_impulse")):
+                out += w * np.nan_to_num(getattr(self, name)[ci, cj])
+        if np.any(weight_sum <= 1e-12):
+            raise InputError(f"gait table: no converged gait near speed {np.ravel(v)[0]:.3f} m/s, "
+                             f"step length {np.ravel(s)[0]:.3f} m")
+        return tuple(out / weight_sum for out in outputs)  # type: ignore[return-value]
+
+    def converged_points(self) -> dict[str, np.ndarray]:
+        """Flattened arrays of the converged grid points (for fits and plots)."""
+        mask = self.converged
+        vv, ss = np.meshgrid(self.speeds, self.step_lengths, indexing="ij")
+        return {"speed": vv[mask], "step_length": ss[mask], "stiffness": self.stiffness[mask],
+                "toe_off_impulse": self.toe_off_impulse[mask], "pre_stance_rate": self.pre_stance_rate[mask],
+                "pre_swing_rate": self.pre_swing_rate[mask], "stance_rate": self.stance_rate[mask],
+                "swing_rate": self.swing_rate[mask], "residual": self.residual[mask]}
+
+
+def _nan_to_none(array: np.ndarray) -> list:
+    return [[None if not np.isfinite(x) else float(x) for x in row] for row in np.asarray(array, float)]
+
+
+def fit_impulse_mean(table: GaitTable) -> tuple[np.ndarray, float]:
+    """Least-squares bilinear fit iota ~ c0 + c1 w1 + c2 w2 + c3 w1 w2 over pre-collision rates (Fig. 4).
+
+    Returns (coefficients (4,), RMS error in m/s).
+    """
+    pts = table.converged_points()
+    w1, w2, iota = pts["pre_stance_rate"], pts["pre_swing_rate"], pts["toe_off_impulse"]
+    design = np.stack([np.ones_like(w1), w1, w2, w1 * w2], axis=1)
+    coef, *_ = np.linalg.lstsq(design, iota, rcond=None)
+    rms = float(np.sqrt(np.mean((design @ coef - iota) ** 2)))
+    return coef, rms
+
+
+def solve_grid(
+    params: WalkerParams,
+    speeds: np.ndarray,
+    step_lengths: np.ndarray,
+    progress: Callable[[str], None] | None = None,
+    seed_point: tuple[float, float] = (5.0 * KMH, 0.7),
+) -> GaitTable:
+    """Solve eq. (3) over a grid by continuation from the grid point nearest ``seed_point``.
+
+    Points are visited in order of distance from the seed; each tries the solutions of its
+    already solved neighbours first, then :func:`default_guesses`. ``progress`` receives one line per point.
+    """
+    speeds, step_lengths = np.asarray(speeds, float), np.asarray(step_lengths, float)
+    shape = (speeds.size, step_lengths.size)
+    solutions: dict[tuple[int, int], GaitSolution] = {}
+    vi = (speeds - seed_point[0]) / max(np.ptp(speeds), 1e-9)
+    sj = (step_lengths - seed_point[1]) / max(np.ptp(step_lengths), 1e-9)
+    order = sorted(np.ndindex(*shape), key=lambda ij: vi[ij[0]] ** 2 + sj[ij[1]] ** 2)
+    started = time.monotonic()
+    for count, (i, j) in enumerate(order, 1):
+        v, s = float(speeds[i]), float(step_lengths[j])
+        guesses = []
+        # linear extrapolation along a grid line from two solved points, then plain neighbours
+        for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+            near, far = solutions.get((i + di, j + dj)), solutions.get((i + 2 * di, j + 2 * dj))
+            if near is not None and far is not None and near.converged and far.converged:
+                guesses.append(2.0 * near.unknowns - far.unknowns)
+        neighbours = sorted(((i + di, j + dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if di or dj),
+                            key=lambda ij: abs(ij[0] - i) + abs(ij[1] - j))
+        for key in neighbours:
+            sol = solutions.get(key)
+            if sol is not None and sol.converged:
+                guesses.append(sol.unknowns)
+        guesses += default_guesses(params, v, s)
+        best: GaitSolution | None = None
+        # prefer the mirror-symmetric (human-like) family; fall back to any cyclic gait
+        for solver in (solve_symmetric_point, solve_point):
+            for guess in guesses:
+                sol = solver(params, v, s, guess)
+                if sol.converged and not is_symmetric(sol) and solver is solve_symmetric_point:
+                    continue
+                if best is None or (sol.converged and not best.converged) or (
+                        sol.converged == best.converged and sol.residual < best.residual):
+                    best = sol
+                if sol.converged:
+                    break
+            if best is not None and best.converged:
+                break
+        assert best is not None
+        if best.converged and not is_symmetric(best):
+            best = GaitSolution(**{**best.__dict__, "reason": best.reason + " (asymmetric gait)"})
+        solutions[(i, j)] = best
+        if progress is not None:
+            progress(f"[{count}/{len(order)}] {v / KMH:.2f} km/h, {s:.3f} m: {best.reason}, "
+                     f"residual {best.residual:.1e}, kappa {best.unknowns[2]:.3f}, iota {best.unknowns[3]:.3f} "
+                     f"({time.monotonic() - started:.0f} s)")
+
+    def grid(fn) -> np.ndarray:
+        return np.array([[fn(solutions[(i, j)]) for j in range(shape[1])] for i in range(shape[0])], float)
+
+    return GaitTable(
+        params=params, speeds=speeds, step_lengths=step_lengths,
+        stance_rate=grid(lambda s: s.unknowns[0]), swing_rate=grid(lambda s: s.unknowns[1]),
+        stiffness=grid(lambda s: s.unknowns[2]), toe_off_impulse=grid(lambda s: s.unknowns[3]),
+        pre_stance_rate=grid(lambda s: s.pre_collision_rates[0]),
+        pre_swing_rate=grid(lambda s: s.pre_collision_rates[1]),
+        residual=grid(lambda s: s.residual),
+        converged=grid(lambda s: s.converged).astype(bool),
+        reason=tuple(tuple(solutions[(i, j)].reason for j in range(shape[1])) for i in range(shape[0])),
+    )
+
+
+def gait_initial_state(
+    params: WalkerParams,
+    speed: np.ndarray | float,
+    step_length: np.ndarray | float,
+    contact_origin: np.ndarray | float = 0.0,
+    stance_leg: np.ndarray | int = LEFT,
+    table: GaitTable | None = None,
+) -> WalkerState:
+    """Double-support start state (just after heel strike) of the cyclic gait, broadcast to N."""
+    table = GaitTable.load() if table is None else table
+    w1, w2, _, _ = table.lookup(speed, step_length)
+    a = double_support_angle(params, step_length)
+    return WalkerState.from_arrays(a, -a, w1, w2, contact_origin, stance_leg)
+
+
+def stderr_progress(line: str) -> None:
+    """Progress printer for long solves (tqdm is not available)."""
+    print(line, file=sys.stderr, flush=True)
