@@ -141,7 +141,8 @@ def run_replay(bag: Path, domain: int, lockstep: bool, rate: float, receive: dic
 
 
 def receiver_process(domain: int, ack: bool, frames: int, timeout: float) -> None:
-    """Child process: receive ``frames`` images (or until ``timeout``), print {stamp: time} JSON."""
+    """Child process: receive ``frames`` images (or stop 3 s after the last one, or at ``timeout``);
+    print {stamp: time} JSON."""
     from rclpy.executors import SingleThreadedExecutor
 
     ctx = new_context(domain)
@@ -153,6 +154,8 @@ def receiver_process(domain: int, ack: bool, frames: int, timeout: float) -> Non
         end = time.monotonic() + timeout
         while len(receive) < frames and time.monotonic() < end:
             executor.spin_once(timeout_sec=0.05)
+            if receive and time.monotonic() - max(receive.values()) > 3.0:
+                break  # frames were lost; the replay is over
         executor.shutdown()
     finally:
         ctx.try_shutdown()
