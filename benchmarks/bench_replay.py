@@ -77,7 +77,8 @@ def receiver_node(context, ack: bool, receive_times: dict[int, float]):
         if ack:
             ack_pub.publish(msg.header)
 
-    node.create_subscription(Image, "/cam0/image_raw", on_image, QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE))
+    qos = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
+    node.create_subscription(Image, "/cam0/image_raw", on_image, qos)
     return node
 
 
@@ -109,7 +110,9 @@ def stats(frames: int, duration: float, publish: dict[int, float], receive: dict
     }
 
 
-def run_replay(bag: Path, domain: int, lockstep: bool, rate: float, receive: dict[int, float] | None) -> tuple[float, dict[int, float], object]:
+def run_replay(
+    bag: Path, domain: int, lockstep: bool, rate: float, receive: dict[int, float] | None
+) -> tuple[float, dict[int, float], object]:
     """Replay in this process; with ``receive`` given, the receiver runs in the same executor."""
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
@@ -213,7 +216,8 @@ def main() -> int:
             for name, env in transports.items():
                 results[f"two_process_lockstep_{name}"] = cross_process(bag, args.domain, True, 1.0, args.frames, env)
                 results[f"two_process_rate1_{name}"] = cross_process(bag, args.domain, False, 1.0, args.frames, env)
-                results[f"two_process_rate1000_{name}"] = cross_process(bag, args.domain, False, 1000.0, args.frames, env)
+                results[f"two_process_rate1000_{name}"] = cross_process(
+                    bag, args.domain, False, 1000.0, args.frames, env)
                 print(f"two-process {name} done", file=sys.stderr)
         finally:
             os.unlink(xml.name)

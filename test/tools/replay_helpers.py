@@ -16,7 +16,9 @@ FRAME_PERIOD_NS = 33_333_333
 FIRST_STAMP_NS = 1_700_000_000_000_000_000
 
 
-def make_bag(path: Path, frames: int = 8, compressed: bool = False, storage: str = "mcap") -> tuple[list[int], list[dict]]:
+def make_bag(
+    path: Path, frames: int = 8, compressed: bool = False, storage: str = "mcap"
+) -> tuple[list[int], list[dict]]:
     """A two-camera bag with random images; returns (stamps, images per frame)."""
     cams = [
         Camera.look_at("cam0", 32, 24, 30.0, [4.0, 0.0, 1.5], [0.0, 0.0, 1.0]),

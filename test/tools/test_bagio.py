@@ -24,7 +24,8 @@ from scipy.spatial.transform import Rotation
 def two_cameras() -> list[Camera]:
     return [
         Camera.look_at("cam0", 40, 30, 35.0, [4.0, -1.0, 1.6], [0.0, 0.0, 1.0]),
-        Camera.look_at("cam1", 24, 18, 20.0, [-1.0, 4.0, 2.0], [0.5, 0.0, 0.9], distortion=[0.1, -0.02, 1e-3, 0.0, 5e-3]),
+        Camera.look_at("cam1", 24, 18, 20.0, [-1.0, 4.0, 2.0], [0.5, 0.0, 0.9],
+                       distortion=[0.1, -0.02, 1e-3, 0.0, 5e-3]),
     ]
 
 

@@ -41,7 +41,8 @@ def parse_source(text: str, kind: str) -> Source:
     """'CAM=PATH' -> Source; InputError if malformed."""
     cam, sep, path = text.partition("=")
     if not sep or not cam or not path:
-        raise InputError(f"--{'video' if kind == 'video' else 'images'} {text!r}: expected CAM=PATH (e.g. cam0=walk.mp4)")
+        option = "--video" if kind == "video" else "--images"
+        raise InputError(f"{option} {text!r}: expected CAM=PATH (e.g. cam0=walk.mp4)")
     return Source(cam, kind, Path(path))
 
 
