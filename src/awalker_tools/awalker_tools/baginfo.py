@@ -59,7 +59,7 @@ def bag_info(path: str | Path) -> dict[str, Any]:
                 missing.append(f"/{name}/image_raw: no images for camera {name} (Image or CompressedImage)")
             elif entry["frames"] == 0:
                 missing.append(f"{image[0]}: topic holds no images")
-            info_msg = seq._first(camera_info_topic(name))
+            info_msg = seq.first_message(camera_info_topic(name))
             tf = transforms.get(f"{name}_optical_frame")
             if info_msg is None:
                 missing.append(f"{camera_info_topic(name)}: topic holds no messages")

@@ -490,7 +490,8 @@ class SequenceReader:
                                  f"({type(exc).__name__}: {exc})") from None
             yield conn.topic, conn.msgtype, log_ns, msg
 
-    def _first(self, topic: str) -> Any | None:
+    def first_message(self, topic: str) -> Any | None:
+        """The first message on ``topic`` (deserialised), or None."""
         return next((m for _, _, _, m in self.messages([topic])), None)
 
     # -- cameras ------------------------------------------------------------------------------
@@ -531,7 +532,7 @@ class SequenceReader:
             transforms = self.camera_transforms()
             cameras = []
             for name in names:
-                info = self._first(camera_info_topic(name))
+                info = self.first_message(camera_info_topic(name))
                 if info is None:
                     raise InputError(f"{self.path}: topic {camera_info_topic(name)} holds no messages")
                 tf = transforms.get(f"{name}_optical_frame")
@@ -617,7 +618,7 @@ class SequenceReader:
             return None
         if self.topics[topic] != STRING:
             raise InputError(f"{self.path}: topic {topic} holds {self.topics[topic]}, expected {STRING}")
-        msg = self._first(topic)
+        msg = self.first_message(topic)
         return None if msg is None else str(msg.data)
 
     def occlusion_masks(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
