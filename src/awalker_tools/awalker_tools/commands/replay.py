@@ -17,7 +17,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "console script `awalker_replay --ros-args -p bag:=BAG ...`.",
     )
     parser.add_argument("bag", help="bag directory (or .mcap / .db3 file)")
-    parser.add_argument("--rate", type=float, default=defaults.rate, help="real-time factor (default 1; ignored with --lockstep)")
+    parser.add_argument("--rate", type=float, default=defaults.rate,
+                        help="real-time factor (default 1; ignored with --lockstep)")
     parser.add_argument("--lockstep", action="store_true",
                         help="publish one frame, then wait for its ack (std_msgs/Header with the frame stamp)")
     parser.add_argument("--ack-topic", default=DEFAULT_ACK_TOPIC, help=f"ack topic (default {DEFAULT_ACK_TOPIC})")
