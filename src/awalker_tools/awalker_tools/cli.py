@@ -40,8 +40,14 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except InputError as exc:
-        print(f"awalker {args.command}: error: {exc}", file=sys.stderr)
+        # One line, however the message was built (YAML parser errors span several lines).
+        message = " ".join(str(exc).split())
+        print(f"awalker {args.command}: error: {message}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # Output piped into e.g. `head`, which closed early: not an error of ours.
+        sys.stderr.close()
+        return 0
     except KeyboardInterrupt:
         print(f"awalker {args.command}: interrupted", file=sys.stderr)
         return 130
