@@ -397,7 +397,7 @@ def simulate_to_strike(
     params: WalkerParams,
     state: WalkerState,
     stiffness: np.ndarray | float,
-    toe_off_impulse: np.ndarray | float,
+    toe_off_impulse: np.ndarray | float | ImpulseSampler,
     step: float = 1.0 / 480.0,
     max_time: float = MAX_STRIKE_INTERVAL,
 ) -> tuple[WalkerState, np.ndarray, np.ndarray]:
@@ -409,7 +409,7 @@ def simulate_to_strike(
     n = len(state)
     k = _consts(params)
     kappa = np.broadcast_to(np.asarray(stiffness, float), (n,))
-    iota = np.broadcast_to(np.asarray(toe_off_impulse, float), (n,))
+    iota = toe_off_impulse if callable(toe_off_impulse) else np.broadcast_to(np.asarray(toe_off_impulse, float), (n,))
     p1, p2 = state.stance_angle.astype(float), state.swing_angle.astype(float)
     w1, w2 = state.stance_rate.astype(float), state.swing_rate.astype(float)
     origin, leg = state.contact_origin.astype(float).copy(), state.stance_leg.astype(np.int8).copy()

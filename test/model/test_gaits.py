@@ -1,0 +1,131 @@
+"""Cyclic gaits (eq. 3): solver, packaged table, lookups, bilinear iota fit."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from awalker_tracker.errors import InputError
+from awalker_tracker.model import dynamics, gaits
+from awalker_tracker.model.walker import RIGHT, WalkerParams
+
+PARAMS = WalkerParams()
+
+
+@pytest.fixture(scope="module")
+def table() -> gaits.GaitTable:
+    return gaits.GaitTable.load()
+
+
+def test_double_support_angle_inverts_step_length() -> None:
+    s = np.linspace(0.3, 1.3, 21)
+    a = gaits.double_support_angle(PARAMS, s)
+    np.testing.assert_allclose(PARAMS.step_length(a), s, atol=1e-12)
+
+
+def test_packaged_table_covers_the_grid_with_small_residuals(table: gaits.GaitTable) -> None:
+    assert table.speeds.size >= 11 and table.step_lengths.size >= 15
+    assert table.speeds[0] == pytest.approx(2 / 3.6) and table.speeds[-1] == pytest.approx(7 / 3.6)
+    assert table.step_lengths[0] == pytest.approx(0.5) and table.step_lengths[-1] == pytest.approx(1.2)
+    assert table.params == PARAMS
+    # the human part of the grid (step ~ 0.65-0.75 m at 5 km/h, growing with speed) is all solved
+    human = np.array([[0.5 <= s <= 0.9 for s in table.step_lengths] for _ in table.speeds])
+    assert table.converged[human].all()
+    assert np.all(table.residual[table.converged] < 1e-8)
+    assert len(table.reason) == table.speeds.size and all(len(r) == table.step_lengths.size for r in table.reason)
+
+
+def test_table_entries_are_cyclic_when_re_simulated(table: gaits.GaitTable) -> None:
+    """Re-evaluate eq. (3) for a spread of entries, batched, without trusting the stored residual."""
+    rng = np.random.default_rng(0)
+    idx = [tuple(ij) for ij in np.argwhere(table.converged)]
+    picks = [idx[k] for k in rng.choice(len(idx), 6, replace=False)]
+    for i, j in picks:
+        x = np.array([table.stance_rate[i, j], table.swing_rate[i, j], table.stiffness[i, j],
+                      table.toe_off_impulse[i, j]])
+        res = gaits.cyclic_residual(table.params, table.speeds[i], table.step_lengths[j], x)
+        assert np.max(np.abs(res)) < 1e-8
+
+
+def test_table_gait_walks_at_its_speed_and_step_length_in_frames(table: gaits.GaitTable) -> None:
+    """Independent of the solver: 30 Hz frames with dynamics.advance reproduce step length and duration."""
+    for speed, step in ((4 / 3.6, 0.6), (5 / 3.6, 0.7)):
+        w1, w2, kappa, iota = table.lookup(speed, step)
+        state = gaits.gait_initial_state(PARAMS, speed, step, contact_origin=1.0, stance_leg=RIGHT, table=table)
+        assert state.stance_leg[0] == RIGHT
+        times, positions, tss = [], [], np.zeros(1)
+        for frame in range(150):
+            state, ev = dynamics.advance(PARAMS, state, kappa, iota, 1 / 30, time_since_strike=tss)
+            tss = ev.time_since_strike
+            assert not ev.fallen[0]
+            if ev.heel_strike[0]:
+                times.append((frame + ev.strike_fraction[0]) / 30)
+                positions.append(ev.strike_position[0])
+        assert len(times) >= 6
+        np.testing.assert_allclose(np.diff(positions), step, atol=2e-3)
+        np.testing.assert_allclose(np.diff(times), step / speed, atol=2e-3)
+        np.testing.assert_allclose(times[0], step / speed, atol=2e-3)
+
+
+def test_solver_finds_a_small_grid_from_scratch() -> None:
+    params = WalkerParams(leg_length=1.0, gravity=9.8)
+    speeds = np.array([4.5, 5.0]) / 3.6
+    steps = np.array([0.7, 0.75])
+    lines: list[str] = []
+    small = gaits.solve_grid(params, speeds, steps, progress=lines.append, seed_point=(5 / 3.6, 0.75))
+    assert small.converged.all() and len(lines) == 4
+    assert np.all(small.residual < 1e-8)
+    for i in range(2):
+        for j in range(2):
+            x = np.array([small.stance_rate[i, j], small.swing_rate[i, j], small.stiffness[i, j],
+                          small.toe_off_impulse[i, j]])
+            assert np.max(np.abs(gaits.cyclic_residual(params, speeds[i], steps[j], x))) < 1e-8
+    # a faster gait at the same step length needs a stiffer spring and a bigger push (Fig. 3)
+    assert small.stiffness[1, 0] > small.stiffness[0, 0]
+    assert small.toe_off_impulse[1, 0] > small.toe_off_impulse[0, 0]
+
+
+def test_solve_point_reports_failure_instead_of_raising() -> None:
+    sol = gaits.solve_point(PARAMS, 5 / 3.6, 0.7, np.array([5.0, 5.0, 0.7, 0.4]), max_iterations=3)
+    assert not sol.converged and sol.reason
+
+
+def test_save_load_round_trip_and_lookup_at_nodes(tmp_path, table: gaits.GaitTable) -> None:
+    path = tmp_path / "t.json"
+    table.save(path)
+    again = gaits.GaitTable.load(path)
+    np.testing.assert_array_equal(again.stiffness, table.stiffness)
+    np.testing.assert_array_equal(again.converged, table.converged)
+    i, j = 4, 6
+    w1, w2, k, iota = again.lookup(table.speeds[i], table.step_lengths[j])
+    assert (w1, w2, k, iota) == pytest.approx((table.stance_rate[i, j], table.swing_rate[i, j],
+                                               table.stiffness[i, j], table.toe_off_impulse[i, j]))
+    # midway between two nodes: the average
+    mid = 0.5 * (table.speeds[i] + table.speeds[i + 1])
+    assert again.lookup(mid, table.step_lengths[j])[2] == pytest.approx(
+        0.5 * (table.stiffness[i, j] + table.stiffness[i + 1, j]))
+
+
+def test_bad_table_files_raise_input_error(tmp_path) -> None:
+    missing = tmp_path / "nope.json"
+    with pytest.raises(InputError, match="nope.json"):
+        gaits.GaitTable.load(missing)
+    garbage = tmp_path / "garbage.json"
+    garbage.write_text("{not json")
+    with pytest.raises(InputError, match="garbage.json"):
+        gaits.GaitTable.load(garbage)
+    partial = tmp_path / "partial.json"
+    partial.write_text(json.dumps({"speeds": [1, 2]}))
+    with pytest.raises(InputError, match="partial.json"):
+        gaits.GaitTable.load(partial)
+
+
+def test_bilinear_impulse_fit_matches_the_table(table: gaits.GaitTable) -> None:
+    coef, rms = gaits.fit_impulse_mean(table)
+    pts = table.converged_points()
+    assert rms < 0.02                       # m/s; solved iotas span 0.15-1.15 m/s
+    assert rms < 0.1 * np.std(pts["toe_off_impulse"])
+    pred = coef[0] + coef[1] * pts["pre_stance_rate"] + coef[2] * pts["pre_swing_rate"] \
+        + coef[3] * pts["pre_stance_rate"] * pts["pre_swing_rate"]
+    assert np.sqrt(np.mean((pred - pts["toe_off_impulse"]) ** 2)) == pytest.approx(rms)
