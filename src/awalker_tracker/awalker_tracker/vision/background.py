@@ -88,10 +88,13 @@ def gaussian_log_density(residual: np.ndarray, covariance: np.ndarray) -> np.nda
     """log N(residual; 0, covariance) over the last axis (5-D), float32."""
     chol = np.linalg.cholesky(covariance)
     inv_chol = np.linalg.inv(chol).astype(np.float32)
-    z = residual @ inv_chol.T
-    log_det = 2.0 * np.sum(np.log(np.diag(chol)))
     dim = covariance.shape[0]
-    return (-0.5 * np.sum(z * z, axis=-1) - 0.5 * (log_det + dim * np.log(2 * np.pi))).astype(np.float32)
+    flat = np.ascontiguousarray(residual.reshape(-1, dim), np.float32)
+    z = cv2.gemm(flat, np.ascontiguousarray(inv_chol.T), 1.0, None, 0.0)    # single-threaded
+    quad = cv2.gemm(z * z, np.ones((dim, 1), np.float32), 1.0, None, 0.0)[:, 0]
+    log_det = 2.0 * np.sum(np.log(np.diag(chol)))
+    out = -0.5 * quad - np.float32(0.5 * (log_det + dim * np.log(2 * np.pi)))
+    return out.reshape(residual.shape[:-1]).astype(np.float32, copy=False)
 
 
 def _floored(cov: np.ndarray, floor_std: tuple[float, ...]) -> np.ndarray:

@@ -3,7 +3,7 @@
 Dense flow from OpenCV's DIS (ultrafast preset) between consecutive grey frames, computed at
 ``scale`` (1 = full resolution; 0.5 halves the cost and doubles the error) and scaled back to full-resolution pixels. Each cell
 (``cell_size`` px square) then gets a robust M-estimate of its motion: starting at the
-median, a few iterations of Cauchy-weighted means over the cell's dense vectors (scale
+texture-weighted mean, a few iterations of Cauchy-weighted means over the cell's dense vectors (scale
 ``robust_scale_px``), weighted also by the gradient magnitude (flow is only measured where
 there is texture).
 
@@ -87,13 +87,6 @@ def to_grey(rgb: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(image.astype(np.uint8, copy=False), cv2.COLOR_RGB2GRAY)
 
 
-def _cell_view(array: np.ndarray, rows: int, cols: int, size: int) -> np.ndarray:
-    """(rows*size, cols*size, ...) -> (rows, cols, size*size, ...)."""
-    rest = array.shape[2:]
-    a = array[: rows * size, : cols * size].reshape((rows, size, cols, size) + rest)
-    return np.moveaxis(a, 2, 1).reshape((rows, cols, size * size) + rest)
-
-
 class GridFlow:
     """Stateful grid-flow estimator; ``estimate(prev_grey, grey)`` -> ``FlowGrid``."""
 
@@ -116,37 +109,62 @@ class GridFlow:
             a, b = prev_grey, grey
         dense = self._dis.calc(a, b, None)
         sub = max(int(round(size * cfg.scale)), 1)         # a cell in the flow image
-        fx = width / a.shape[1]
-        fy = height / a.shape[0]
-        vectors = _cell_view(dense, rows, cols, sub).astype(np.float32) * np.float32([fx, fy])
-        # Gradient tensor per cell at full resolution (grey levels / px).
-        g = grey.astype(np.float32)
-        gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3) / 8.0
-        gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3) / 8.0
-        tensor_px = np.stack([gx * gx, gx * gy, gy * gy], axis=-1)
-        t = _cell_view(tensor_px, rows, cols, size).sum(axis=2)        # (rows, cols, 3)
-        T = np.stack([np.stack([t[..., 0], t[..., 1]], -1), np.stack([t[..., 1], t[..., 2]], -1)], -2)
-        # Gradient-magnitude weights of the dense vectors (at the flow image's resolution).
-        mag = cv2.resize(np.sqrt(gx * gx + gy * gy), (a.shape[1], a.shape[0]), interpolation=cv2.INTER_AREA)
-        w_tex = _cell_view(mag, rows, cols, sub) + 1e-3
-        flow = self._robust_mean(vectors, w_tex)
-        eig_min = np.linalg.eigvalsh(T.astype(np.float64))[..., 0] / (size * size)
+        factor = np.float32([width / a.shape[1], height / a.shape[0]])
+        if dense.shape[0] < rows * sub or dense.shape[1] < cols * sub:
+            dense = cv2.resize(dense, (cols * sub, rows * sub), interpolation=cv2.INTER_LINEAR)
+        dense = dense[: rows * sub, : cols * sub] * factor
+        # Gradient tensor per cell at full resolution (grey levels / px), summed over the cell.
+        g = grey[: rows * size, : cols * size].astype(np.float32)
+        gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3) * np.float32(1 / 8)
+        gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3) * np.float32(1 / 8)
+        area = np.float32(size * size)
+        txx = _cell_sums(gx * gx, rows, cols).astype(np.float64) * area
+        txy = _cell_sums(gx * gy, rows, cols).astype(np.float64) * area
+        tyy = _cell_sums(gy * gy, rows, cols).astype(np.float64) * area
+        # Texture weights of the dense vectors (gradient magnitude at the flow image's resolution).
+        magnitude = cv2.magnitude(gx, gy)
+        if sub != size:
+            magnitude = cv2.resize(magnitude, (cols * sub, rows * sub), interpolation=cv2.INTER_AREA)
+        stride = 2 if sub % 2 == 0 else 1                 # every 2nd vector per axis is plenty
+        flow = self._robust_mean(dense[::stride, ::stride], magnitude[::stride, ::stride] + np.float32(1e-3),
+                                 rows, cols, sub // stride)
+        # Smallest eigenvalue per pixel and Sigma = noise^2 T^-1 + floor^2 I (2x2 in closed form).
+        eig_min = (0.5 * (txx + tyy) - np.sqrt(0.25 * (txx - tyy) ** 2 + txy ** 2)) / area
         valid = (eig_min >= cfg.min_texture) & np.all(np.isfinite(flow), axis=-1)
-        ridge = np.eye(2) * 1e-6
-        cov = cfg.noise_std ** 2 * np.linalg.inv(T.astype(np.float64) + ridge) + cfg.floor_std ** 2 * np.eye(2)
+        det = np.maximum(txx * tyy - txy * txy, 1e-12)
+        scale = cfg.noise_std ** 2 / det
+        floor = cfg.floor_std ** 2
+        cov = np.stack([np.stack([scale * tyy + floor, -scale * txy], -1),
+                        np.stack([-scale * txy, scale * txx + floor], -1)], -2)
         cov = np.where(valid[..., None, None], cov, np.eye(2) * 1e4)
         return FlowGrid(grid_centers(rows, cols, size), np.nan_to_num(flow).astype(np.float32),
                         cov.astype(np.float32), valid, size)
 
-    def _robust_mean(self, vectors: np.ndarray, weights: np.ndarray) -> np.ndarray:
-        """Cauchy M-estimate of each cell's motion from its dense vectors (rows, cols, K, 2)."""
-        est = np.median(vectors, axis=2)
-        c2 = self.config.robust_scale_px ** 2
-        for _ in range(self.config.robust_iterations):
-            r2 = np.sum((vectors - est[:, :, None]) ** 2, axis=-1)
-            w = weights / (1.0 + r2 / c2)
-            est = np.sum(w[..., None] * vectors, axis=2) / np.sum(w, axis=2)[..., None]
-        return est
+    def _robust_mean(self, dense: np.ndarray, weights: np.ndarray, rows: int, cols: int, sub: int) -> np.ndarray:
+        """Cauchy M-estimate (IRLS) of each cell's motion from its dense vectors; texture-weighted.
+
+        Cell sums by area averaging (cv2.resize INTER_AREA), so each iteration is a few passes
+        over the image; starts from the texture-weighted mean."""
+        inv_c2 = np.float32(1.0 / self.config.robust_scale_px ** 2)
+        u, v = np.ascontiguousarray(dense[..., 0]), np.ascontiguousarray(dense[..., 1])
+        w = weights
+        shape = (u.shape[1], u.shape[0])
+        for iteration in range(self.config.robust_iterations + 1):
+            total = _cell_sums(w, rows, cols)
+            est_u = _cell_sums(u * w, rows, cols) / total
+            est_v = _cell_sums(v * w, rows, cols) / total
+            if iteration == self.config.robust_iterations:
+                break
+            du = u - cv2.resize(est_u, shape, interpolation=cv2.INTER_NEAREST)
+            dv = v - cv2.resize(est_v, shape, interpolation=cv2.INTER_NEAREST)
+            w = weights / (np.float32(1) + (du * du + dv * dv) * inv_c2)
+        return np.stack([est_u, est_v], axis=-1)
+
+
+def _cell_sums(image: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """Mean of each cell of an (rows*s, cols*s[, C]) float32 image -> (rows, cols[, C]) (area averaging)."""
+    out = cv2.resize(image, (cols, rows), interpolation=cv2.INTER_AREA)
+    return out.reshape((rows, cols) + image.shape[2:])
 
 
 def student_t_log_likelihood(v: np.ndarray, u: np.ndarray, information: np.ndarray,

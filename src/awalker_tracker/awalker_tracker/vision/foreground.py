@@ -38,21 +38,42 @@ class GaussianMixture:
 
     def log_likelihood(self, m: np.ndarray) -> np.ndarray:
         """log p(m) for measurements (..., 5) -> (...) float32 (log-sum-exp over components)."""
-        flat = m.reshape(-1, MEASUREMENT_DIM).astype(np.float32)
-        comp = _component_log_densities(flat, self.means, self.covariances) + np.log(self.weights)[None, :]
-        top = comp.max(axis=1, keepdims=True)
-        out = top[:, 0] + np.log(np.exp(comp - top).sum(axis=1))
-        return out.reshape(m.shape[:-1]).astype(np.float32)
+        flat = m.reshape(-1, MEASUREMENT_DIM).astype(np.float32, copy=False)
+        comp = _component_log_densities(flat, self.means, self.covariances) + np.log(self.weights).astype(np.float32)
+        return _logsumexp_rows(comp).reshape(m.shape[:-1])
+
+
+def _logsumexp_rows(values: np.ndarray) -> np.ndarray:
+    """log sum exp over the (few) columns of (M, K), column by column (fast for small K)."""
+    columns = [values[:, j] for j in range(values.shape[1])]
+    top = columns[0]
+    for c in columns[1:]:
+        top = np.maximum(top, c)
+    total = np.zeros_like(top)
+    for c in columns:
+        total += np.exp(c - top)
+    return top + np.log(total)
 
 
 def _component_log_densities(x: np.ndarray, means: np.ndarray, covs: np.ndarray) -> np.ndarray:
-    out = np.empty((x.shape[0], len(means)), np.float32)
-    for k in range(len(means)):     # K = 3 components: a loop over components, not pixels
-        chol = np.linalg.cholesky(covs[k])
-        z = (x - means[k].astype(np.float32)) @ np.linalg.inv(chol).T.astype(np.float32)
-        log_det = 2.0 * np.sum(np.log(np.diag(chol)))
-        out[:, k] = -0.5 * np.sum(z * z, axis=1) - 0.5 * (log_det + MEASUREMENT_DIM * np.log(2 * np.pi))
-    return out
+    """log N(x; mean_k, cov_k) for samples (M, 5) and K components -> (M, K) float32.
+
+    All components in one matrix product: z_k = L_k^-1 (x - mean_k) for every k at once."""
+    k = len(means)
+    inv_chol = np.empty((k, MEASUREMENT_DIM, MEASUREMENT_DIM))
+    log_det = np.empty(k)
+    for j in range(k):     # K small factorisations, not a loop over pixels
+        chol = np.linalg.cholesky(covs[j])
+        inv_chol[j] = np.linalg.inv(chol)
+        log_det[j] = 2.0 * np.sum(np.log(np.diag(chol)))
+    A = inv_chol.transpose(2, 0, 1).reshape(MEASUREMENT_DIM, k * MEASUREMENT_DIM).astype(np.float32)
+    offset = np.einsum("kij,kj->ki", inv_chol, means).reshape(-1).astype(np.float32)
+    # cv2.gemm: single-threaded, fast for these thin products (BLAS threads thrash on a busy host).
+    z = cv2.gemm(np.ascontiguousarray(x, np.float32), A, 1.0, None, 0.0) - offset        # (M, K*5)
+    z *= z
+    quad = cv2.gemm(z, np.kron(np.eye(k), np.ones((MEASUREMENT_DIM, 1))).astype(np.float32), 1.0, None, 0.0)
+    const = (-0.5 * (log_det + MEASUREMENT_DIM * np.log(2 * np.pi))).astype(np.float32)
+    return -0.5 * quad + const
 
 
 def fit_mixture(samples: np.ndarray, components: int = NUM_COMPONENTS, iterations: int = 40,
@@ -109,11 +130,20 @@ class ForegroundModel:
         eps = float(outlier_probability)
         floor = np.float32(np.log(eps) + OUTLIER_LOG_DENSITY)
         keep = np.float32(np.log1p(-eps))
-        log_bg = np.logaddexp(background.log_likelihood(m) + keep, floor)
-        out = np.empty((len(self.classes),) + m.shape[:2], np.float32)
+        flat = m.reshape(-1, MEASUREMENT_DIM).astype(np.float32, copy=False)
+        means = np.concatenate([mix.means for mix in self.mixtures])
+        covs = np.concatenate([mix.covariances for mix in self.mixtures])
+        log_w = np.concatenate([np.log(mix.weights) for mix in self.mixtures]).astype(np.float32)
+        comp = _component_log_densities(flat, means, covs) + log_w                    # (M, sum K)
+        log_bg = np.logaddexp(background.log_likelihood(m).reshape(-1) + keep, floor)
+        out = np.empty((len(self.classes), flat.shape[0]), np.float32)
+        start = 0
         for c, mixture in enumerate(self.mixtures):
-            np.clip(np.logaddexp(mixture.log_likelihood(m) + keep, floor) - log_bg, -clip, clip, out=out[c])
-        return out
+            stop = start + len(mixture.weights)
+            log_fg = _logsumexp_rows(comp[:, start:stop])
+            np.clip(np.logaddexp(log_fg + keep, floor) - log_bg, -clip, clip, out=out[c])
+            start = stop
+        return out.reshape((len(self.classes),) + m.shape[:2])
 
 
 def band_labels(foreground: np.ndarray, body: BodyDescription | None = None) -> np.ndarray:

@@ -1,33 +1,35 @@
 """Batched image log-likelihood of N body poses over C cameras (paper Sec. 5.1, eq. 9-12).
 
-For each state, camera and part, the part's **silhouette plane** is the plane through its axis
-perpendicular to the viewing direction; its outline in that plane is the quad start +- h0 w,
-end +- h1 w, where w = unit(axis x view) and h = sqrt((r0 (w.e0))^2 + (r1 (w.e1))^2) is the
-half-width of the elliptical cross-section seen along the view (its support function). Only
-the 4 quad corners are projected (exactly, with distortion); a fixed grid of
-``points_along x points_across`` sample points inside the quad is interpolated bilinearly
-(the quad is nearly fronto-parallel, so the error is a small fraction of a pixel). The sample
-points thus cover the part's projected silhouette uniformly.
+Each part (a tapered elliptical cylinder) is drawn, per state and camera, as its projected
+silhouette: the projected axis from start a to end b, widened on both sides by the projected
+half-width of its elliptical cross-section seen along the view, h = sqrt((r0 (w.e0))^2 +
+(r1 (w.e1))^2) with w = unit(axis x view) (the ellipse's support function), in pixels
+f h / depth at each end. Only the two axis end points are projected (exactly, with
+distortion). ``points_along`` rows x ``points_across`` columns of sample points cover the
+silhouette uniformly.
 
 Appearance (eq. 10-11, footnote 1): the sum of foreground/background log-likelihood ratios
-over the pixels of part i is approximated by (area_i / K) * sum_k llr(point k); eq. 11's
-weight w_i is 1 / (expected area of part i): its side-on area (length x mean diameter) at
-the median depth of the part over the N states (so each part contributes about its mean
-ratio, scaled by how large it appears in this state).
-The ratio of the part's class is looked up (nearest map pixel) in ``FrameFeatures.llr``.
+over the pixels of part i is approximated by (area_i / K) * sum_k llr(point k) (nearest map
+pixel of the part's class in ``FrameFeatures.llr``); eq. 11's weight w_i is 1 / (expected area
+of part i): its side-on area (length x mean diameter) at the part's median depth over the N
+states. So each part contributes about its mean ratio, scaled by how large it appears.
 
-Flow (eq. 9): each sample point's predicted image motion u is the motion of the same
-part-local point from ``prev_segments`` to ``segments``; it is compared with the measured flow
-v of the grid cell it falls in: log p(v | u) - log p(v | 0), i.e. relative to the background's
-zero-motion model (the background cells' terms are common to all states and cancel).
+Flow (eq. 9): at each row's axis point the predicted image motion u is the motion of that
+point from ``prev_segments`` to ``segments``; it is compared with the measured flow v of the
+grid cell it falls in: log p(v | u) - log p(v | 0), i.e. relative to the background's
+zero-motion model (background cells' terms are common to all states and cancel), weighted
+like the appearance term.
 
-Visibility: points outside the image, behind the camera, under the occlusion mask, on invalid
-flow cells (flow term only), or hidden by a nearer part are dropped. Self-occlusion is an
-analytic per-state test: the legs and feet of one side against the legs and feet of the other
-side and (for the upper legs) the torso, each occluder a projected tapered band around its
-axis; a point is hidden when it lies within the band and behind the occluder's axis depth.
-The test is made at the axis points of each row of samples and shared across the row.
-Cameras are conditionally independent: their terms add (eq. 12).
+Visibility: points outside the image, behind the camera, under the occlusion mask (ratio 0,
+flow cell invalid) or hidden by a nearer part are dropped. Self-occlusion is an analytic
+per-state test between part pairs that can overlap (``occluder_table``: the legs and feet of
+one side against those of the other side, the upper legs against the torso): a row of
+sample points is hidden when its axis point lies within the occluder's projected band and
+behind the occluder's axis depth there. Pairs whose image bounding boxes do not meet are
+skipped. Cameras are conditionally independent: their terms add (eq. 12).
+
+Cost: O(N x parts x points) element operations, all vectorised over the N states
+(``benchmarks/bench_likelihood.py``).
 """
 from __future__ import annotations
 
@@ -46,7 +48,7 @@ class LikelihoodConfig:
     """Sampling density and term weights of the image likelihood."""
 
     points_along: int = 6           # sample rows along each part's axis
-    points_across: int = 3          # samples per row across the silhouette
+    points_across: int = 2          # samples per row across the silhouette
     appearance_weight: float = 1.0  # multiplies each part's mean log-likelihood ratio
     flow_weight: float = 1.0        # multiplies each part's mean flow log-ratio
     self_occlusion: bool = True
@@ -54,16 +56,6 @@ class LikelihoodConfig:
     def __post_init__(self) -> None:
         if self.points_along < 1 or self.points_across < 1:
             raise ValueError("LikelihoodConfig: points_along and points_across must be >= 1")
-
-
-def _bilinear_weights(along: int, across: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Weights (K, 4) of corners [start-, start+, end-, end+] and the (t, s') of each point."""
-    t = (np.arange(along) + 0.5) / along
-    s = (np.arange(across) + 0.5) / across
-    tt, ss = np.meshgrid(t, s, indexing="ij")
-    tt, ss = tt.ravel(), ss.ravel()
-    weights = np.stack([(1 - tt) * (1 - ss), (1 - tt) * ss, tt * (1 - ss), tt * ss], axis=1)
-    return weights.astype(np.float32), tt.astype(np.float32), ss.astype(np.float32)
 
 
 def occluder_table(parts: tuple[PartShape, ...]) -> np.ndarray:
@@ -81,145 +73,228 @@ def occluder_table(parts: tuple[PartShape, ...]) -> np.ndarray:
     return table
 
 
-def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    norm = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.maximum(norm, 1e-12), norm[..., 0]
+def occluder_pairs(parts: tuple[PartShape, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """(occludee, occluder) index pairs from ``occluder_table``."""
+    table = occluder_table(parts)
+    who, slot = np.nonzero(table >= 0)
+    return who, table[who, slot]
 
 
-def silhouette_corners(parts: tuple[PartShape, ...], segments: BodySegments, camera: Camera) -> np.ndarray:
-    """Part-local corners (N, P, 4, 3) of each part's silhouette quad seen from ``camera``."""
-    origin = np.asarray(segments.origin)
-    rot = np.asarray(segments.rotation)
-    lengths = np.array([p.length for p in parts])
-    r_start = np.array([p.radii_start for p in parts])     # (P, 2)
-    r_end = np.array([p.radii_end for p in parts])
-    axis = rot[..., :, 2]
-    centre = origin + 0.5 * lengths[:, None] * axis
-    lateral, norm = _unit(np.cross(axis, camera.position - centre))
-    degenerate = norm < 1e-9                                 # looking along the axis
-    lateral = np.where(degenerate[..., None], rot[..., :, 0], lateral)
-    # Lateral direction in the part frame (its ellipse-axis components).
-    c0 = np.einsum("npi,npi->np", lateral, rot[..., :, 0])
-    c1 = np.einsum("npi,npi->np", lateral, rot[..., :, 1])
+def _project(camera: Camera, points: np.ndarray, component_first: bool = False
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """float32 projection of world points (..., 3) (or (3, ...) if ``component_first``): u, v
+    (px; -1e6 behind the camera) and depth (m)."""
+    R = camera.rotation.astype(np.float32)
+    c = camera.position.astype(np.float32)
+    px, py, pz = points if component_first else (points[..., 0], points[..., 1], points[..., 2])
+    dx, dy, dz = px - c[0], py - c[1], pz - c[2]
+    x = dx * R[0, 0] + dy * R[1, 0] + dz * R[2, 0]
+    y = dx * R[0, 1] + dy * R[1, 1] + dz * R[2, 1]
+    z = dx * R[0, 2] + dy * R[1, 2] + dz * R[2, 2]
+    front = z > 1e-6
+    inv = np.float32(1) / np.where(front, z, np.float32(1))
+    x *= inv
+    y *= inv
+    if np.any(camera.distortion):
+        x, y = camera._distort(x, y)
+    K = camera.K.astype(np.float32)
+    far = np.float32(-1e6)
+    u = np.where(front, K[0, 0] * x + K[0, 1] * y + K[0, 2], far)
+    v = np.where(front, K[1, 1] * y + K[1, 2], far)
+    return u, v, z
+
+
+@dataclass
+class _Silhouettes:
+    """Projected parts of N states: axis ends (px), half-widths (px), depths (m), all (N, P)."""
+
+    ax: np.ndarray
+    ay: np.ndarray
+    bx: np.ndarray
+    by: np.ndarray
+    ha: np.ndarray
+    hb: np.ndarray
+    da: np.ndarray
+    db: np.ndarray
+
+
+def _silhouettes(parts: tuple[PartShape, ...], segments: BodySegments, camera: Camera,
+                 widths: bool = True) -> _Silhouettes:
+    """Projected axis ends, half-widths (px) and end depths of every part, (P, N) float32 each."""
+    rot = np.asarray(segments.rotation, np.float32)
+    origin = np.asarray(segments.origin, np.float32).transpose(2, 1, 0)      # (3, P, N)
+    axis = rot[..., :, 2].transpose(2, 1, 0)
+    lengths = np.array([p.length for p in parts], np.float32)[:, None]
+    end = origin + lengths * axis
+    u, v, depth = _project(camera, np.stack([origin, end], axis=-1), component_first=True)   # (P, N, 2)
+    da, db = depth[..., 0], depth[..., 1]
+    if not widths:
+        zero = np.zeros_like(da)
+        return _Silhouettes(u[..., 0], v[..., 0], u[..., 1], v[..., 1], zero, zero, da, db)
+    r_start = np.array([p.radii_start for p in parts], np.float32)[:, :, None]   # (P, 2, 1)
+    r_end = np.array([p.radii_end for p in parts], np.float32)[:, :, None]
+    cam = camera.position.astype(np.float32)
+    vx, vy, vz = (cam[k] - 0.5 * (origin[k] + end[k]) for k in range(3))    # towards the camera
+    ax, ay, az = axis
+    lx, ly, lz = ay * vz - az * vy, az * vx - ax * vz, ax * vy - ay * vx     # lateral = axis x view
+    e0 = rot[..., :, 0].transpose(2, 1, 0)
+    e1 = rot[..., :, 1].transpose(2, 1, 0)
+    c0 = lx * e0[0] + ly * e0[1] + lz * e0[2]
+    c1 = lx * e1[0] + ly * e1[1] + lz * e1[2]
+    norm = np.sqrt(c0 * c0 + c1 * c1)            # lateral lies in the e0-e1 plane
+    degenerate = norm < 1e-9                     # looking along the axis: any lateral direction
+    inv = np.float32(1) / np.where(degenerate, np.float32(1), norm)
+    c0 = np.where(degenerate, np.float32(1), c0 * inv)
+    c1 = np.where(degenerate, np.float32(0), c1 * inv)
     h0 = np.sqrt((r_start[:, 0] * c0) ** 2 + (r_start[:, 1] * c1) ** 2)
     h1 = np.sqrt((r_end[:, 0] * c0) ** 2 + (r_end[:, 1] * c1) ** 2)
-    unit_local = np.stack([c0, c1, np.zeros_like(c0)], axis=-1)     # (N, P, 3)
-    z = np.zeros(origin.shape[:2] + (3,))
-    z_end = z.copy()
-    z_end[..., 2] = lengths
-    return np.stack([z - h0[..., None] * unit_local, z + h0[..., None] * unit_local,
-                     z_end - h1[..., None] * unit_local, z_end + h1[..., None] * unit_local], axis=2)
-
-
-def _to_world(segments: BodySegments, local: np.ndarray) -> np.ndarray:
-    return segments.origin[:, :, None, :] + np.einsum("npij,npcj->npci", segments.rotation, local)
+    focal = np.float32(0.5 * (camera.K[0, 0] + camera.K[1, 1]))
+    ha = focal * h0 / np.maximum(da, np.float32(1e-6))
+    hb = focal * h1 / np.maximum(db, np.float32(1e-6))
+    return _Silhouettes(u[..., 0], v[..., 0], u[..., 1], v[..., 1], ha, hb, da, db)
 
 
 def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, prev_segments: BodySegments,
                           camera: Camera, features: FrameFeatures, occlusion_mask: np.ndarray | None = None,
                           config: LikelihoodConfig = LikelihoodConfig()) -> np.ndarray:
-    """Log-likelihood (N,) of one camera's features (see the module docstring)."""
+    """Log-likelihood (N,) of one camera's features (see the module docstring).
+
+    Arrays are laid out (A, P, N) and (J, A, P, N) so that sums over the few sample rows and
+    columns add contiguous blocks and per-part slices are contiguous."""
     n, p = segments.origin.shape[:2]
     if p != len(parts):
         raise ValueError(f"likelihood: segments have {p} parts, body has {len(parts)}")
     if (features.image_width, features.image_height) != (camera.width, camera.height):
         raise ValueError(f"likelihood: features of camera {camera.name} are {features.image_width}x"
                          f"{features.image_height}, calibration says {camera.width}x{camera.height}")
-    class_index = np.array([features.classes.index(part.part_class) for part in parts])
-    weights, _, _ = _bilinear_weights(config.points_along, config.points_across)
-    k = weights.shape[0]
-    local = silhouette_corners(parts, segments, camera)
-    uv, depth = camera.project(_to_world(segments, local))           # (N, P, 4, 2), (N, P, 4)
-    uv_prev, _ = camera.project(_to_world(prev_segments, local))
-    uv = uv.astype(np.float32)
-    depth = depth.astype(np.float32)
-    # Sample points (N, P, K, 2) and their depths (axis depth at their row).
-    points = np.einsum("npcx,kc->npkx", uv, weights)
-    motion = points - np.einsum("npcx,kc->npkx", uv_prev.astype(np.float32), weights)
-    d_start = 0.5 * (depth[..., 0] + depth[..., 1])
-    d_end = 0.5 * (depth[..., 2] + depth[..., 3])
-    ok = (d_start > 0)[..., None] & (d_end > 0)[..., None] & np.all(np.isfinite(points), axis=-1)
-    ok &= (points[..., 0] >= 0) & (points[..., 0] < camera.width) & (points[..., 1] >= 0) & (points[..., 1] < camera.height)
+    A, J = config.points_along, config.points_across
+    t = ((np.arange(A) + 0.5) / A).astype(np.float32)[:, None, None]      # row positions along the axis
+    s = (2 * (np.arange(J) + 0.5) / J - 1).astype(np.float32)              # across, in half-widths
+    sil = _silhouettes(parts, segments, camera)
+    dx, dy = sil.bx - sil.ax, sil.by - sil.ay
+    length = np.sqrt(dx * dx + dy * dy)
+    long_enough = length > 1e-3
+    inv_len = np.float32(1) / np.where(long_enough, length, np.float32(1))
+    nx = np.where(long_enough, -dy * inv_len, np.float32(1))              # unit normal of the axis in the image
+    ny = np.where(long_enough, dx * inv_len, np.float32(0))
+    # Row centres, half-widths and depths (A, P, N).
+    cx = sil.ax + t * dx
+    cy = sil.ay + t * dy
+    half = sil.ha + t * (sil.hb - sil.ha)
+    depth = sil.da + t * (sil.db - sil.da)
+    in_front = (sil.da > 1e-6) & (sil.db > 1e-6)
+    row_ok = np.broadcast_to(in_front, cx.shape).copy()
     if config.self_occlusion:
-        ok &= ~_self_occluded(parts, uv, d_start, d_end, config)
-    # Projected areas (px^2) and eq. 11 weights: 1 / expected area, the side-on area of the
-    # part (length x mean diameter) at the states' median depth of the part.
-    q = uv[..., [0, 1, 3, 2], :]
-    area = 0.5 * np.abs(np.sum(q[..., 0] * np.roll(q[..., 1], -1, axis=-1) - np.roll(q[..., 0], -1, axis=-1) * q[..., 1], axis=-1))
-    area = np.where(np.isfinite(area), area, 0.0)
-    size = np.array([p.length * (np.mean(p.radii_start) + np.mean(p.radii_end)) for p in parts])  # m^2
-    median_depth = np.maximum(np.median(0.5 * (d_start + d_end), axis=0), 1e-3)       # (P,)
-    expected = np.maximum(camera.K[0, 0] * camera.K[1, 1] * size / median_depth ** 2, 1.0)
-    part_scale = (area / expected) / k                                  # (N, P)
-    # Appearance.
+        row_ok &= ~_hidden_rows(parts, sil, cx, cy, depth)
+    # Eq. 11 weights: projected area over expected area (P, N).
+    area = np.where(in_front, length * (sil.ha + sil.hb), np.float32(0))
+    size = np.array([q.length * (np.mean(q.radii_start) + np.mean(q.radii_end)) for q in parts])   # m^2
+    median_depth = np.maximum(np.median(0.5 * (sil.da + sil.db), axis=1), 1e-3)
+    expected = np.maximum(camera.K[0, 0] * camera.K[1, 1] * size / median_depth ** 2, 1.0).astype(np.float32)
+    scale = area / expected[:, None]
+    # ---- appearance: sample points (J, A, P, N) --------------------------------------------
     llr = features.llr
     mask_map = _map_mask(occlusion_mask, features.downsample, features.map_shape)
     if mask_map is not None:
         llr = np.where(mask_map[None], np.float32(0), llr)
     h, w = features.map_shape
-    safe = np.where(ok[..., None], points, 0.0)
-    col = np.minimum((safe[..., 0] / features.downsample).astype(np.int32), w - 1)
-    row = np.minimum((safe[..., 1] / features.downsample).astype(np.int32), h - 1)
-    flat = (class_index[None, :, None] * (h * w) + row * w + col)
-    values = np.where(ok, llr.reshape(-1)[flat], np.float32(0))
-    total = config.appearance_weight * np.sum(part_scale * values.sum(axis=-1), axis=-1, dtype=np.float64)
-    # Flow.
+    # Maps padded with a zero border: indices clipped into the border contribute nothing.
+    padded = np.zeros((len(features.classes), h + 2, w + 2), np.float32)
+    padded[:, 1:-1, 1:-1] = llr
+    table = padded.reshape(-1)
+    inv_ds = np.float32(1.0 / features.downsample)
+    offset = s[:, None, None, None] * half                                  # (J, A, P, N) px
+    col = offset * nx
+    col += cx
+    col *= inv_ds
+    col += 1
+    row = offset * ny
+    row += cy
+    row *= inv_ds
+    row += 1
+    np.clip(col, 0, w + 1, out=col)
+    np.clip(row, 0, h + 1, out=row)
+    class_index = np.array([features.classes.index(q.part_class) for q in parts], np.int32)
+    flat = row.astype(np.int32)
+    flat *= w + 2
+    flat += col.astype(np.int32)
+    flat += (class_index * ((h + 2) * (w + 2)))[:, None]
+    values = table[flat]
+    row_sums = values[0]
+    for j in range(1, J):
+        row_sums = row_sums + values[j]
+    row_sums *= row_ok
+    part_sums = row_sums[0]
+    for a in range(1, A):
+        part_sums = part_sums + row_sums[a]
+    total = config.appearance_weight / (A * J) * np.sum(scale * part_sums, axis=0, dtype=np.float64)
+    # ---- flow at the row centres (A, P, N) ------------------------------------------------
     grid = features.flow
     valid = grid.valid
     cell_mask = _cell_mask(occlusion_mask, *grid.shape, grid.cell_size)
     if cell_mask is not None:
         valid = valid & ~cell_mask
     if config.flow_weight > 0 and valid.any():
-        rows, cols = grid.shape
-        info = np.linalg.inv(grid.covariance.astype(np.float64)).astype(np.float32)
-        v = grid.flow
-        e0 = np.einsum("rci,rcij,rcj->rc", v, info, v) / STUDENT_T_DOF
-        ccol = (safe[..., 0] / grid.cell_size).astype(np.int32)
-        crow = (safe[..., 1] / grid.cell_size).astype(np.int32)
-        in_grid = ok & (ccol < cols) & (crow < rows)
-        cell = np.where(in_grid, np.minimum(crow, rows - 1) * cols + np.minimum(ccol, cols - 1), 0)
-        use = in_grid & valid.reshape(-1)[cell]
-        d = v.reshape(-1, 2)[cell] - motion                             # (N, P, K, 2)
-        i = info.reshape(-1, 4)[cell]
-        e2 = (d[..., 0] * (i[..., 0] * d[..., 0] + 2 * i[..., 1] * d[..., 1]) + i[..., 3] * d[..., 1] ** 2) / STUDENT_T_DOF
-        ratio = -0.5 * (STUDENT_T_DOF + 2) * (np.log1p(np.where(use, e2, 0)) - np.log1p(np.where(use, e0.reshape(-1)[cell], 0)))
-        total += config.flow_weight * np.sum(part_scale * ratio.sum(axis=-1), axis=-1, dtype=np.float64)
+        total += config.flow_weight / A * _flow_term(parts, prev_segments, camera, grid, valid, t, cx, cy, row_ok, scale)
     return total
 
 
-def _self_occluded(parts: tuple[PartShape, ...], uv: np.ndarray, d_start: np.ndarray, d_end: np.ndarray,
-                   config: LikelihoodConfig) -> np.ndarray:
-    """(N, P, K) True where a sample point is hidden by another part (see the module docstring)."""
-    n, p = uv.shape[:2]
-    along, across = config.points_along, config.points_across
-    hidden = np.zeros((n, p, along), bool)
-    table = occluder_table(parts)
-    who = np.flatnonzero(np.any(table >= 0, axis=1))
-    if who.size == 0:
-        return np.zeros((n, p, along * across), bool)
-    a = 0.5 * (uv[..., 0, :] + uv[..., 1, :])          # projected axis start (N, P, 2)
-    b = 0.5 * (uv[..., 2, :] + uv[..., 3, :])
-    ra = 0.5 * np.linalg.norm(uv[..., 1, :] - uv[..., 0, :], axis=-1)
-    rb = 0.5 * np.linalg.norm(uv[..., 3, :] - uv[..., 2, :], axis=-1)
-    t = ((np.arange(along) + 0.5) / along).astype(np.float32)
-    # Axis points of the occludees' sample rows: (N, W, A, 2) and depths (N, W, A).
-    pts = a[:, who, None, :] + t[None, None, :, None] * (b - a)[:, who, None, :]
-    dep = d_start[:, who, None] + t[None, None, :] * (d_end - d_start)[:, who, None]
-    occ = table[who]                                    # (W, Q)
-    real = occ >= 0
-    occ = np.where(real, occ, 0)
-    oa, ob = a[:, occ], b[:, occ]                       # (N, W, Q, 2)
-    seg = ob - oa
-    rel = pts[:, :, None, :, :] - oa[:, :, :, None, :]  # (N, W, Q, A, 2)
-    length2 = np.maximum(np.sum(seg * seg, axis=-1), 1e-9)[..., None]
-    tau = np.clip(np.sum(rel * seg[:, :, :, None, :], axis=-1) / length2, 0.0, 1.0)  # (N, W, Q, A)
-    closest = oa[:, :, :, None, :] + tau[..., None] * seg[:, :, :, None, :]
-    dist2 = np.sum((pts[:, :, None] - closest) ** 2, axis=-1)
-    radius = ra[:, occ][..., None] + tau * (rb - ra)[:, occ][..., None]
-    occ_depth = d_start[:, occ][..., None] + tau * (d_end - d_start)[:, occ][..., None]
-    behind = (dist2 < radius * radius) & (dep[:, :, None, :] > occ_depth) & real[None, :, :, None]
-    hidden[:, who] = behind.any(axis=2)
-    return np.repeat(hidden, across, axis=2)
+def _flow_term(parts: tuple[PartShape, ...], prev_segments: BodySegments, camera: Camera, grid, valid: np.ndarray,
+               t: np.ndarray, cx: np.ndarray, cy: np.ndarray, row_ok: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Sum over parts of scale x sum over rows of log p(v | u) - log p(v | 0), (N,) float64."""
+    rows, cols = grid.shape
+    prev = _silhouettes(parts, prev_segments, camera, widths=False)
+    mu = cx - (prev.ax + t * (prev.bx - prev.ax))                           # predicted motion (px/frame)
+    mv = cy - (prev.ay + t * (prev.by - prev.ay))
+    cov = grid.covariance.astype(np.float64)
+    det = cov[..., 0, 0] * cov[..., 1, 1] - cov[..., 0, 1] * cov[..., 1, 0]
+    i00, i01, i11 = cov[..., 1, 1] / det, -cov[..., 0, 1] / det, cov[..., 0, 0] / det
+    fx, fy = grid.flow[..., 0].astype(np.float64), grid.flow[..., 1].astype(np.float64)
+    e0 = (fx * (i00 * fx + 2 * i01 * fy) + i11 * fy * fy) / STUDENT_T_DOF
+
+    def padded(a: np.ndarray) -> np.ndarray:    # per-cell table with a trailing 'invalid' entry
+        return np.append(np.where(valid, a, 0).reshape(-1), 0).astype(np.float32)
+
+    T_fx, T_fy, T_00, T_01, T_11, T_l0 = (padded(a) for a in (fx, fy, i00, i01, i11, np.log1p(e0)))
+    ok = np.append(valid.reshape(-1), False)
+    inv_cell = np.float32(1.0 / grid.cell_size)
+    fcol, frow = cx * inv_cell, cy * inv_cell
+    inside = (fcol >= 0) & (fcol < cols) & (frow >= 0) & (frow < rows) & row_ok
+    inside &= (prev.da > 1e-6) & (prev.db > 1e-6)
+    cell = np.where(inside, frow.astype(np.int32) * cols + fcol.astype(np.int32), ok.size - 1)
+    du = T_fx[cell] - mu
+    dv = T_fy[cell] - mv
+    e2 = (du * (T_00[cell] * du + 2 * T_01[cell] * dv) + T_11[cell] * dv * dv) * np.float32(1 / STUDENT_T_DOF)
+    ratio = np.float32(-0.5 * (STUDENT_T_DOF + 2)) * (np.log1p(e2) - T_l0[cell])
+    ratio = np.where(ok[cell], ratio, np.float32(0))
+    per_part = ratio.sum(axis=0)
+    return np.sum(scale * per_part, axis=0, dtype=np.float64)
+
+
+def _hidden_rows(parts: tuple[PartShape, ...], sil: _Silhouettes, cx: np.ndarray, cy: np.ndarray,
+                 depth: np.ndarray) -> np.ndarray:
+    """(A, P, N) True where a row's axis point is hidden by another part (module docstring)."""
+    hidden = np.zeros(cx.shape, bool)
+    occludees, occluders = occluder_pairs(parts)
+    # Image bounding boxes of the parts (P, N), including their half-widths.
+    hmax = np.maximum(sil.ha, sil.hb)
+    x0, x1 = np.fmin(sil.ax, sil.bx) - hmax, np.fmax(sil.ax, sil.bx) + hmax
+    y0, y1 = np.fmin(sil.ay, sil.by) - hmax, np.fmax(sil.ay, sil.by) + hmax
+    for i, j in zip(occludees, occluders):
+        meet = np.flatnonzero((x0[i] < x1[j]) & (x0[j] < x1[i]) & (y0[i] < y1[j]) & (y0[j] < y1[i]))
+        if meet.size == 0:
+            continue
+        ax, ay = sil.ax[j, meet], sil.ay[j, meet]
+        sx, sy = sil.bx[j, meet] - ax, sil.by[j, meet] - ay
+        px, py = cx[:, i, meet] - ax, cy[:, i, meet] - ay                   # (A, M)
+        tau = np.clip((px * sx + py * sy) / np.maximum(sx * sx + sy * sy, np.float32(1e-6)), 0, 1)
+        ex, ey = px - tau * sx, py - tau * sy
+        ha = sil.ha[j, meet]
+        radius = ha + tau * (sil.hb[j, meet] - ha)
+        da = sil.da[j, meet]
+        occ_depth = da + tau * (sil.db[j, meet] - da)
+        hidden[:, i, meet] |= (ex * ex + ey * ey < radius * radius) & (depth[:, i, meet] > occ_depth)
+    return hidden
 
 
 def log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, prev_segments: BodySegments | None,

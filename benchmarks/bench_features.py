@@ -1,0 +1,118 @@
+"""Features node throughput at 640x480 (all per-frame stages: Image message -> RGB, appearance
+maps, grid flow, ImageFeatures message), the time per stage, and the flow's median endpoint
+error on the walker against the rendered motion. Prints JSON.
+
+    .venv/bin/python benchmarks/bench_features.py [--frames 90]
+
+Frames are a rendered walker over a textured background (rendered once, cycled).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test" / "vision"))
+from vision_scene import BODY, background_image, noisy, render_frames, side_camera, walking_poses  # noqa: E402
+
+from awalker_tracker.nodes.convert import header  # noqa: E402
+from awalker_tracker.nodes.features import features_to_msg, image_from_msg  # noqa: E402
+from awalker_tracker.vision.background import measurements  # noqa: E402
+from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor  # noqa: E402
+from awalker_tracker.vision.flow import GridFlow, to_grey  # noqa: E402
+from awalker_tracker.vision.render import render  # noqa: E402
+
+
+def image_msg(rgb: np.ndarray, stamp: int):
+    from sensor_msgs.msg import Image
+
+    msg = Image(header=header(stamp, "cam_optical_frame"), height=rgb.shape[0], width=rgb.shape[1],
+                encoding="rgb8", step=rgb.shape[1] * 3)
+    msg.data = rgb.tobytes()
+    return msg
+
+
+def flow_endpoint_error(cam, poses, frames) -> dict:
+    """Median EPE (px) over 16 px cells >= 70 % covered by the body, frames 1 -> 2 ... 4 -> 5."""
+    errors, speeds = [], []
+    flow = GridFlow()
+    for a in range(1, len(poses) - 1):
+        seg_a, seg_b = poses[a].segments(), poses[a + 1].segments()
+        result = render(BODY, seg_a, cam)
+        v, u = np.nonzero(result.labels >= 0)
+        part, local = result.labels[v, u], result.local[v, u]
+        world = [s.origin[0][part] + np.einsum("kij,kj->ki", s.rotation[0][part], local) for s in (seg_a, seg_b)]
+        motion = cam.project(world[1])[0] - cam.project(world[0])[0]
+        grid = flow.estimate(to_grey(frames[a]), to_grey(frames[a + 1]))
+        cell = (v // 16) * grid.shape[1] + (u // 16)
+        counts = np.bincount(cell, minlength=grid.shape[0] * grid.shape[1])
+        summed = np.stack([np.bincount(cell, motion[:, i], minlength=counts.size) for i in range(2)], -1)
+        covered = np.flatnonzero(counts >= 0.7 * 256)
+        truth = summed[covered] / counts[covered, None]
+        errors.append(np.linalg.norm(grid.flow.reshape(-1, 2)[covered] - truth, axis=1))
+        speeds.append(np.linalg.norm(truth, axis=1))
+    errors, speeds = np.concatenate(errors), np.concatenate(speeds)
+    return {"cells": int(errors.size), "median_epe_px": float(np.median(errors)),
+            "p90_epe_px": float(np.percentile(errors, 90)), "median_true_motion_px": float(np.median(speeds))}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--frames", type=int, default=90)
+    args = parser.parse_args()
+    cam = side_camera(640, 480, 600.0)
+    bg = background_image(cam)
+    rng = np.random.default_rng(0)
+    poses = walking_poses(8)
+    print("rendering frames ...", file=sys.stderr, flush=True)
+    frames, _ = render_frames(cam, poses, bg)
+    cycle = frames + frames[::-1]
+    msgs = [image_msg(f, k) for k, f in enumerate(cycle)]
+    config = FeatureConfig(background_frames=5)
+    extractor = FeatureExtractor(config)
+    for _ in range(5):
+        extractor.process(noisy(bg, rng))
+    stages = {"decode": 0.0, "extract": 0.0, "to_msg": 0.0}
+    started = time.perf_counter()
+    for k in range(args.frames):
+        t0 = time.perf_counter()
+        rgb = image_from_msg(msgs[k % len(msgs)])
+        t1 = time.perf_counter()
+        feats = extractor.process(rgb)
+        t2 = time.perf_counter()
+        features_to_msg(feats, header(k, "cam_optical_frame"), "cam")
+        t3 = time.perf_counter()
+        stages["decode"] += t1 - t0
+        stages["extract"] += t2 - t1
+        stages["to_msg"] += t3 - t2
+        if k % 30 == 29:
+            print(f"{k + 1}/{args.frames} frames", file=sys.stderr, flush=True)
+    total = time.perf_counter() - started
+    # Split of the extract stage: appearance maps vs flow.
+    t0 = time.perf_counter()
+    for f in frames:
+        m = measurements(f, config.downsample)
+        extractor.foreground.log_likelihood_ratios(m, extractor.background, config.llr_clip, config.outlier_probability)
+    appearance = (time.perf_counter() - t0) / len(frames)
+    flow = GridFlow(config.flow)
+    greys = [to_grey(f) for f in frames]
+    t0 = time.perf_counter()
+    for a, b in zip(greys[:-1], greys[1:]):
+        flow.estimate(a, b)
+    flow_ms = (time.perf_counter() - t0) / (len(greys) - 1)
+    print(json.dumps({
+        "benchmark": "features", "width": 640, "height": 480, "frames": args.frames,
+        "downsample": config.downsample, "flow_cell_size": config.flow.cell_size, "flow_scale": config.flow.scale,
+        "frames_per_s": args.frames / total,
+        "ms_per_frame": {k: 1e3 * v / args.frames for k, v in stages.items()},
+        "extract_split_ms": {"appearance_maps": 1e3 * appearance, "grid_flow": 1e3 * flow_ms},
+        "flow_accuracy": flow_endpoint_error(cam, poses, frames),
+    }, indent=2))
+
+
+if __name__ == "__main__":
+    main()
