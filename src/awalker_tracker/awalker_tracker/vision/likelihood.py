@@ -49,13 +49,14 @@ class LikelihoodConfig:
 
     points_along: int = 6           # sample rows along each part's axis
     points_across: int = 2          # samples per row across the silhouette
+    flow_row_step: int = 2          # flow compared at every flow_row_step-th row (cells >> rows)
     appearance_weight: float = 1.0  # multiplies each part's mean log-likelihood ratio
     flow_weight: float = 1.0        # multiplies each part's mean flow log-ratio
     self_occlusion: bool = True
 
     def __post_init__(self) -> None:
-        if self.points_along < 1 or self.points_across < 1:
-            raise ValueError("LikelihoodConfig: points_along and points_across must be >= 1")
+        if self.points_along < 1 or self.points_across < 1 or self.flow_row_step < 1:
+            raise ValueError("LikelihoodConfig: points_along, points_across and flow_row_step must be >= 1")
 
 
 def occluder_table(parts: tuple[PartShape, ...]) -> np.ndarray:
@@ -185,7 +186,9 @@ def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, 
     in_front = (sil.da > 1e-6) & (sil.db > 1e-6)
     row_ok = np.broadcast_to(in_front, cx.shape).copy()
     if config.self_occlusion:
-        row_ok &= ~_hidden_rows(parts, sil, cx, cy, depth)
+        # The occlusion test at every other row (pairs of rows share it): it is the costliest step.
+        hidden = _hidden_rows(parts, sil, cx[::2], cy[::2], depth[::2])
+        row_ok &= ~np.repeat(hidden, 2, axis=0)[:A]
     # Eq. 11 weights: projected area over expected area (P, N).
     area = np.where(in_front, length * (sil.ha + sil.hb), np.float32(0))
     size = np.array([q.length * (np.mean(q.radii_start) + np.mean(q.radii_end)) for q in parts])   # m^2
@@ -235,7 +238,10 @@ def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, 
     if cell_mask is not None:
         valid = valid & ~cell_mask
     if config.flow_weight > 0 and valid.any():
-        total += config.flow_weight / A * _flow_term(parts, prev_segments, camera, grid, valid, t, cx, cy, row_ok, scale)
+        pick = slice(None, None, config.flow_row_step)       # flow cells are coarser than the rows
+        rows_used = len(range(A)[pick])
+        total += config.flow_weight / rows_used * _flow_term(parts, prev_segments, camera, grid, valid, t[pick],
+                                                              cx[pick], cy[pick], row_ok[pick], scale)
     return total
 
 
