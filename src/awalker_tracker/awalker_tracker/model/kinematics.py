@@ -386,16 +386,21 @@ def sample_kinematics(
     events: object | None,
     kin: KinematicState,
     rng: np.random.Generator,
+    heading: np.ndarray | float | None = None,
 ) -> KinematicState:
     """Sample k_t ~ p(k_t | d_t, k_{t-1}) for N particles (eq. 6 plus the contact constraint).
 
     ``walker`` is the walker state after this frame's dynamics step; a change of
     ``walker.stance_leg`` against ``kin.contact_leg`` is a heel strike (``walker_prev`` and
-    ``events`` are accepted for interface symmetry and not needed).
+    ``events`` are accepted for interface symmetry and not needed). ``heading`` (rad), if
+    given, replaces the sampled torso heading (a scripted turn, e.g. for synthesis); the body
+    still turns about the stance-foot contact.
     """
     del walker_prev, events
     current = kin.dofs()
     new = _eq6(config, walker, current, kin.previous, rng)
+    if heading is not None:
+        new[:, DOF_NAMES.index("heading")] = heading
     local = _local_pose(body, leg_angles(walker), new)
     old_leg = kin.contact_leg
     old_foot = _pick(local.foot, old_leg)

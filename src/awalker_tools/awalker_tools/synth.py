@@ -1,0 +1,424 @@
+"""Synthetic test sequences: a walking person in a textured room, seen by 1-4 calibrated cameras.
+
+The person's motion comes from the generative model itself (the walker prior plus the
+conditional kinematics, with optional scripted speed change and turn) or from a CMU motion
+capture walk (``--from-mocap``), so the tracker can also be tested on motion it did not
+produce. Frames are ray-cast (``vision/render.py``): a room with a tiled, noisy floor and
+cluttered walls, the textured body, an optional box occluder hiding the lower body for a
+stretch (paper Experiments 1-3), a slow lighting change and per-pixel sensor noise. The
+first ``background_frames`` frames hold the empty room (for background models).
+
+Outputs in ``out_dir``: ``<name>.bag`` (bagio format, ground truth included),
+``calibration.yaml``, ``body.yaml``, ``start.yaml`` (the paper's coarse hand
+initialisation: first frame with the person, pelvis ground position, heading, speed, step
+length, stance leg) and ``ground_truth.csv`` (``frame,stamp_ns,marker,x,y,z``; frame counts
+from 0 at the first bag frame).
+"""
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from awalker_tracker.errors import InputError
+from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription, BodySegments
+from awalker_tracker.vision.camera import Camera, save_calibration
+from awalker_tracker.vision.render import pixel_rays, render, render_rgb
+
+from awalker_tools import bagio
+
+_M = {n: i for i, n in enumerate(MARKER_NAMES)}
+ROOM_HALF_SIZE = 8.0   # m: the room spans [-8, 8] x [-8, 8]
+ROOM_HEIGHT = 4.0      # m
+TEXEL = 0.01           # m per texture pixel
+FIRST_STAMP_NS = 1_700_000_000_000_000_000
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    """What to synthesise. Speeds m/s, lengths m, angles deg, noise in grey levels (0-255)."""
+
+    out_dir: Path
+    name: str = "synth"
+    cameras: int = 1
+    rate: float = 30.0
+    frames: int = 90                 # frames with the person
+    background_frames: int = 8       # empty-room frames before the person appears
+    seed: int = 0
+    speed: float = 1.3
+    step_length: float = 0.7
+    speed_change: bool = False       # slow down to 65 % of the speed over the middle third
+    turn_deg: float = 0.0            # turn left (+) or right (-) by this much over the middle third
+    occluder: bool = False
+    mocap: tuple[Path, Path] | None = None
+    width: int = 640
+    height: int = 480
+    noise_sigma: float = 3.0
+    lighting_change: float = 0.25    # the light dims by this fraction and recovers
+    storage: str = "mcap"
+    compressed: bool = True
+    image_format: str = "jpeg"
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.cameras <= 4:
+            raise InputError(f"synth: --cameras must be 1..4, got {self.cameras}")
+        if self.rate not in (30.0, 60.0):
+            raise InputError(f"synth: --rate must be 30 or 60 Hz, got {self.rate:g}")
+        if self.frames < 2 or self.background_frames < 0:
+            raise InputError(f"synth: need --frames >= 2 (got {self.frames}) and background frames >= 0")
+        if abs(self.turn_deg) > 90:
+            raise InputError(f"synth: --turn must be within [-90, 90] degrees, got {self.turn_deg:g}")
+        if self.width < 64 or self.height < 48:
+            raise InputError(f"synth: image size {self.width}x{self.height} is too small")
+
+
+@dataclass
+class Motion:
+    """Ground-truth motion for the frames with the person: markers (F, 13, 3), part poses, the
+    body, joint angles (F, J) or None, and the start description."""
+
+    markers: np.ndarray
+    segments: BodySegments
+    body: BodyDescription
+    joint_angles: np.ndarray | None
+    start: dict = field(default_factory=dict)
+
+
+# ---- scene --------------------------------------------------------------------------------
+def make_cameras(count: int, width: int, height: int, path_centre: np.ndarray) -> list[Camera]:
+    """Up to four cameras around the walkway (side, two diagonals, opposite side), slight
+    barrel distortion, aimed at the middle of the path."""
+    focal = 0.82 * width  # ~63 degrees horizontal field of view
+    target = np.array([path_centre[0], path_centre[1], 0.9])
+    placements = [(0.0, -4.8, 1.4), (3.6, -3.6, 2.0), (-3.6, 3.6, 2.0), (0.5, 4.8, 1.5)]
+    cams = []
+    for k in range(count):
+        position = target * np.array([1, 1, 0]) + np.array(placements[k])
+        cams.append(Camera.look_at(f"cam{k}", width, height, focal, position, target,
+                                   distortion=np.array([-0.04, 0.01, 0.0, 0.0, 0.0])))
+    return cams
+
+
+def _value_noise(rng: np.random.Generator, shape: tuple[int, int], cell: int) -> np.ndarray:
+    """Smooth noise in [0, 1] of the given shape with features of ~``cell`` pixels."""
+    import cv2
+
+    coarse = rng.random((shape[0] // cell + 2, shape[1] // cell + 2)).astype(np.float32)
+    return cv2.resize(coarse, (shape[1], shape[0]), interpolation=cv2.INTER_CUBIC).clip(0, 1)
+
+
+def make_textures(rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """Floor and wall textures (float32 RGB 0-255) at ``TEXEL`` m per pixel: floor tiles with
+    stains, walls covered with random shelves, posters and boxes (clutter)."""
+    import cv2
+
+    size = int(2 * ROOM_HALF_SIZE / TEXEL)
+    floor = np.empty((size, size, 3), np.float32)
+    floor[:] = (150, 140, 120)
+    tiles = (np.add.outer(np.arange(size) // 50, np.arange(size) // 50) % 2).astype(np.float32)  # 0.5 m tiles
+    floor *= (0.9 + 0.1 * tiles)[..., None]
+    floor *= (0.8 + 0.4 * _value_noise(rng, (size, size), 40))[..., None]
+    for _ in range(25):  # rugs and stains
+        x0, y0 = rng.integers(0, size - 200, 2)
+        w, h = rng.integers(40, 200, 2)
+        colour = rng.uniform(60, 220, 3)
+        cv2.rectangle(floor, (int(x0), int(y0)), (int(x0 + w), int(y0 + h)), colour.tolist(), -1)
+    grout = (np.arange(size) % 50 < 1)
+    floor[grout] *= 0.6
+    floor[:, grout] *= 0.6
+    walls = []
+    wall_h = int(ROOM_HEIGHT / TEXEL)
+    for _ in range(4):
+        wall = np.empty((wall_h, size, 3), np.float32)
+        wall[:] = rng.uniform(150, 210, 3)
+        wall *= (0.85 + 0.3 * _value_noise(rng, (wall_h, size), 60))[..., None]
+        for _ in range(60):
+            x0 = int(rng.integers(0, size - 50))
+            y0 = int(rng.integers(0, wall_h - 40))
+            w, h = int(rng.integers(20, 180)), int(rng.integers(20, 150))
+            colour = rng.uniform(20, 240, 3).tolist()
+            cv2.rectangle(wall, (x0, y0), (x0 + w, y0 + h), colour, -1)
+            if rng.random() < 0.5:
+                cv2.rectangle(wall, (x0, y0), (x0 + w, y0 + h), (30, 30, 30), 2)
+        walls.append(wall)
+    return {"floor": floor, "walls": walls}
+
+
+def _world_rays(camera: Camera) -> np.ndarray:
+    """World ray directions (H, W, 3) with unit camera-frame depth."""
+    xy = pixel_rays(camera)
+    local = np.concatenate([xy, np.ones(xy.shape[:2] + (1,))], axis=-1)
+    return local @ camera.rotation.T
+
+
+def _sample(texture: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    import cv2
+
+    # Coordinates of pixels that do not see this surface can be inf/NaN: clamp them (remap's
+    # border handling is very slow for huge coordinates).
+    u = np.clip(np.nan_to_num(u, nan=0.0, posinf=0.0, neginf=0.0), 0, texture.shape[1] - 1)
+    v = np.clip(np.nan_to_num(v, nan=0.0, posinf=0.0, neginf=0.0), 0, texture.shape[0] - 1)
+    return cv2.remap(texture, u.astype(np.float32), v.astype(np.float32), cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE)
+
+
+def render_room(camera: Camera, textures: dict[str, np.ndarray]) -> np.ndarray:
+    """The empty room seen by ``camera``: float32 RGB (H, W, 3), 0-255."""
+    d = _world_rays(camera)
+    c = camera.position
+    out = np.zeros(d.shape, np.float32)
+    out[:] = (235, 235, 230)  # ceiling
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t_floor = np.where(d[..., 2] < 0, -c[2] / d[..., 2], np.inf)
+        t_walls = []
+        for axis in (0, 1):
+            for sign in (-1.0, 1.0):
+                t_walls.append(np.where(d[..., axis] * sign > 0, (sign * ROOM_HALF_SIZE - c[axis]) / d[..., axis], np.inf))
+    t_wall = np.min(t_walls, axis=0)
+    wall_index = np.argmin(t_walls, axis=0)
+    floor_hit = t_floor <= t_wall
+    p = c + np.where(floor_hit, t_floor, 0.0)[..., None] * d
+    u = (p[..., 0] + ROOM_HALF_SIZE) / TEXEL
+    v = (p[..., 1] + ROOM_HALF_SIZE) / TEXEL
+    floor_rgb = _sample(textures["floor"], u, v)
+    out[floor_hit] = floor_rgb[floor_hit]
+    q = c + np.where(np.isfinite(t_wall), t_wall, 0)[..., None] * d
+    for k in range(4):
+        sel = ~floor_hit & (wall_index == k) & (q[..., 2] <= ROOM_HEIGHT)
+        along = q[..., 1] if k < 2 else q[..., 0]
+        wu = (along + ROOM_HALF_SIZE) / TEXEL
+        wv = (ROOM_HEIGHT - q[..., 2]) / TEXEL
+        rgb = _sample(textures["walls"][k], wu, wv)
+        out[sel] = rgb[sel]
+    return out
+
+
+@dataclass(frozen=True)
+class Occluder:
+    """An axis-aligned box (world m) standing on the floor: min corner, max corner."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+
+    def depth(self, camera: Camera) -> np.ndarray:
+        """Camera-frame depth (H, W) of the box surface per pixel (inf where not seen); slab method."""
+        d = _world_rays(camera)
+        c = camera.position
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t1 = (self.lower - c) / d
+            t2 = (self.upper - c) / d
+        t_near = np.nanmax(np.minimum(t1, t2), axis=-1)
+        t_far = np.nanmin(np.maximum(t1, t2), axis=-1)
+        hit = (t_near <= t_far) & (t_far > 0)
+        return np.where(hit, np.maximum(t_near, 0.0), np.inf)
+
+
+def make_occluder(motion: Motion, camera: Camera) -> Occluder:
+    """A 0.65 m high, 1.6 m wide box between ``camera`` and the middle of the walk, hiding the
+    lower body for about a third of the sequence."""
+    mid = motion.markers[len(motion.markers) // 2, _M["pelvis"]]
+    towards = camera.position[:2] - mid[:2]
+    towards /= np.linalg.norm(towards)
+    centre = mid[:2] + 1.0 * towards
+    side = np.array([-towards[1], towards[0]])
+    corners = np.array([centre + 0.8 * side + 0.15 * towards, centre - 0.8 * side - 0.15 * towards])
+    lower = np.append(corners.min(axis=0), 0.0)
+    upper = np.append(corners.max(axis=0), 0.65)
+    return Occluder(lower, upper)
+
+
+# ---- motion -------------------------------------------------------------------------------
+def _turn_schedule(config: SynthConfig, heading0: float) -> np.ndarray:
+    """Heading (rad) per frame: constant, then a smooth turn of ``turn_deg`` over the middle third."""
+    f = np.arange(config.frames) / max(config.frames - 1, 1)
+    ramp = np.clip((f - 1 / 3) * 3, 0, 1)
+    smooth = 0.5 - 0.5 * np.cos(np.pi * ramp)
+    return heading0 + np.radians(config.turn_deg) * smooth
+
+
+def _start_from_markers(markers: np.ndarray, rate: float, first_frame: int, speed: float,
+                        step_length: float) -> dict:
+    pelvis = markers[:, _M["pelvis"]]
+    ahead = pelvis[min(len(pelvis) - 1, int(0.3 * rate)), :2] - pelvis[0, :2]
+    heading = float(np.arctan2(ahead[1], ahead[0]))
+    feet_z = markers[0, [_M["left_heel"], _M["right_heel"], _M["left_toe"], _M["right_toe"]], 2]
+    stance = "left" if min(feet_z[0], feet_z[2]) <= min(feet_z[1], feet_z[3]) else "right"
+    return {"start": {
+        "frame": int(first_frame),
+        "position": [round(float(pelvis[0, 0]), 4), round(float(pelvis[0, 1]), 4)],
+        "heading": round(heading, 4),
+        "speed": round(float(speed), 4),
+        "step_length": round(float(step_length), 4),
+        "stance_leg": stance,
+    }}
+
+
+def mocap_motion(config: SynthConfig, start_xy: np.ndarray, heading: float) -> Motion:
+    """Motion from a CMU walk: resampled, turned and moved so that it starts at ``start_xy``
+    walking along ``heading``; the body sizes are measured from the markers."""
+    from awalker_tracker.model.mocap import body_from_markers, load_mocap, segments_from_markers
+
+    asf, amc = config.mocap  # type: ignore[misc]
+    trial = load_mocap(asf, amc).resample(config.rate)
+    markers = trial.markers
+    if markers.shape[0] < config.frames:
+        raise InputError(f"{amc}: the mocap walk has {markers.shape[0]} frames at {config.rate:g} Hz, "
+                         f"fewer than --frames {config.frames}")
+    markers = markers[: config.frames]
+    pelvis = markers[:, _M["pelvis"], :2]
+    travel = pelvis[-1] - pelvis[0]
+    angle = heading - np.arctan2(travel[1], travel[0])
+    c, s = np.cos(angle), np.sin(angle)
+    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    centred = markers - np.append(pelvis[0], 0.0)
+    markers = centred @ rotation.T + np.append(start_xy, 0.0)
+    markers[..., 2] -= min(0.0, float(np.percentile(markers[:, 9:, 2].min(axis=1), 5)))  # feet not below floor
+    body = body_from_markers(markers)
+    duration = (len(markers) - 1) / config.rate
+    speed = float(np.linalg.norm(markers[-1, 0, :2] - markers[0, 0, :2]) / duration)
+    # Step length: distance between the feet along the path at their widest, averaged.
+    direction = np.array([np.cos(heading), np.sin(heading)])
+    spread = np.abs((markers[:, _M["left_ankle"], :2] - markers[:, _M["right_ankle"], :2]) @ direction)
+    step = float(np.percentile(spread, 95)) + 0.1  # ankles -> feet contact points, roughly
+    start = _start_from_markers(markers, config.rate, config.background_frames, speed, step)
+    return Motion(markers, segments_from_markers(body, markers), body, None, start)
+
+
+def _speed_schedule(config: SynthConfig) -> np.ndarray:
+    """Target walking speed (m/s) per frame: constant, or with ``speed_change`` a smooth slow-down
+    to 70 % over the middle third."""
+    f = np.arange(config.frames) / max(config.frames - 1, 1)
+    ramp = np.clip((f - 1 / 3) * 3, 0, 1) if config.speed_change else np.zeros_like(f)
+    return config.speed * (1.0 - 0.3 * (0.5 - 0.5 * np.cos(np.pi * ramp)))
+
+
+def walker_motion(config: SynthConfig, start_xy: np.ndarray, heading: float, rng: np.random.Generator) -> Motion:
+    """Motion from the model: the walker dynamics driven along the cyclic gaits of the target
+    speed (gait table stiffness and toe-off impulse, plus a little stiffness noise), and the
+    conditional kinematics prior (eq. 6) for everything else; the heading is scripted.
+
+    The walker is steered along the gait table rather than sampled from the control prior,
+    whose kappa noise (variance 1 per frame) makes most walkers fall within ~1 s on their own.
+    """
+    from awalker_tracker.model import dynamics, gaits
+    from awalker_tracker.model.kinematics import KinematicConfig, initial_kinematics, pose_body, sample_kinematics
+    from awalker_tracker.model.walker import LEFT
+
+    body = BodyDescription.default()
+    params = body.walker_params()
+    dt = 1.0 / config.rate
+    table = gaits.GaitTable.load()
+    speeds = _speed_schedule(config)
+    steps = config.step_length * (speeds / config.speed) ** 0.42  # preferred step length ~ speed^0.42
+    walker = gaits.gait_initial_state(params, config.speed, config.step_length, contact_origin=0.0,
+                                      stance_leg=LEFT, table=table)
+    kin_config = KinematicConfig(dt=dt)
+    headings = _turn_schedule(config, heading)
+    kin = initial_kinematics(kin_config, walker, start_xy, heading, 1, rng, body=body, params=params)
+    since_strike = None
+    markers, origins, rotations, joints = [], [], [], []
+    for f in range(config.frames):
+        if f > 0:
+            _, _, stiffness, impulse = table.lookup(speeds[f], steps[f])
+            stiffness = np.atleast_1d(stiffness + 0.02 * rng.standard_normal())
+            new_walker, events = dynamics.advance(params, walker, stiffness, np.atleast_1d(impulse), dt,
+                                                  time_since_strike=since_strike)
+            since_strike = events.time_since_strike
+            if np.any(events.fallen):
+                raise InputError(f"synth: the walker fell at frame {f} (seed {config.seed}); try another --seed, "
+                                 f"a milder --speed/--step-length or fewer --frames")
+            kin = sample_kinematics(kin_config, body, params, walker, new_walker, events, kin, rng,
+                                    heading=headings[f])
+            walker = new_walker
+        pose = pose_body(body, params, walker, kin)
+        markers.append(pose.markers[0])
+        origins.append(pose.segments.origin[0])
+        rotations.append(pose.segments.rotation[0])
+        joints.append(pose.joint_angles[0])
+    markers_arr = np.array(markers)
+    start = _start_from_markers(markers_arr, config.rate, config.background_frames, config.speed, config.step_length)
+    start["start"]["heading"] = round(float(heading), 4)
+    start["start"]["stance_leg"] = "left"  # the walker starts on its left leg
+    return Motion(markers_arr, BodySegments(np.array(origins), np.array(rotations)), body, np.array(joints), start)
+
+
+# ---- writing ------------------------------------------------------------------------------
+def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
+    """Make the sequence; returns the paths written (bag, calibration, body, start, ground_truth)."""
+    out = Path(config.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    bag_path = out / f"{config.name}.bag"
+    if bag_path.exists():
+        raise InputError(f"{bag_path}: exists already; choose another --out or remove it")
+    rng = np.random.default_rng(config.seed)
+    start_xy = np.array([-2.0, 0.0])
+    heading = 0.0
+    if config.mocap is not None:
+        motion = mocap_motion(config, start_xy, heading)
+    else:
+        motion = walker_motion(config, start_xy, heading, rng)
+    path_centre = 0.5 * (motion.markers[0, 0, :2] + motion.markers[-1, 0, :2])
+    cameras = make_cameras(config.cameras, config.width, config.height, path_centre)
+    textures = make_textures(rng)
+    rooms = [render_room(cam, textures) for cam in cameras]
+    occluders = {}
+    if config.occluder:
+        box = make_occluder(motion, cameras[0])
+        for cam, room in zip(cameras, rooms):
+            depth = box.depth(cam)
+            seen = np.isfinite(depth)
+            wood = np.array([120, 80, 45], np.float32) * (0.85 + 0.3 * _value_noise(rng, depth.shape, 12))[..., None]
+            room[seen] = wood[seen]
+            occluders[cam.name] = depth
+
+    total = config.background_frames + config.frames
+    stamps = FIRST_STAMP_NS + np.round(np.arange(total) * 1e9 / config.rate).astype(np.int64)
+    phase = np.arange(total) / max(total - 1, 1)
+    gain = 1.0 - config.lighting_change * 0.5 * (1 - np.cos(2 * np.pi * phase))
+    tint = np.stack([1 + 0.04 * np.sin(2 * np.pi * phase), np.ones(total), 1 - 0.04 * np.sin(2 * np.pi * phase)], 1)
+
+    save_calibration(cameras, out / "calibration.yaml")
+    (out / "body.yaml").write_text(motion.body.to_yaml_text())
+    start_text = yaml.safe_dump(motion.start, sort_keys=False)
+    (out / "start.yaml").write_text(start_text)
+    csv_lines = ["frame,stamp_ns,marker,x,y,z"]
+    with bagio.SequenceWriter(bag_path, cameras, storage=config.storage, compressed=config.compressed,
+                              image_format=config.image_format) as writer:
+        writer.write_text(bagio.START_DESCRIPTION_TOPIC, int(stamps[0]), start_text)
+        writer.write_text(bagio.BODY_DESCRIPTION_TOPIC, int(stamps[0]), motion.body.to_yaml_text())
+        for frame in range(total):
+            person = frame - config.background_frames
+            images = {}
+            for cam, room in zip(cameras, rooms):
+                base = room
+                if person >= 0:
+                    segments = BodySegments(motion.segments.origin[person][None], motion.segments.rotation[person][None])
+                    result = render(motion.body, segments, cam)
+                    if cam.name in occluders:
+                        hidden = occluders[cam.name] < result.depth
+                        result.labels[hidden] = -1
+                        result.depth[hidden] = np.inf
+                    base = render_rgb(motion.body, segments, cam, np.clip(room, 0, 255).astype(np.uint8),
+                                      result=result).astype(np.float32)
+                lit = base * (gain[frame] * tint[frame])[None, None, :]
+                noisy = lit + rng.normal(0.0, config.noise_sigma, lit.shape).astype(np.float32)
+                images[cam.name] = np.clip(np.round(noisy), 0, 255).astype(np.uint8)
+            writer.write_frame(int(stamps[frame]), images)
+            for name, depth in occluders.items():
+                writer.write_occlusion_mask(int(stamps[frame]), name, np.isfinite(depth))
+            if person >= 0:
+                markers = motion.markers[person]
+                if motion.joint_angles is not None:
+                    writer.write_ground_truth(int(stamps[frame]), markers, list(JOINT_NAMES), motion.joint_angles[person])
+                else:
+                    writer.write_ground_truth(int(stamps[frame]), markers)
+                for name, point in zip(MARKER_NAMES, markers):
+                    csv_lines.append(f"{frame},{stamps[frame]},{name},{point[0]:.6f},{point[1]:.6f},{point[2]:.6f}")
+            if progress and (frame % 20 == 0 or frame == total - 1):
+                print(f"synth: frame {frame + 1}/{total}", file=sys.stderr, flush=True)
+    (out / "ground_truth.csv").write_text("\n".join(csv_lines) + "\n")
+    return {"bag": bag_path, "calibration": out / "calibration.yaml", "body": out / "body.yaml",
+            "start": out / "start.yaml", "ground_truth": out / "ground_truth.csv"}
