@@ -76,3 +76,28 @@ def test_adaptation_moves_background_but_not_foreground_pixels():
     adapted = model.adapt(brighter, 0.5, foreground=fg)
     assert np.allclose(adapted.mean[:10], model.mean[:10])
     assert np.median(adapted.mean[10:, :, 0] - model.mean[10:, :, 0]) == pytest.approx(1.5, abs=0.3)
+
+
+def test_extractor_learns_from_the_median_when_no_background_frames_are_known():
+    from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
+    from vision_scene import render_frames, walking_poses
+
+    rng = np.random.default_rng(4)
+    clean = background_image(CAM)
+    frames = []
+    for f in range(8):                        # a red block crossing the view, then the walker
+        image = noisy(clean, rng)
+        image[40:200, 10 + 35 * f : 40 + 35 * f] = (200, 40, 40)
+        frames.append(image)
+    walker, _ = render_frames(CAM, walking_poses(1), clean)
+    extractor = FeatureExtractor(FeatureConfig(downsample=2, median_frames=8))
+    outputs = [extractor.process(f) for f in frames]
+    assert not any(o.llr.any() for o in outputs[:7])          # nothing known before the 8th frame
+    assert extractor.ready and outputs[7].llr.any()
+    assert np.percentile(np.abs(extractor.background.mean[..., :3] - measurements(clean, 2)[..., :3]), 99) < 3.0
+    # Occlusion mask: zero ratios under it, its flow cells invalid.
+    mask = np.zeros((CAM.height, CAM.width), np.uint8)
+    mask[:, : CAM.width // 2] = 255
+    out = extractor.process(walker[0], occlusion_mask=mask)
+    assert not out.llr[:, :, : CAM.width // 4].any() and out.llr[:, :, CAM.width // 4 :].any()
+    assert not out.flow.valid[:, : out.flow.shape[1] // 2].any() and out.flow.valid[:, out.flow.shape[1] // 2 + 1 :].any()

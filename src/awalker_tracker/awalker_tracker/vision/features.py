@@ -73,7 +73,7 @@ class FrameFeatures:
         return int(self.llr.shape[1]), int(self.llr.shape[2])
 
 
-def _map_mask(mask: np.ndarray | None, downsample: int, shape: tuple[int, int]) -> np.ndarray | None:
+def occlusion_map_mask(mask: np.ndarray | None, downsample: int, shape: tuple[int, int]) -> np.ndarray | None:
     """A full-resolution occlusion mask -> (h, w) bool: any occluded pixel in a block occludes it."""
     if mask is None:
         return None
@@ -84,7 +84,8 @@ def _map_mask(mask: np.ndarray | None, downsample: int, shape: tuple[int, int]) 
     return m[: h * downsample, : w * downsample].reshape(h, downsample, w, downsample).any(axis=(1, 3))
 
 
-def _cell_mask(mask: np.ndarray | None, rows: int, cols: int, size: int) -> np.ndarray | None:
+def occlusion_cell_mask(mask: np.ndarray | None, rows: int, cols: int, size: int) -> np.ndarray | None:
+    """A full-resolution occlusion mask -> (rows, cols) bool: any occluded pixel in a flow cell occludes it."""
     if mask is None:
         return None
     m = np.asarray(mask) > 0
@@ -154,7 +155,7 @@ class FeatureExtractor:
         height, width = image.shape[:2]
         grey = to_grey(image)
         m = measurements(image, cfg.downsample)
-        map_mask = _map_mask(occlusion_mask, cfg.downsample, m.shape[:2])
+        map_mask = occlusion_map_mask(occlusion_mask, cfg.downsample, m.shape[:2])
         if self.background is not None and self.background.shape != m.shape[:2]:
             raise ValueError(f"frame size {width}x{height} differs from the first frames'")
         # ---- model learning ----------------------------------------------------------------
@@ -192,7 +193,7 @@ class FeatureExtractor:
             flow = FlowGrid.empty(height, width, cfg.flow.cell_size)
         else:
             flow = self._flow.estimate(self._prev_grey, grey)
-        cell_mask = _cell_mask(occlusion_mask, *flow.shape, cfg.flow.cell_size)
+        cell_mask = occlusion_cell_mask(occlusion_mask, *flow.shape, cfg.flow.cell_size)
         if cell_mask is not None:
             flow = FlowGrid(flow.centers, flow.flow, flow.covariance, flow.valid & ~cell_mask, flow.cell_size)
         self._prev_grey = grey

@@ -39,7 +39,7 @@ import numpy as np
 
 from awalker_tracker.model.body import BodySegments, PartShape
 from awalker_tracker.vision.camera import Camera
-from awalker_tracker.vision.features import FrameFeatures, _cell_mask, _map_mask
+from awalker_tracker.vision.features import FrameFeatures, occlusion_cell_mask, occlusion_map_mask
 from awalker_tracker.vision.flow import STUDENT_T_DOF
 
 
@@ -197,7 +197,7 @@ def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, 
     scale = area / expected[:, None]
     # ---- appearance: sample points (J, A, P, N) --------------------------------------------
     llr = features.llr
-    mask_map = _map_mask(occlusion_mask, features.downsample, features.map_shape)
+    mask_map = occlusion_map_mask(occlusion_mask, features.downsample, features.map_shape)
     if mask_map is not None:
         llr = np.where(mask_map[None], np.float32(0), llr)
     h, w = features.map_shape
@@ -234,7 +234,7 @@ def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, 
     # ---- flow at the row centres (A, P, N) ------------------------------------------------
     grid = features.flow
     valid = grid.valid
-    cell_mask = _cell_mask(occlusion_mask, *grid.shape, grid.cell_size)
+    cell_mask = occlusion_cell_mask(occlusion_mask, *grid.shape, grid.cell_size)
     if cell_mask is not None:
         valid = valid & ~cell_mask
     if config.flow_weight > 0 and valid.any():
