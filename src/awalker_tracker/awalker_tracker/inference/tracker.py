@@ -185,8 +185,7 @@ class TrackerModel:
     # -- SMC protocol ---------------------------------------------------------------------
     def initial(self, n: int, rng: np.random.Generator) -> TrackerStates:
         s, sp = self.start, self.config.spread
-        speed = s.speed * np.exp(sp.speed_fraction * rng.standard_normal(n))
-        step = s.step_length * np.exp(sp.step_length_fraction * rng.standard_normal(n))
+        speed, step = self._sample_gaits(n, rng)
         walker = self._gaits.gait_initial_state(self.params, speed, step, contact_origin=0.0,
                                                stance_leg=s.stance_leg, table=self.gaits)
         if len(walker) == 1 and n > 1:
@@ -202,6 +201,39 @@ class TrackerModel:
             joint_spread=sp.joint_rad)
         pose = self._kin.pose_body(self.body, self.params, walker, kin)
         return TrackerStates(walker, control, kin, pose, speed.copy(), np.zeros(n, bool))
+
+    def _gait_known(self, speed: np.ndarray, step: np.ndarray) -> np.ndarray:
+        """True where the gait table's bilinear lookup has converged corners with weight (as lookup needs)."""
+        t = self.gaits
+        v = np.clip(speed, t.speeds[0], t.speeds[-1])
+        s = np.clip(step, t.step_lengths[0], t.step_lengths[-1])
+        i = np.clip(np.searchsorted(t.speeds, v, side="right") - 1, 0, t.speeds.size - 2)
+        j = np.clip(np.searchsorted(t.step_lengths, s, side="right") - 1, 0, t.step_lengths.size - 2)
+        tv = (v - t.speeds[i]) / (t.speeds[i + 1] - t.speeds[i])
+        ts = (s - t.step_lengths[j]) / (t.step_lengths[j + 1] - t.step_lengths[j])
+        weight = (t.converged[i, j] * (1 - tv) * (1 - ts) + t.converged[i + 1, j] * tv * (1 - ts)
+                  + t.converged[i, j + 1] * (1 - tv) * ts + t.converged[i + 1, j + 1] * tv * ts)
+        return weight > 1e-6
+
+    def _sample_gaits(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Speeds and step lengths around the start's, redrawn where the gait table has no gait."""
+        s, sp = self.start, self.config.spread
+        if not self._gait_known(np.array([s.speed]), np.array([s.step_length]))[0]:
+            raise InputError(f"start description: no cyclic gait for speed {s.speed} m/s and step length "
+                             f"{s.step_length} m in the gait table; give values inside "
+                             f"{self.gaits.speeds[0]:.2f}-{self.gaits.speeds[-1]:.2f} m/s, "
+                             f"{self.gaits.step_lengths[0]:.2f}-{self.gaits.step_lengths[-1]:.2f} m")
+        speed, step = np.full(n, s.speed), np.full(n, s.step_length)
+        todo = np.ones(n, bool)
+        for _ in range(20):
+            k = int(todo.sum())
+            speed[todo] = s.speed * np.exp(sp.speed_fraction * rng.standard_normal(k))
+            step[todo] = s.step_length * np.exp(sp.step_length_fraction * rng.standard_normal(k))
+            todo &= ~self._gait_known(speed, step)
+            if not todo.any():
+                break
+        speed[todo], step[todo] = s.speed, s.step_length
+        return speed, step
 
     def _random_phase(self, walker: WalkerState, control: Any, speed: np.ndarray, step: np.ndarray,
                       rng: np.random.Generator) -> tuple[WalkerState, Any]:

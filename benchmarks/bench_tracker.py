@@ -1,0 +1,93 @@
+"""Tracker speed: frames/s of the particle filter with look-ahead (tau = 3) at 500/1000/5000
+particles, (a) excluding the image likelihood (a 3D-marker likelihood stands in, as the paper's
+"30 frames per second excluding likelihood computations") and (b) with the full image likelihood
+on 1 and 3 cameras (synthetic rendered frames, features from vision.features). Also reports
+where the time goes (transition = walker dynamics + control, kinematics, pose, likelihood,
+filter bookkeeping). Prints JSON.
+
+    .venv/bin/python benchmarks/bench_tracker.py [--frames 20] [--particles 500 1000 5000] [--cameras 1 3]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test" / "inference"))
+
+from awalker_tracker.inference.smc import SMCConfig  # noqa: E402
+from awalker_tracker.inference.tracker import (  # noqa: E402
+    StartDescription, Tracker, TrackerConfig, TrackerModel, marker_likelihood)
+from awalker_tracker.model.walker import LEFT  # noqa: E402
+
+
+class Timed:
+    """Wraps a callable and accumulates its wall time under ``name``."""
+
+    def __init__(self, totals: dict[str, float], name: str, fn):
+        self.totals, self.name, self.fn = totals, name, fn
+
+    def __call__(self, *args, **kwargs):
+        started = time.perf_counter()
+        try:
+            return self.fn(*args, **kwargs)
+        finally:
+            self.totals[self.name] += time.perf_counter() - started
+
+
+def instrument(model: TrackerModel, totals: dict[str, float]) -> None:
+    """Time the model's stages by wrapping the module functions it calls."""
+    model._control = type("C", (), {"sample_transition": staticmethod(
+        Timed(totals, "dynamics+control", model._control.sample_transition)),
+        "initial_control": staticmethod(model._control.initial_control)})
+    kin = model._kin
+    model._kin = type("K", (), {
+        "sample_kinematics": staticmethod(Timed(totals, "kinematics", kin.sample_kinematics)),
+        "pose_body": staticmethod(Timed(totals, "pose_body", kin.pose_body)),
+        "initial_kinematics": staticmethod(kin.initial_kinematics)})
+    model.likelihood = Timed(totals, "likelihood", model.likelihood)
+
+
+def run_filter(body, start, likelihood, observations, n: int, seed: int = 0) -> dict:
+    totals: dict[str, float] = defaultdict(float)
+    model = TrackerModel(body, start, likelihood, TrackerConfig(smc=SMCConfig(num_particles=n, seed=seed)))
+    instrument(model, totals)
+    tracker = Tracker(model)
+    started = time.perf_counter()
+    count = 0
+    for k, obs in enumerate(observations):
+        count += len(tracker.push(k, 1 + k, obs))
+    count += len(tracker.finish())
+    elapsed = time.perf_counter() - started
+    frames = len(observations)
+    stages = {k: round(1000 * v / frames, 2) for k, v in totals.items()}
+    stages["filter+summaries"] = round(1000 * elapsed / frames - sum(stages.values()), 2)
+    return {"particles": n, "frames": frames, "frames_per_s": round(frames / elapsed, 2),
+            "ms_per_frame": round(1000 * elapsed / frames, 2), "ms_per_frame_by_stage": stages,
+            "resamples": tracker.filter.num_resamples}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--frames", type=int, default=20)
+    parser.add_argument("--particles", type=int, nargs="+", default=[500, 1000, 5000])
+    args = parser.parse_args()
+    from test_tracker_model import simulate_walk
+
+    body, markers, _, _ = simulate_walk(args.frames, 1.3, 0.7, 0.0, seed=3)
+    start = StartDescription(0, tuple(markers[0, 0, :2]), 0.0, 1.3, 0.7, LEFT)
+    obs = markers + 0.01 * np.random.default_rng(0).standard_normal(markers.shape)
+    results = {"lookahead": 3, "excluding_image_likelihood": []}
+    for n in args.particles:
+        results["excluding_image_likelihood"].append(run_filter(body, start, marker_likelihood(0.03), obs, n))
+        print(f"N={n}: {results['excluding_image_likelihood'][-1]['frames_per_s']} frames/s", file=sys.stderr)
+    print(json.dumps(results, indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,307 @@
+"""`awalker track` in one process: replay (lockstep) -> features (one node per camera) ->
+tracker -> pose publisher, the same node classes a user starts separately, on one executor.
+
+Writes into the output directory:
+- ``result.bag``: every topic the pipeline published (features, posterior, joint states, markers,
+  acks), recorded from the topics themselves;
+- ``poses.csv`` (MAP trajectory: lineage of the final best particle; ``frame,stamp_ns,marker,x,y,z``)
+  and ``summary.csv`` (per frame: posterior speed, stance-left probability, N_eff, resampling,
+  heel strike, MAP stance leg);
+- ``calibration.yaml``, ``start.yaml``, ``body.yaml`` (what was used) and ``run.yaml`` (input,
+  settings, timings);
+- ``overlay/frame_XXXXX.png`` and ``overlay.mp4``: the MAP body drawn on the first camera's frames.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from awalker_tracker.errors import InputError
+from awalker_tracker.inference.tracker import StartDescription
+from awalker_tracker.model.body import BodyDescription
+
+from awalker_tools import evaluation
+
+START_FILE, BODY_FILE, CALIBRATION_FILE, RUN_FILE = "start.yaml", "body.yaml", "calibration.yaml", "run.yaml"
+PROGRESS_PERIOD_S = 2.0
+
+
+@dataclass(frozen=True)
+class TrackOptions:
+    """Settings of one `awalker track` run."""
+
+    bag: Path
+    out: Path
+    start: Path | None = None
+    body: Path | None = None
+    particles: int = 5000
+    lookahead: int = 3
+    trust: float = 0.9
+    seed: int = 0
+    overlays: bool = True
+    storage: str = "mcap"
+    quiet: bool = False
+
+
+@dataclass
+class TrackResult:
+    frames: int = 0
+    summaries: int = 0
+    seconds: float = 0.0
+    seconds_in_filter: float = 0.0
+    sync_issues: list[str] = field(default_factory=list)
+    recorded: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def frames_per_second(self) -> float:
+        return self.summaries / self.seconds if self.seconds > 0 else 0.0
+
+
+def resolve_descriptions(bag: Path, reader: Any, start_path: Path | None, body_path: Path | None
+                         ) -> tuple[StartDescription, str, BodyDescription, str]:
+    """Start and body descriptions: the files given, else the bag's topics, else files beside the bag."""
+    from awalker_tools.bagio import BODY_DESCRIPTION_TOPIC, START_DESCRIPTION_TOPIC
+
+    beside = [bag.parent, bag] if bag.is_dir() else [bag.parent]
+    if start_path is not None:
+        start, start_src = StartDescription.from_yaml(start_path), str(start_path)
+    elif (text := reader.text(START_DESCRIPTION_TOPIC)) is not None:
+        start, start_src = StartDescription.from_yaml_text(text, f"{bag}:{START_DESCRIPTION_TOPIC}"), START_DESCRIPTION_TOPIC
+    elif found := [d / START_FILE for d in beside if (d / START_FILE).is_file()]:
+        start, start_src = StartDescription.from_yaml(found[0]), str(found[0])
+    else:
+        raise InputError(
+            f"{bag}: no start description (no {START_DESCRIPTION_TOPIC} topic, no {START_FILE} beside the bag); "
+            "pass --start START.yaml with 'start: {frame, position: [x, y], heading, speed, step_length, "
+            "stance_leg: left|right}' (metres, radians, m/s)")
+    if body_path is not None:
+        body, body_src = BodyDescription.from_yaml(body_path), str(body_path)
+    elif (text := reader.text(BODY_DESCRIPTION_TOPIC)) is not None:
+        body, body_src = BodyDescription.from_yaml_text(text, f"{bag}:{BODY_DESCRIPTION_TOPIC}"), BODY_DESCRIPTION_TOPIC
+    elif found := [d / BODY_FILE for d in beside if (d / BODY_FILE).is_file()]:
+        body, body_src = BodyDescription.from_yaml(found[0]), str(found[0])
+    else:
+        raise InputError(f"{bag}: no body description (no {BODY_DESCRIPTION_TOPIC} topic, no {BODY_FILE} beside "
+                         "the bag); pass --body BODY.yaml with 'body: {upper_leg_length, lower_leg_length, ...}' (m)")
+    return start, start_src, body, body_src
+
+
+class Recorder:
+    """Records topics as raw CDR into a rosbag2 bag (rosbags Writer) from rclpy subscriptions."""
+
+    def __init__(self, node: Any, path: Path, topics: dict[str, tuple[type, str]], storage: str = "mcap") -> None:
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        from awalker_tools.typestore import typestore
+
+        plugin = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}[storage]
+        self.writer = Writer(path, version=9, storage_plugin=plugin)
+        self.writer.open()
+        self.counts: dict[str, int] = {t: 0 for t in topics}
+        self._connections = {}
+        qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+        for topic, (cls, msgtype) in topics.items():
+            self._connections[topic] = self.writer.add_connection(topic, msgtype, typestore=typestore())
+            node.create_subscription(cls, topic, lambda raw, t=topic: self._on(t, raw), qos, raw=True)
+
+    def _on(self, topic: str, raw: bytes) -> None:
+        # log time = receive time, as `ros2 bag record` does; the messages carry the image stamps
+        self.writer.write(self._connections[topic], time.time_ns(), raw)
+        self.counts[topic] += 1
+
+    def close(self) -> None:
+        self.writer.close()
+
+
+def _progress(options: TrackOptions, text: str) -> None:
+    if not options.quiet:
+        print(text, file=sys.stderr, flush=True)
+
+
+def run_tracking(options: TrackOptions) -> TrackResult:
+    """Run the whole pipeline on ``options.bag``; write the outputs into ``options.out``."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.signals import SignalHandlerOptions
+
+    from awalker_tracker.nodes.features import FeatureNode
+    from awalker_tracker.nodes.pose_publisher import PosePublisherNode
+    from awalker_tracker.nodes.tracker import TrackerNode
+    from awalker_tracker.vision.camera import save_calibration
+
+    from awalker_tools.bagio import SequenceReader
+    from awalker_tools.replay import ReplayConfig, Replayer
+
+    bag, out = Path(options.bag), Path(options.out)
+    if not bag.exists():
+        raise InputError(f"{bag}: no such bag (expected a rosbag2 directory, .mcap or .db3)")
+    with SequenceReader(bag) as reader:
+        cameras = reader.cameras
+        num_frames = len(reader.frame_stamps)
+        start, start_src, body, body_src = resolve_descriptions(bag, reader, options.start, options.body)
+    if start.frame >= num_frames:
+        raise InputError(f"start description ({start_src}): start frame {start.frame} but {bag} has {num_frames} frames")
+    out.mkdir(parents=True, exist_ok=True)
+    result_bag = out / "result.bag"
+    if result_bag.exists():
+        raise InputError(f"{result_bag}: exists already; choose a new --out directory or remove it")
+    save_calibration(cameras, out / CALIBRATION_FILE)
+    (out / START_FILE).write_text(start.to_yaml_text())
+    (out / BODY_FILE).write_text(body.to_yaml_text())
+    names = [c.name for c in cameras]
+    _progress(options, f"awalker track: {bag} ({num_frames} frames, cameras {', '.join(names)}), start frame "
+                       f"{start.frame} from {start_src}, body from {body_src}, {options.particles} particles")
+
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    context = Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    nodes: list[Any] = []
+    recorder = None
+    result = TrackResult()
+    started = time.monotonic()
+    try:
+        driver = Node("awalker_track_replay", context=context)
+        nodes.append(driver)
+        features = [FeatureNode(context=context, parameter_overrides=[Parameter("camera_name", value=c)])
+                    for c in names]
+        nodes += features
+        tracker = TrackerNode(context=context, parameter_overrides=[
+            Parameter("cameras", value=names), Parameter("calibration", value=str(out / CALIBRATION_FILE)),
+            Parameter("start_description", value=str(out / START_FILE)),
+            Parameter("body_description", value=str(out / BODY_FILE)),
+            Parameter("num_particles", value=int(options.particles)), Parameter("lookahead", value=int(options.lookahead)),
+            Parameter("trust", value=float(options.trust)), Parameter("seed", value=int(options.seed)),
+            Parameter("idle_flush_s", value=1.0e9)])
+        tracker.keep_summaries = True
+        nodes.append(tracker)
+        poser = PosePublisherNode(context=context, parameter_overrides=[
+            Parameter("body_description", value=str(out / BODY_FILE))])
+        nodes.append(poser)
+        from awalker_msgs.msg import ImageFeatures, PosteriorSummary
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Header
+        from visualization_msgs.msg import MarkerArray
+
+        topics: dict[str, tuple[type, str]] = {
+            "/awalker/posterior": (PosteriorSummary, "awalker_msgs/msg/PosteriorSummary"),
+            "/awalker/joint_states": (JointState, "sensor_msgs/msg/JointState"),
+            f"/humans/bodies/{poser.body_id}/joint_states": (JointState, "sensor_msgs/msg/JointState"),
+            "/awalker/markers": (MarkerArray, "visualization_msgs/msg/MarkerArray"),
+            "/awalker/ack": (Header, "std_msgs/msg/Header"),
+        }
+        topics.update({f"/{c}/features": (ImageFeatures, "awalker_msgs/msg/ImageFeatures") for c in names})
+        recorder_node = Node("awalker_track_recorder", context=context)
+        nodes.append(recorder_node)
+        recorder = Recorder(recorder_node, result_bag, topics, options.storage)
+        executor = SingleThreadedExecutor(context=context)
+        for n in nodes:
+            executor.add_node(n)
+        replayer = Replayer(driver, bag, ReplayConfig(lockstep=True, wait_for_subscribers=10.0))
+        last = time.monotonic()
+        try:
+            while replayer.step():
+                executor.spin_once(timeout_sec=replayer.next_wait())
+                if time.monotonic() - last > PROGRESS_PERIOD_S:
+                    last = time.monotonic()
+                    done = tracker.stats.frames_received
+                    rate = tracker.stats.frames_tracked / max(tracker.stats.seconds_in_filter, 1e-9)
+                    _progress(options, f"  frame {done}/{num_frames}, {tracker.stats.summaries} posteriors, "
+                                       f"filter {rate:.1f} frames/s")
+        finally:
+            replayer.close()
+        if replayer.summary.stopped:
+            raise InputError(f"{bag}: replay stopped: {replayer.summary.stopped}")
+        tracker.flush()
+        # let the pose publisher and the recorder receive everything published so far
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline and (
+                recorder.counts["/awalker/posterior"] < tracker.stats.summaries
+                or recorder.counts["/awalker/joint_states"] < tracker.stats.summaries
+                or recorder.counts["/awalker/markers"] < tracker.stats.summaries):
+            executor.spin_once(timeout_sec=0.05)
+        executor.shutdown()
+        result.frames = tracker.stats.frames_received
+        result.summaries = tracker.stats.summaries
+        result.seconds_in_filter = tracker.stats.seconds_in_filter
+        result.sync_issues = list(tracker.stats.sync_issues)
+        result.recorded = dict(recorder.counts)
+        if tracker.tracker is None or not tracker.summaries:
+            raise InputError(f"{bag}: no frame was tracked (frames received: {result.frames}; "
+                             f"start frame {start.frame}); check that the bag has images for every camera")
+        write_outputs(out, tracker.tracker.map_trajectory(), tracker.summaries)
+    finally:
+        if recorder is not None:
+            recorder.close()
+        for n in nodes:
+            n.destroy_node()
+        context.try_shutdown()
+    result.seconds = time.monotonic() - started
+    if options.overlays:
+        write_overlays(bag, out, cameras[0], body)
+    (out / RUN_FILE).write_text(yaml.safe_dump({
+        "input": str(bag.resolve()), "start_source": start_src, "body_source": body_src,
+        "particles": options.particles, "lookahead": options.lookahead, "trust": options.trust, "seed": options.seed,
+        "frames": result.frames, "posteriors": result.summaries, "seconds": round(result.seconds, 3),
+        "seconds_in_filter": round(result.seconds_in_filter, 3), "sync_issues": result.sync_issues,
+        "recorded": result.recorded}, sort_keys=False))
+    _progress(options, f"awalker track: {result.summaries} frames tracked in {result.seconds:.1f} s "
+                       f"({result.frames_per_second:.2f} frames/s end to end, filter "
+                       f"{result.summaries / max(result.seconds_in_filter, 1e-9):.2f} frames/s); outputs in {out}")
+    return result
+
+
+def write_outputs(out: Path, trajectory: Any, summaries: list[Any]) -> None:
+    """poses.csv (MAP trajectory) and summary.csv (per-frame posterior summaries)."""
+    track = evaluation.PoseTrack(trajectory.frames, trajectory.stamps_ns, tuple(trajectory.marker_names),
+                                 trajectory.markers)
+    evaluation.write_poses_csv(out / "poses.csv", track)
+    map_leg = dict(zip(trajectory.stamps_ns.tolist(), trajectory.stance_leg.tolist()))
+    rows = [{"frame": s.frame_index, "stamp_ns": s.stamp_ns, "speed": f"{s.speed:.4f}",
+             "speed_std": f"{s.speed_std:.4f}", "stance_left_probability": f"{s.stance_left_probability:.4f}",
+             "effective_sample_size": f"{s.effective_sample_size:.1f}", "resampled": int(s.resampled),
+             "heel_strike": s.heel_strike_foot,
+             "stance_leg": "left" if map_leg.get(s.stamp_ns, s.map_stance_leg) == 0 else "right"}
+            for s in summaries]
+    evaluation.write_summary_csv(out / "summary.csv", rows)
+
+
+def write_overlays(bag: Path, out: Path, camera: Any, body: BodyDescription, fps: float | None = None) -> Path | None:
+    """Draw the MAP markers on the first camera's frames: overlay/frame_*.png and overlay.mp4."""
+    import cv2
+
+    from awalker_tools.bagio import SequenceReader
+    from awalker_tools.overlay import draw_body
+
+    poses = evaluation.read_poses_csv(out / "poses.csv")
+    by_stamp = {int(s): i for i, s in enumerate(poses.stamps_ns)}
+    folder = out / "overlay"
+    folder.mkdir(exist_ok=True)
+    video = None
+    path = out / "overlay.mp4"
+    with SequenceReader(bag) as reader:
+        stamps = reader.frame_stamps
+        if fps is None:
+            fps = 1e9 / float(np.median(np.diff(stamps))) if len(stamps) > 1 else 30.0
+        for stamp, images in reader.frames():
+            image = images[camera.name]
+            if int(stamp) in by_stamp:
+                image = draw_body(image, poses.markers[by_stamp[int(stamp)]], camera)
+                cv2.imwrite(str(folder / f"frame_{by_stamp[int(stamp)]:05d}.png"), image[..., ::-1])
+            if video is None:
+                video = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps,
+                                        (image.shape[1], image.shape[0]))
+            video.write(np.ascontiguousarray(image[..., ::-1]))
+    if video is not None:
+        video.release()
+    return path

@@ -1,0 +1,280 @@
+"""Tracker node: per-camera image features -> particle filter -> posterior summaries.
+
+Subscribes ``/<cam>/features`` (awalker_msgs/ImageFeatures) of every camera in the ``cameras``
+parameter, pairs them by stamp (``inference.sync``), steps the filter and publishes
+``/awalker/posterior`` (awalker_msgs/PosteriorSummary, stamped with the image stamp). Each
+frame is acknowledged on ``/awalker/ack`` (std_msgs/Header with its stamp) once the filter has
+taken it, so a lockstep replay can send the next. Because of the look-ahead, the summary of
+frame t is published when frame t + tau arrives; after ``idle_flush_s`` without new frames
+(or on ``flush()``) the remaining frames are completed.
+
+Cameras come from the ``calibration`` YAML or from ``/<cam>/camera_info`` + ``/<cam>/camera_pose``
+(as the replay publishes them); start and body descriptions from YAML files or the latched
+``/awalker/start_description`` and ``/awalker/body_description`` topics (body: default if none).
+Frames that arrive before everything is known are kept and processed as soon as it is.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import rclpy
+from awalker_msgs.msg import ImageFeatures, PosteriorSummary
+from geometry_msgs.msg import PoseStamped
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import CameraInfo
+from std_msgs.msg import Header, String
+
+from awalker_tracker.errors import InputError
+from awalker_tracker.inference.posterior import PosteriorSummary as CoreSummary
+from awalker_tracker.inference.smc import SMCConfig
+from awalker_tracker.inference.sync import StampSynchronizer
+from awalker_tracker.inference.tracker import (
+    ImageObservation, StartDescription, Tracker, TrackerConfig, TrackerModel, image_likelihood)
+from awalker_tracker.model.body import BodyDescription
+from awalker_tracker.nodes.convert import camera_from_msgs, header, stamp_to_ns, summary_to_msg
+
+START_TOPIC = "/awalker/start_description"
+BODY_TOPIC = "/awalker/body_description"
+
+
+@dataclass
+class _Pending:
+    stamp_ns: int
+    frame_index: int
+    messages: tuple[Any, ...]
+
+
+@dataclass
+class TrackerNodeStats:
+    frames_received: int = 0
+    frames_tracked: int = 0
+    summaries: int = 0
+    sync_issues: list[str] = field(default_factory=list)
+    seconds_in_filter: float = 0.0
+
+
+class TrackerNode(Node):
+    """Runs the physics-based particle filter on synchronised per-camera features."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("awalker_tracker", **kwargs)
+
+        def declare(name: str, value: Any, text: str) -> Any:
+            return self.declare_parameter(name, value, ParameterDescriptor(description=text)).value
+
+        cameras = self.declare_parameter("cameras", Parameter.Type.STRING_ARRAY,
+                                         ParameterDescriptor(description="camera names: /<cam>/features")).value
+        self.calibration_path = declare("calibration", "", "calibration YAML; empty: camera_info + camera_pose topics")
+        start_path = declare("start_description", "", "start YAML; empty: /awalker/start_description topic")
+        body_path = declare("body_description", "", "body YAML; empty: /awalker/body_description topic or default")
+        n = declare("num_particles", 5000, "number of particles N")
+        tau = declare("lookahead", 3, "look-ahead tau (frames)")
+        gamma = declare("trust", 0.9, "gamma: trust in look-ahead weights when resampling")
+        fraction = declare("resample_fraction", 0.1, "resample when N_eff < fraction * N")
+        scheme = declare("resampling", "systematic", "systematic | stratified | multinomial")
+        seed = declare("seed", 0, "random seed")
+        self.frame_rate = float(declare("frame_rate", 0.0, "frames/s; 0: from the first two frame stamps"))
+        self.world_frame = declare("world_frame", "world", "world frame id of the outputs")
+        ack_topic = declare("ack_topic", "/awalker/ack", "std_msgs/Header acks of processed frames")
+        self.idle_flush_s = float(declare("idle_flush_s", 2.0, "complete pending frames after this idle time (s)"))
+        queue = declare("sync_queue", 30, "incomplete frames kept while pairing cameras")
+        if not cameras:
+            raise InputError("awalker_tracker: parameter 'cameras' is required (e.g. -p cameras:=[cam0])")
+        self.camera_names = tuple(cameras)
+        try:
+            self.smc_config = SMCConfig(num_particles=int(n), lookahead=int(tau), trust=float(gamma),
+                                        resample_fraction=float(fraction), resampling=str(scheme), seed=int(seed))
+        except ValueError as exc:
+            raise InputError(f"awalker_tracker: {exc}") from None
+        self.sync = StampSynchronizer(self.camera_names, max_pending=int(queue))
+        self.stats = TrackerNodeStats()
+        self.tracker: Tracker | None = None
+        self.summaries: list[CoreSummary] = []
+        self.keep_summaries = False
+        self._pending: list[_Pending] = []
+        self._first_stamps: list[int] = []
+        self._last_frame_time = time.monotonic()
+        self._dirty = False   # frames pushed since the last flush
+
+        self.start = StartDescription.from_yaml(start_path) if start_path else None
+        self.body = BodyDescription.from_yaml(body_path) if body_path else None
+        self._body_from_file = bool(body_path)
+        self.cameras: dict[str, Any] = {}
+        if self.calibration_path:
+            from awalker_tracker.vision.camera import load_calibration
+
+            by_name = {c.name: c for c in load_calibration(self.calibration_path)}
+            missing = [c for c in self.camera_names if c not in by_name]
+            if missing:
+                raise InputError(f"{self.calibration_path}: no camera(s) {', '.join(missing)} "
+                                 f"(has {', '.join(by_name)})")
+            self.cameras = {c: by_name[c] for c in self.camera_names}
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self._infos: dict[str, CameraInfo] = {}
+        self._poses: dict[str, PoseStamped] = {}
+        if not self.cameras:
+            for cam in self.camera_names:
+                self.create_subscription(CameraInfo, f"/{cam}/camera_info",
+                                         lambda m, c=cam: self._on_camera_info(c, m), reliable)
+                self.create_subscription(PoseStamped, f"/{cam}/camera_pose",
+                                         lambda m, c=cam: self._on_camera_pose(c, m), latched)
+        if self.start is None:
+            self.create_subscription(String, START_TOPIC, self._on_start, latched)
+        if self.body is None:
+            self.create_subscription(String, BODY_TOPIC, self._on_body, latched)
+        self.posterior_pub = self.create_publisher(PosteriorSummary, "/awalker/posterior", reliable)
+        self.ack_pub = self.create_publisher(Header, ack_topic, QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+        for cam in self.camera_names:
+            self.create_subscription(ImageFeatures, f"/{cam}/features",
+                                     lambda m, c=cam: self._on_features(c, m), QoSProfile(depth=100))
+        self.create_timer(0.2, self._on_timer)
+
+    # -- inputs ----------------------------------------------------------------------------
+    def _on_camera_info(self, cam: str, msg: CameraInfo) -> None:
+        self._infos[cam] = msg
+        self._update_cameras()
+
+    def _on_camera_pose(self, cam: str, msg: PoseStamped) -> None:
+        self._poses[cam] = msg
+        self._update_cameras()
+
+    def _update_cameras(self) -> None:
+        if len(self.cameras) == len(self.camera_names):
+            return
+        for cam in self.camera_names:
+            if cam in self._infos and cam in self._poses and cam not in self.cameras:
+                self.cameras[cam] = camera_from_msgs(cam, self._infos[cam], self._poses[cam])
+        self._process_pending()
+
+    def _on_start(self, msg: String) -> None:
+        if self.start is None:
+            try:
+                self.start = StartDescription.from_yaml_text(msg.data, START_TOPIC)
+            except InputError as exc:
+                self.get_logger().error(str(exc))
+                return
+            self._process_pending()
+
+    def _on_body(self, msg: String) -> None:
+        if not self._body_from_file:
+            try:
+                self.body = BodyDescription.from_yaml_text(msg.data, BODY_TOPIC)
+            except InputError as exc:
+                self.get_logger().error(f"{exc}; using the default body")
+                self.body = BodyDescription.default()
+            self._process_pending()
+
+    def _on_features(self, cam: str, msg: ImageFeatures) -> None:
+        from awalker_tracker.nodes.features import features_from_msg
+
+        stamp = stamp_to_ns(msg.header.stamp)
+        try:
+            item = features_from_msg(msg)
+        except (InputError, ValueError) as exc:
+            self.get_logger().error(f"/{cam}/features at {stamp} ns: {exc}; frame skipped")
+            self._ack(stamp)
+            return
+        frames, issues = self.sync.add(cam, stamp, item)
+        for issue in issues:
+            self.stats.sync_issues.append(issue.message)
+            self.get_logger().warning(issue.message)
+            if issue.kind in ("incomplete", "overflow"):
+                self._ack(issue.stamp_ns)
+        for frame in frames:
+            self._pending.append(_Pending(frame.stamp_ns, self.stats.frames_received, frame.items))
+            self.stats.frames_received += 1
+            if len(self._first_stamps) < 2:
+                self._first_stamps.append(frame.stamp_ns)
+            self._process_pending()
+            self._ack(frame.stamp_ns)
+        self._last_frame_time = time.monotonic()
+
+    def _ack(self, stamp_ns: int) -> None:
+        self.ack_pub.publish(header(stamp_ns, self.world_frame))
+
+    # -- filtering -------------------------------------------------------------------------
+    def ready(self) -> bool:
+        return self.start is not None and len(self.cameras) == len(self.camera_names)
+
+    def _make_tracker(self) -> bool:
+        if self.frame_rate > 0:
+            dt = 1.0 / self.frame_rate
+        elif len(self._first_stamps) == 2:
+            dt = (self._first_stamps[1] - self._first_stamps[0]) * 1e-9
+        else:
+            return False
+        body = self.body or BodyDescription.default()
+        cameras = [self.cameras[c] for c in self.camera_names]
+        config = TrackerConfig(smc=self.smc_config, dt=dt)
+        model = TrackerModel(body, self.start, image_likelihood(body, cameras), config)
+        self.tracker = Tracker(model)
+        self.get_logger().info(f"tracking with {self.smc_config.num_particles} particles, dt {dt * 1e3:.1f} ms, "
+                               f"cameras {', '.join(self.camera_names)}, start frame {self.start.frame}")
+        return True
+
+    def _process_pending(self, final: bool = False) -> None:
+        if not self.ready() or not self._pending:
+            return
+        if self.tracker is None and not self._make_tracker():
+            if not final:
+                return
+            self.frame_rate = self.frame_rate or 30.0   # a single frame: any dt will do
+            self._make_tracker()
+        pending, self._pending = self._pending, []
+        for item in pending:
+            if item.frame_index < self.start.frame:
+                continue     # background-only frames before the person appears
+            started = time.perf_counter()
+            obs = ImageObservation(features=tuple(item.messages))
+            summaries = self.tracker.push(item.frame_index, item.stamp_ns, obs)
+            self.stats.seconds_in_filter += time.perf_counter() - started
+            self.stats.frames_tracked += 1
+            self._dirty = True
+            self._publish(summaries)
+
+    def _publish(self, summaries: list[CoreSummary]) -> None:
+        for s in summaries:
+            self.posterior_pub.publish(summary_to_msg(s, self.world_frame))
+            self.stats.summaries += 1
+            if self.keep_summaries:
+                self.summaries.append(s)
+
+    def flush(self) -> int:
+        """Complete all frames still waiting for look-ahead data; returns how many were published."""
+        self._process_pending(final=True)
+        if self.tracker is None or not self._dirty:
+            return 0
+        summaries = self.tracker.finish()
+        self._dirty = False
+        self._publish(summaries)
+        return len(summaries)
+
+    def _on_timer(self) -> None:
+        if self._dirty and time.monotonic() - self._last_frame_time > self.idle_flush_s:
+            self.flush()
+
+
+def main(args: list[str] | None = None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = TrackerNode()
+        rclpy.spin(node)
+    except InputError as exc:
+        print(f"awalker_tracker_node: error: {exc}", file=sys.stderr)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+

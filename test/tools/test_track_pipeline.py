@@ -1,0 +1,151 @@
+"""`awalker track` end to end on a short synthetic bag: one process (replay, features, tracker and
+pose publisher on one executor) and the nodes split across two processes (replay in a subprocess)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from awalker_tools import evaluation
+from awalker_tools.cli import main
+
+FRAMES, BACKGROUND = 10, 4
+
+
+@pytest.fixture(scope="module")
+def synth_bag(tmp_path_factory) -> Path:
+    """A 160x120 one-camera synthetic walk (first seed whose walker does not fall)."""
+    for seed in range(1, 15):
+        out = tmp_path_factory.mktemp(f"synth{seed}")
+        code = main(["synth", "--out", str(out), "--frames", str(FRAMES), "--background-frames", str(BACKGROUND),
+                     "--size", "160", "120", "--seed", str(seed)])
+        if code == 0:
+            return out / "synth.bag"
+    pytest.fail("awalker synth could not make a walk that does not fall")
+
+
+def _stamp(msg) -> int:
+    stamp = msg.stamp if hasattr(msg, "stamp") else msg.header.stamp     # Header itself or a stamped message
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def read_result_bag(path: Path) -> dict[str, list]:
+    from awalker_tools.bagio import SequenceReader
+
+    out: dict[str, list] = {}
+    with SequenceReader(path) as reader:
+        for topic, _, _, msg in reader.messages(reader.topics):
+            out.setdefault(topic, []).append(msg)
+    return out
+
+
+def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
+    from awalker_tools.bagio import SequenceReader
+
+    out = tmp_path / "run"
+    assert main(["track", str(synth_bag), "--out", str(out), "--particles", "100", "--seed", "1"]) == 0
+    with SequenceReader(synth_bag) as reader:
+        stamps = reader.frame_stamps.tolist()
+    tracked = stamps[BACKGROUND:]
+    result = read_result_bag(out / "result.bag")
+    # a posterior for every frame with the person, in order, with the image stamps
+    assert [_stamp(m) for m in result["/awalker/posterior"]] == tracked
+    assert [m.frame_index for m in result["/awalker/posterior"]] == list(range(BACKGROUND, BACKGROUND + FRAMES))
+    assert [_stamp(m) for m in result["/awalker/joint_states"]] == tracked
+    assert [_stamp(m) for m in result["/humans/bodies/walker/joint_states"]] == tracked
+    assert [_stamp(m.markers[0]) for m in result["/awalker/markers"]] == tracked
+    assert [_stamp(m) for m in result["/awalker/ack"]] == stamps           # every frame acknowledged
+    assert [_stamp(m) for m in result["/cam0/features"]] == stamps
+    poses = evaluation.read_poses_csv(out / "poses.csv")
+    assert poses.stamps_ns.tolist() == tracked and poses.markers.shape == (FRAMES, 13, 3)
+    summary = evaluation.read_summary_csv(out / "summary.csv")
+    assert summary["stamp_ns"].tolist() == tracked
+    assert np.all((summary["stance_left_probability"] >= 0) & (summary["stance_left_probability"] <= 1))
+    assert len(list((out / "overlay").glob("frame_*.png"))) == FRAMES and (out / "overlay.mp4").stat().st_size > 0
+    capsys.readouterr()
+    assert main(["eval", str(out)]) == 0          # ground truth found beside the input bag
+    assert "absolute" in capsys.readouterr().out
+
+
+def test_track_with_nodes_in_two_processes(synth_bag: Path, ros_domain_id: int, monkeypatch, tmp_path: Path):
+    """Replay in a subprocess; features, tracker and pose publisher here (as users would split them)."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rclpy.signals import SignalHandlerOptions
+    from sensor_msgs.msg import JointState
+
+    from awalker_msgs.msg import PosteriorSummary
+    from awalker_tracker.nodes.features import FeatureNode
+    from awalker_tracker.nodes.pose_publisher import PosePublisherNode
+    from awalker_tracker.nodes.tracker import TrackerNode
+
+    domain = ros_domain_id + 20
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+    nodes = []
+    proc = None
+    try:
+        features = FeatureNode(context=ctx, parameter_overrides=[Parameter("camera_name", value="cam0")])
+        tracker = TrackerNode(context=ctx, parameter_overrides=[   # cameras, start, body from the replayed topics
+            Parameter("cameras", value=["cam0"]), Parameter("num_particles", value=100),
+            Parameter("idle_flush_s", value=1.5)])
+        poser = PosePublisherNode(context=ctx)
+        probe = Node("probe", context=ctx)
+        got: dict[str, list] = {"posterior": [], "joints": []}
+        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        probe.create_subscription(PosteriorSummary, "/awalker/posterior", got["posterior"].append, qos)
+        probe.create_subscription(JointState, "/awalker/joint_states", got["joints"].append, qos)
+        nodes = [features, tracker, poser, probe]
+        executor = SingleThreadedExecutor(context=ctx)
+        for n in nodes:
+            executor.add_node(n)
+        proc = subprocess.Popen([sys.executable, "-m", "awalker_tools.cli", "replay", str(synth_bag), "--lockstep",
+                                 "--wait-for-subscribers", "20", "--ack-timeout", "20"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ))
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline and (proc.poll() is None or len(got["joints"]) < FRAMES):
+            executor.spin_once(timeout_sec=0.02)
+        out, err = proc.communicate(timeout=30)
+        assert proc.returncode == 0, out + err
+        executor.shutdown()
+    finally:
+        if proc is not None and proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+        for n in nodes:
+            n.destroy_node()
+        ctx.try_shutdown()
+    from awalker_tools.bagio import SequenceReader
+
+    with SequenceReader(synth_bag) as reader:
+        tracked = reader.frame_stamps.tolist()[BACKGROUND:]
+    assert [_stamp(m) for m in got["posterior"]] == tracked
+    assert [_stamp(m) for m in got["joints"]] == tracked
+
+
+def test_track_without_start_description_says_what_to_provide(tmp_path: Path, capsys):
+    from awalker_tools.bagio import SequenceWriter
+    from awalker_tracker.vision.camera import Camera
+
+    cam = Camera.look_at("cam0", 32, 24, 30.0, np.array([0.0, -5.0, 1.0]), np.array([0.0, 0.0, 1.0]))
+    bag = tmp_path / "bare" / "seq.bag"
+    bag.parent.mkdir()
+    with SequenceWriter(bag, [cam]) as writer:
+        for k in range(3):
+            writer.write_frame(1000 + k, {"cam0": np.zeros((24, 32, 3), np.uint8)})
+    assert main(["track", str(bag), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "no start description" in err and "--start START.yaml" in err
+    assert main(["track", str(tmp_path / "missing.bag"), "--out", str(tmp_path / "out")]) == 2
+    assert "no such bag" in capsys.readouterr().err
