@@ -1,0 +1,132 @@
+"""awalker synth: complete, deterministic bags whose ground truth lines up with the pixels."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+from conftest import MOCAP_DIR
+
+from awalker_tools import cli
+from awalker_tools.bagio import SequenceReader, occlusion_mask_topic
+from awalker_tools.overlay import draw_body, save_overlay_png
+from awalker_tracker.model.body import MARKER_NAMES, BodyDescription
+from awalker_tracker.vision.camera import load_calibration
+
+M = {n: i for i, n in enumerate(MARKER_NAMES)}
+SMALL = ["--size", "200", "150", "--frames", "14", "--background-frames", "3"]
+
+
+def synth(out, *extra: str) -> int:
+    return cli.main(["synth", "--out", str(out), *SMALL, *extra])
+
+
+def read(out):
+    with SequenceReader(out / "synth.bag") as bag:
+        cameras = bag.cameras
+        frames = list(bag.frames())
+        stamps, markers = bag.ground_truth()
+        start = bag.text("/awalker/start_description")
+        masks = [m for _, _, _, m in bag.messages([occlusion_mask_topic(cameras[0].name)])]
+    return cameras, frames, stamps, markers, start, masks
+
+
+def test_synth_is_complete_deterministic_and_lines_up(tmp_path):
+    assert synth(tmp_path / "a", "--seed", "3", "--cameras", "2") == 0
+    assert synth(tmp_path / "b", "--seed", "3", "--cameras", "2") == 0
+    assert synth(tmp_path / "c", "--seed", "4", "--cameras", "2") == 0
+    a, b, c = (tmp_path / k for k in "abc")
+    assert (a / "ground_truth.csv").read_text() == (b / "ground_truth.csv").read_text()
+    assert (a / "ground_truth.csv").read_text() != (c / "ground_truth.csv").read_text()
+    cameras, frames, stamps, markers, start_text, _ = read(a)
+    _, frames_b, *_ = read(b)
+    assert all(np.array_equal(fa[1][k], fb[1][k]) for fa, fb in zip(frames, frames_b) for k in fa[1])
+    assert [cam.name for cam in cameras] == ["cam0", "cam1"] and len(frames) == 17
+    assert markers.shape == (14, 13, 3) and np.all(np.diff(stamps) > 0)
+    assert list(stamps) == [s for s, _ in frames[3:]]  # ground truth from the first frame with the person
+    # Side files agree with the bag.
+    start = yaml.safe_load((a / "start.yaml").read_text())["start"]
+    assert yaml.safe_load(start_text)["start"] == start and start["frame"] == 3
+    assert np.allclose(start["position"], markers[0, M["pelvis"], :2], atol=1e-3)
+    assert start["stance_leg"] in ("left", "right") and start["speed"] == 1.3
+    calibration = load_calibration(a / "calibration.yaml")
+    assert all(np.allclose(x.K, y.K) and np.allclose(x.position, y.position) for x, y in zip(calibration, cameras))
+    assert BodyDescription.from_yaml(a / "body.yaml") == BodyDescription.default()
+    rows = (a / "ground_truth.csv").read_text().strip().splitlines()
+    assert rows[0] == "frame,stamp_ns,marker,x,y,z" and len(rows) == 1 + 14 * 13
+    frame, stamp, name, *xyz = rows[1 + 5 * 13 + M["left_knee"]].split(",")
+    assert (int(frame), int(stamp), name) == (8, stamps[5], "left_knee")
+    assert np.allclose([float(v) for v in xyz], markers[5, M["left_knee"]], atol=1e-6)
+    # Ground truth lines up: points inside the body (mid torso, mid thighs) project onto pixels
+    # that differ from the empty room much more than points 0.5 m beside the body do.
+    empty = {k: v.astype(float) for k, v in frames[0][1].items()}
+    on_body, beside = [], []
+    for index in range(14):
+        _, images = frames[3 + index]
+        m = markers[index]
+        inside = [0.5 * (m[M["pelvis"]] + m[M["thorax"]]), 0.5 * (m[M["left_hip"]] + m[M["left_knee"]]),
+                  0.5 * (m[M["right_hip"]] + m[M["right_knee"]])]
+        for cam in cameras:
+            sideways = np.cross(cam.rotation[:, 2], [0.0, 0.0, 1.0])
+            for point in inside:
+                for offset, store in ((0.0, on_body), (0.5, beside)):
+                    (u, v), _ = cam.project(point + offset * sideways)
+                    u, v = int(round(u)), int(round(v))
+                    store.append(np.abs(images[cam.name][v - 1 : v + 2, u - 1 : u + 2].astype(float)
+                                        - empty[cam.name][v - 1 : v + 2, u - 1 : u + 2]).mean())
+    assert np.median(on_body) > 3 * np.median(beside) and np.median(on_body) > 30
+    # The body walks at about the requested speed.
+    travel = np.linalg.norm(markers[-1, M["pelvis"], :2] - markers[0, M["pelvis"], :2]) / (13 / 30)
+    assert travel == pytest.approx(1.3, rel=0.25)
+    overlay = draw_body(frames[10][1]["cam0"], markers[7], cameras[0])
+    assert np.count_nonzero(np.any(overlay != frames[10][1]["cam0"], axis=2)) > 50
+    assert save_overlay_png(tmp_path / "overlay.png", frames[10][1]["cam0"], markers[7], cameras[0]).stat().st_size > 0
+
+
+def test_turn_and_occluder(tmp_path):
+    assert synth(tmp_path, "--turn", "80", "--occluder", "--frames", "30", "--seed", "1") == 0
+    cameras, frames, stamps, markers, _, masks = read(tmp_path)
+    early = markers[6, M["pelvis"], :2] - markers[0, M["pelvis"], :2]
+    late = markers[-1, M["pelvis"], :2] - markers[-7, M["pelvis"], :2]
+    turned = np.degrees(np.arctan2(late[1], late[0]) - np.arctan2(early[1], early[0]))
+    assert turned == pytest.approx(80, abs=15)
+    assert len(masks) == len(frames)
+    mask = np.frombuffer(bytes(masks[0].data), np.uint8).reshape(masks[0].height, masks[0].width)
+    assert set(np.unique(mask)) == {0, 255}
+    # Some frame has a knee or ankle behind the occluder, none has the head behind it.
+    hidden_lower, hidden_head = False, False
+    for k in range(markers.shape[0]):
+        for name in ("left_ankle", "right_ankle", "left_knee", "right_knee", "head"):
+            (u, v), _ = cameras[0].project(markers[k, M[name]])
+            u, v = int(round(u)), int(round(v))
+            inside = 0 <= u < mask.shape[1] and 0 <= v < mask.shape[0] and mask[v, u] == 255
+            hidden_head |= inside and name == "head"
+            hidden_lower |= inside and name != "head"
+    assert hidden_lower and not hidden_head
+
+
+def test_from_mocap(tmp_path):
+    assert synth(tmp_path, "--from-mocap", str(MOCAP_DIR / "07.asf"), str(MOCAP_DIR / "07_01.amc"),
+                 "--rate", "60") == 0
+    cameras, frames, stamps, markers, start_text, _ = read(tmp_path)
+    assert np.allclose(np.diff(stamps), 1e9 / 60, atol=1)
+    start = yaml.safe_load(start_text)["start"]
+    assert start["speed"] == pytest.approx(1.37, abs=0.15) and abs(start["heading"]) < 0.2
+    body = BodyDescription.from_yaml(tmp_path / "body.yaml")
+    assert body.leg_length == pytest.approx(0.9, abs=0.06)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [(["--cameras", "5"], "--cameras must be 1..4"), (["--turn", "120"], "--turn must be within"),
+     (["--from-mocap", "missing.asf", "missing.amc"], "missing.asf")],
+)
+def test_bad_options_are_one_line_errors(tmp_path, capsys, args, message):
+    assert synth(tmp_path, *args) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+
+
+def test_existing_bag_is_not_overwritten(tmp_path, capsys):
+    assert synth(tmp_path, "--frames", "3") == 0
+    assert synth(tmp_path, "--frames", "3") == 2
+    assert "exists already" in capsys.readouterr().err
