@@ -135,3 +135,18 @@ def test_paper_prior_spreads_gaits_and_its_fall_rate_is_measured(prior: control.
         assert np.all(np.isfinite(walkers.stance_angle)) and np.all(np.isfinite(ctrl.stiffness_mean_mean))
     assert ctrl.stiffness_mean_mean.std() > 0.1
     assert 0.0 < fallen.mean() <= 1.0
+
+
+def test_prior_walk_statistics(prior: control.ControlPrior, table: gaits.GaitTable) -> None:
+    _, _, kappa, iota = table.lookup(4 / 3.6, 0.6)
+    still = dataclasses.replace(prior, mu_kappa=float(kappa), kappa_noise_variance=1e-12, kappa_bar_variance=1e-12,
+                                impulse_variance=1e-12, impulse_mean_coefficients=(float(iota), 0.0, 0.0, 0.0))
+    quiet = control.prior_walk_statistics(PARAMS, still, table, 4 / 3.6, 0.6, n=20, steps=8)
+    assert quiet["fraction_fallen"] == 0.0 and quiet["median_strikes_before_fall"] is None
+    assert quiet["step_length_percentiles_m"]["50"] == pytest.approx(0.6, abs=2e-3)
+    assert quiet["speed_percentiles_kmh"]["50"] == pytest.approx(4.0, abs=0.02)
+    noisy = control.prior_walk_statistics(PARAMS, prior, table, 5 / 3.6, 0.7, n=100, steps=8)
+    assert 0.0 < noisy["fraction_fallen"] <= 1.0
+    spread = noisy["step_length_percentiles_m"]
+    assert spread["95"] - spread["5"] > 0.1
+    assert np.isfinite(noisy["log_step_length_vs_log_speed_slope"])

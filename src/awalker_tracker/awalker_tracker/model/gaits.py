@@ -11,9 +11,16 @@ start state (legs swapped). The residual (4,) is
 (phi2+ = -phi1+ at a strike, so the pose residual is one number). :func:`solve_grid` sweeps a
 speed x step-length grid with continuation from solved neighbours plus several fresh starting
 guesses; :class:`GaitTable` holds the result (``data/cyclic_gaits.json``).
+
+Eq. (3) has more than one solution family. The solver prefers the mirror-symmetric gaits (both
+legs vertical together at mid-step, pre-collision rates equal to the start rates; see
+:func:`symmetric_residual`), which exist over the whole 2-7 km/h x 0.5-1.2 m grid and give smooth
+kappa and iota maps (Fig. 3). Nearby asymmetric solutions exist too (e.g. 5 km/h, 0.7 m: kappa
+0.749 instead of 0.737); mixing families made the maps jump, so they are only a fallback.
 """
 from __future__ import annotations
 
+import functools
 import json
 import sys
 import time
@@ -264,8 +271,7 @@ class GaitTable:
     def load(cls, path: str | Path | None = None) -> "GaitTable":
         """The packaged table (awalker_tracker/data/cyclic_gaits.json) or the JSON file at ``path``."""
         if path is None:
-            text = resources.files("awalker_tracker").joinpath("data/cyclic_gaits.json").read_text()
-            return cls.from_json(json.loads(text), "awalker_tracker/data/cyclic_gaits.json")
+            return _packaged_table()
         path = Path(path)
         if not path.is_file():
             raise InputError(f"{path}: gait table not found")
@@ -312,6 +318,13 @@ class GaitTable:
                 "toe_off_impulse": self.toe_off_impulse[mask], "pre_stance_rate": self.pre_stance_rate[mask],
                 "pre_swing_rate": self.pre_swing_rate[mask], "stance_rate": self.stance_rate[mask],
                 "swing_rate": self.swing_rate[mask], "residual": self.residual[mask]}
+
+
+@functools.lru_cache(maxsize=1)
+def _packaged_table() -> GaitTable:
+    """The packaged table, parsed once per process (shared: do not modify its arrays)."""
+    text = resources.files("awalker_tracker").joinpath("data/cyclic_gaits.json").read_text()
+    return GaitTable.from_json(json.loads(text), "awalker_tracker/data/cyclic_gaits.json")
 
 
 def _nan_to_none(array: np.ndarray) -> list:
