@@ -8,16 +8,34 @@ import numpy as np
 import pytest
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.model.body import BodyDescription
+from awalker_tracker.vision.foreground import start_pose_labels
 from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
 from awalker_tracker.vision.flow import FlowConfig
 
 
-def scene_frames():
+def stamps_first() -> int:
+    return 2_000_000_000
+
+
+def _scene():
     import sys
     from pathlib import Path
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "vision"))
-    from vision_scene import background_image, noisy, render_frames, side_camera, walking_poses
+    import vision_scene
+
+    return vision_scene
+
+
+def scene_camera():
+    return _scene().side_camera()
+
+
+def scene_frames():
+    s = _scene()
+    background_image, noisy, render_frames, side_camera, walking_poses = (
+        s.background_image, s.noisy, s.render_frames, s.side_camera, s.walking_poses)
 
     cam = side_camera()
     bg = background_image(cam)
@@ -88,7 +106,8 @@ def test_node_publishes_features_for_every_image(ros_context):
     from rclpy.node import Node
     from rclpy.parameter import Parameter
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-    from sensor_msgs.msg import CompressedImage, Image
+    from geometry_msgs.msg import PoseStamped
+    from sensor_msgs.msg import CameraInfo, CompressedImage, Image
     from std_msgs.msg import String
 
     from awalker_msgs.msg import ImageFeatures
@@ -96,6 +115,7 @@ def test_node_publishes_features_for_every_image(ros_context):
     from awalker_tracker.nodes.features import FeatureNode, features_from_msg
 
     frames = scene_frames()
+    cam = scene_camera()
     node = FeatureNode(context=ros_context, parameter_overrides=[
         Parameter("camera_name", value="cam"), Parameter("downsample", value=2), Parameter("flow_cell_size", value=8)])
     probe = Node("probe", context=ros_context)
@@ -105,15 +125,29 @@ def test_node_publishes_features_for_every_image(ros_context):
     start_pub = probe.create_publisher(String, "/awalker/start_description", latched)
     image_pub = probe.create_publisher(Image, "/cam/image_raw", QoSProfile(depth=50))
     compressed_pub = probe.create_publisher(CompressedImage, "/cam/image_raw/compressed", QoSProfile(depth=50))
+    info_pub = probe.create_publisher(CameraInfo, "/cam/camera_info", QoSProfile(depth=10))
+    pose_pub = probe.create_publisher(PoseStamped, "/cam/camera_pose", latched)
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(node)
     executor.add_node(probe)
     try:
         start_pub.publish(String(data="start: {frame: 3, position: [0.0, 0.0], heading: 0.0, speed: 1.3, "
                                       "step_length: 0.7, stance_leg: left}\n"))
+        pose = PoseStamped()
+        pose.header.frame_id = "world"
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = (float(v) for v in cam.position)
+        q = cam.quaternion
+        pose.pose.orientation.x, pose.pose.orientation.y, pose.pose.orientation.z, pose.pose.orientation.w = (
+            float(v) for v in q)
+        pose_pub.publish(pose)
         deadline = time.monotonic() + 10
         while (node.extractor.background_frames != 3 or image_pub.get_subscription_count() == 0
-               or compressed_pub.get_subscription_count() == 0) and time.monotonic() < deadline:
+               or compressed_pub.get_subscription_count() == 0 or node._pose is None
+               or info_pub.get_subscription_count() == 0) and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        info_pub.publish(CameraInfo(header=header(stamps_first(), "cam_optical_frame"), width=cam.width,
+                                    height=cam.height, k=[float(v) for v in cam.K.ravel()], d=[]))
+        while node._info is None and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
         assert node.extractor.background_frames == 3      # learned from the start description
         stamps = [2_000_000_000 + k * 33_333_333 for k in range(len(frames))]
@@ -134,9 +168,11 @@ def test_node_publishes_features_for_every_image(ros_context):
             executor.spin_once(timeout_sec=0.05)
         assert [stamp_to_ns(m.header.stamp) for m in received] == stamps
         assert node.stats.skipped == 1 and node.stats.frames == len(frames)
-        # Same maps as the core extractor fed the same frames.
+        assert node.stats.foreground_from == "start pose"
+        # Same maps as the core extractor fed the same frames (and the same start-pose labels).
         reference = FeatureExtractor(FeatureConfig(background_frames=3, downsample=2, flow=FlowConfig(cell_size=8)))
-        expected = [reference.process(f) for f in frames]
+        labels = start_pose_labels(BodyDescription.default(), cam, (0.0, 0.0), 0.0, 0.7, 0)
+        expected = [reference.process(f, class_labels=labels, fill_with_bands=True) for f in frames]
         for msg, exp in zip(received, expected):
             got = features_from_msg(msg)
             assert msg.camera_name == "cam" and msg.header.frame_id == "cam_optical_frame"

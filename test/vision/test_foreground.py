@@ -69,3 +69,30 @@ def test_foreground_learned_without_labels_discriminates_parts(use_labels):
     for c in ("head", "torso", "legs"):
         own = truth == PART_CLASSES.index(c)
         assert np.mean(best[own] == PART_CLASSES.index(c)) > 0.8, c
+
+
+def test_start_pose_projection_labels_the_feet_better_than_bands():
+    """The body projected at the start description's pose (legs in double support, phase unknown),
+    with the foreground it misses filled by bands, learns the feet class; bands alone hardly do."""
+    from awalker_tracker.model.kinematics import pose_body
+    from awalker_tracker.vision.foreground import start_pose_labels
+    from vision_scene import PARAMS
+
+    cam = side_camera()
+    rng = np.random.default_rng(3)
+    bg = background_image(cam)
+    background = learn_background([noisy(bg, rng) for _ in range(4)], downsample=2)
+    poses = walking_poses(6)
+    frames, part_labels = render_frames(cam, poses, bg)
+    truth = [class_labels_from_parts(p, PART_CLASS_NAMES)[1::2, 1::2] for p in part_labels]
+    pelvis = pose_body(BODY, PARAMS, poses[0].walker, poses[0].kin).markers[0, 0, :2]
+    start = start_pose_labels(BODY, cam, pelvis, 0.0, 0.7, 0)
+    assert start.shape == (cam.height, cam.width) and set(np.unique(start)) == {-1, 0, 1, 2, 3}
+    m0 = measurements(frames[0], 2)
+    feet = PART_CLASSES.index("feet")
+    accuracy = {}
+    for name, labels in (("bands", None), ("start", start[1::2, 1::2])):
+        model = learn_foreground(m0, background, labels, BODY, fill_with_bands=True)
+        llr = model.log_likelihood_ratios(measurements(frames[5], 2), background, clip=25.0)
+        accuracy[name] = float(np.mean(np.argmax(llr, axis=0)[truth[5] == feet] == feet))
+    assert accuracy["start"] > 0.7 and accuracy["start"] > accuracy["bands"] + 0.3, accuracy

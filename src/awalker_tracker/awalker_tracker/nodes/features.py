@@ -9,7 +9,11 @@ Subscribes (camera ``<cam>`` from the ``camera_name`` parameter):
   image for learning the foreground: 0 = none, k = 1 + index into PART_CLASSES);
 - ``/awalker/start_description`` (latched std_msgs/String): the frames before its ``frame``
   are background-only (``background_frames`` = -1, the default);
-- ``/awalker/body_description`` (latched): body proportions for the unlabelled foreground bands.
+- ``/awalker/body_description`` (latched): body sizes (start-pose projection, bands);
+- ``/<cam>/camera_info`` and ``/<cam>/camera_pose`` (latched geometry_msgs/PoseStamped, as the
+  replay publishes it): with the start description, the foreground mixtures are learned from
+  the body projected at the start pose (``start_pose_labels`` parameter), foreground pixels it
+  misses labelled by height bands; without them, by height bands alone.
 Publishes ``/<cam>/features`` (awalker_msgs/ImageFeatures, reliable, depth 10), stamped with
 the image stamp, for every image it can decode — also during background learning (zero maps),
 so lockstep replay never waits. Undecodable images and out-of-order stamps are logged with the
@@ -35,14 +39,16 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
-from sensor_msgs.msg import CompressedImage, Image
+from geometry_msgs.msg import PoseStamped
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from std_msgs.msg import Header, String
 
 from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import PART_CLASSES, BodyDescription
-from awalker_tracker.nodes.convert import stamp_to_ns
+from awalker_tracker.nodes.convert import camera_from_msgs, stamp_to_ns
 from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor, FrameFeatures
 from awalker_tracker.vision.flow import FlowConfig, FlowGrid
+from awalker_tracker.vision.foreground import start_pose_labels
 
 START_TOPIC = "/awalker/start_description"
 BODY_TOPIC = "/awalker/body_description"
@@ -133,6 +139,7 @@ class FeatureNodeStats:
     frames: int = 0
     skipped: int = 0
     seconds: float = 0.0
+    foreground_from: str = ""     # "start pose", "label image" or "height bands" once learned
 
 
 class FeatureNode(Node):
@@ -157,6 +164,8 @@ class FeatureNode(Node):
         outlier = declare("outlier_probability", 0.02, "uniform outlier share of the appearance densities")
         clip = declare("llr_clip", 25.0, "bound on each pixel's log-likelihood ratio")
         adapt = declare("adapt_rate", 0.0, "background adaptation rate per frame (0 = frozen)")
+        self.use_start_pose = bool(declare("start_pose_labels", True, "learn the foreground from the body "
+                                           "projected at the start pose (needs camera_info and camera_pose)"))
         self.verbose = bool(declare("verbose", False, "log model learning to stderr"))
         if not self.camera_name:
             raise InputError("awalker_features: parameter 'camera_name' is required (e.g. -p camera_name:=cam0)")
@@ -172,6 +181,9 @@ class FeatureNode(Node):
         self._last_stamp = -1
         self._masks: dict[int, np.ndarray] = {}
         self._labels: np.ndarray | None = None
+        self._start: Any = None
+        self._info: CameraInfo | None = None
+        self._pose: PoseStamped | None = None
         cam = self.camera_name
         self.image_topic = f"/{cam}/image_raw"
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -183,6 +195,8 @@ class FeatureNode(Node):
         self.create_subscription(Image, f"/{cam}/occlusion_mask", self._on_mask, QoSProfile(depth=30))
         self.create_subscription(Image, f"/{cam}/foreground_labels", self._on_labels, latched)
         self.create_subscription(String, START_TOPIC, self._on_start, latched)
+        self.create_subscription(CameraInfo, f"/{cam}/camera_info", self._on_info, reliable)
+        self.create_subscription(PoseStamped, f"/{cam}/camera_pose", self._on_pose, latched)
         self.create_subscription(String, BODY_TOPIC, self._on_body, latched)
         self.publisher = self.create_publisher(ImageFeatures, f"/{cam}/features", reliable)
 
@@ -195,8 +209,33 @@ class FeatureNode(Node):
         except InputError as exc:
             self.get_logger().error(f"{exc}; background frames unknown")
             return
+        self._start = start
         if self.background_param < 0:
             self.extractor.set_background_frames(start.frame)
+
+    def _on_info(self, msg: CameraInfo) -> None:
+        self._info = msg
+
+    def _on_pose(self, msg: PoseStamped) -> None:
+        self._pose = msg
+
+    def _start_labels(self, rgb: np.ndarray) -> np.ndarray | None:
+        """Class labels of the body at the start pose, if this frame learns the foreground and
+        the start, the camera_info and the camera pose are known."""
+        if not (self.use_start_pose and self._labels is None and self.extractor.learns_foreground_next
+                and self._start is not None and self._info is not None and self._pose is not None):
+            return None
+        camera = camera_from_msgs(self.camera_name, self._info, self._pose)
+        if (camera.height, camera.width) != rgb.shape[:2]:
+            self.get_logger().error(f"/{self.camera_name}/camera_info says {camera.width}x{camera.height}, images are "
+                                    f"{rgb.shape[1]}x{rgb.shape[0]}; learning the foreground from height bands")
+            return None
+        s = self._start
+        labels = start_pose_labels(self.extractor.body, camera, s.position, s.heading, s.step_length, s.stance_leg)
+        if self.verbose:
+            print(f"features {self.camera_name}: start pose covers {np.count_nonzero(labels >= 0)} px",
+                  file=sys.stderr, flush=True)
+        return labels
 
     def _on_body(self, msg: String) -> None:
         try:
@@ -234,7 +273,17 @@ class FeatureNode(Node):
         try:
             rgb = image_from_msg(msg, topic)
             mask = self._masks.pop(stamp, None)
-            features = self.extractor.process(rgb, mask, self._labels)
+            start_labels = self._start_labels(rgb)
+            learned = self.extractor.foreground is not None
+            if start_labels is not None:
+                features = self.extractor.process(rgb, mask, start_labels, fill_with_bands=True)
+            else:
+                features = self.extractor.process(rgb, mask, self._labels)
+            if not learned and self.extractor.foreground is not None:
+                self.stats.foreground_from = ("start pose" if start_labels is not None else
+                                              "label image" if self._labels is not None else "height bands")
+                self.get_logger().info(f"{self.camera_name}: background and foreground learned at frame "
+                                       f"{self.extractor.frame_index - 1} (foreground labels: {self.stats.foreground_from})")
         except (InputError, ValueError) as exc:
             self._skip(f"{topic} at {stamp} ns: {exc}")
             return

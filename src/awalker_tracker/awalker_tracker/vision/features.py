@@ -14,8 +14,10 @@ Learning, in order of preference (all automatic, no hand labels needed):
    zero (no appearance information).
 2. Foreground: at the first frame after the background is known, the mixtures are fitted to
    the pixels that differ from the background, labelled by (a) a class-label image passed
-   with that frame (the body projected at the start pose, or a user's label mask), else
-   (b) horizontal bands of the largest foreground blob at the body's proportions.
+   with that frame: a user's label mask, or the body projected at the start description's
+   pose (``foreground.start_pose_labels``) with the foreground pixels it misses (the start's
+   leg phase is unknown) filled by (b); else (b) horizontal bands of the largest foreground
+   blob at the body's proportions (head, torso, legs, feet from the top).
 Maps are zero before the models exist; the flow is valid from the second frame on.
 Occlusion mask (255 / True = occluded): its pixels get ratio 0, cells it touches are invalid.
 """
@@ -121,7 +123,7 @@ class FeatureExtractor:
             self.background_frames = int(count)
 
     def learn(self, rgb: np.ndarray, class_labels: np.ndarray | None = None,
-              background: BackgroundModel | None = None) -> None:
+              background: BackgroundModel | None = None, fill_with_bands: bool = False) -> None:
         """Fit the foreground mixtures on ``rgb`` (optionally with a class-label image, full or map
         resolution); ``background`` replaces the learned background if given."""
         m = measurements(rgb, self.config.downsample)
@@ -130,7 +132,8 @@ class FeatureExtractor:
         if self.background is None:
             raise ValueError("learn: no background model yet")
         labels = None if class_labels is None else self._labels_at_map(class_labels, m.shape[:2])
-        self.foreground = learn_foreground(m, self.background, labels, self.body, self.classes, seed=self.config.seed)
+        self.foreground = learn_foreground(m, self.background, labels, self.body, self.classes, seed=self.config.seed,
+                                           fill_with_bands=fill_with_bands)
         self._log(f"foreground mixtures learned at frame {self.frame_index} "
                   f"({'label image' if labels is not None else 'height bands of the foreground blob'})")
 
@@ -145,9 +148,16 @@ class FeatureExtractor:
         if self.verbose:
             print(f"features: {text}", file=sys.stderr, flush=True)
 
+    @property
+    def learns_foreground_next(self) -> bool:
+        """True when the next frame is the one the foreground mixtures will be learned from
+        (known background frames only; with the robust median it is not known in advance)."""
+        return self.foreground is None and 0 < self.background_frames == self.frame_index
+
     def process(self, rgb: np.ndarray, occlusion_mask: np.ndarray | None = None,
-                class_labels: np.ndarray | None = None) -> FrameFeatures:
-        """Features of the next frame (RGB (H, W, 3) uint8); updates the models as described above."""
+                class_labels: np.ndarray | None = None, fill_with_bands: bool = False) -> FrameFeatures:
+        """Features of the next frame (RGB (H, W, 3) uint8); updates the models as described above.
+        ``class_labels`` (and ``fill_with_bands``) are used if this frame learns the foreground."""
         cfg = self.config
         image = np.asarray(rgb)
         if image.ndim != 3 or image.shape[2] != 3:
@@ -177,8 +187,10 @@ class FeatureExtractor:
         if self.background is not None and self.foreground is None and (
                 self.background_frames == 0 or self.frame_index >= self.background_frames):
             labels = None if class_labels is None else self._labels_at_map(class_labels, m.shape[:2])
-            self.foreground = learn_foreground(m, self.background, labels, self.body, self.classes, seed=cfg.seed)
-            self._log(f"foreground mixtures learned at frame {self.frame_index}")
+            self.foreground = learn_foreground(m, self.background, labels, self.body, self.classes, seed=cfg.seed,
+                                               fill_with_bands=fill_with_bands)
+            self._log(f"foreground mixtures learned at frame {self.frame_index} from "
+                      f"{'a label image' if labels is not None else 'height bands of the foreground blob'}")
         # ---- maps ------------------------------------------------------------------------
         if self.ready:
             llr = self.foreground.log_likelihood_ratios(m, self.background, cfg.llr_clip, cfg.outlier_probability)

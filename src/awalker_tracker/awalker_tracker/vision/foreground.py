@@ -173,14 +173,17 @@ def band_labels(foreground: np.ndarray, body: BodyDescription | None = None) -> 
 
 def learn_foreground(m: np.ndarray, background: BackgroundModel, class_labels: np.ndarray | None = None,
                      body: BodyDescription | None = None, classes: tuple[str, ...] = PART_CLASSES,
-                     min_pixels: int = 8, seed: int = 0) -> ForegroundModel:
+                     min_pixels: int = 8, seed: int = 0, fill_with_bands: bool = False) -> ForegroundModel:
     """Fit one mixture per class to pixels that differ from the background (``class_labels``
-    (h, w) int: class index or -1; None -> ``band_labels``). A class with too few labelled
+    (h, w) int: class index or -1; None -> ``band_labels``; ``fill_with_bands``: foreground
+    pixels the label image leaves at -1 take their band label). A class with too few labelled
     foreground pixels uses all its labelled pixels, or failing that all foreground pixels."""
     moving = background.foreground_mask(m)
     labels = band_labels(moving, body) if class_labels is None else np.asarray(class_labels)
     if labels.shape != m.shape[:2]:
         raise ValueError(f"label image shape {labels.shape} does not match the measurement map {m.shape[:2]}")
+    if class_labels is not None and fill_with_bands:
+        labels = np.where(labels >= 0, labels, band_labels(moving, body))
     fallback = m[moving] if moving.sum() >= min_pixels else m.reshape(-1, MEASUREMENT_DIM)
     mixtures = []
     for c in range(len(classes)):
@@ -198,3 +201,23 @@ def class_labels_from_parts(part_labels: np.ndarray, part_classes: tuple[str, ..
     lookup = np.array([classes.index(c) for c in part_classes] + [-1], np.int8)
     labels = np.asarray(part_labels).astype(np.int64)
     return lookup[np.where(labels < 0, len(part_classes), labels)]
+
+
+def start_pose_labels(body: BodyDescription, camera, position_xy: tuple[float, float], heading: float,
+                      step_length: float, stance_leg: int) -> np.ndarray:
+    """Class labels (H, W) int8 (-1 = none) of the body projected at a start description's pose:
+    pelvis above ``position_xy`` (m), walking along ``heading`` (rad), legs in double support
+    for ``step_length`` (m), with self-occlusion (``render_labels``). The leg phase of a real
+    start is unknown, so callers fill foreground pixels the projection misses with bands."""
+    from awalker_tracker.model.gaits import double_support_angle
+    from awalker_tracker.model.kinematics import KinematicConfig, initial_kinematics, pose_body
+    from awalker_tracker.model.walker import WalkerState
+    from awalker_tracker.vision.render import render_labels
+
+    params = body.walker_params()
+    angle = double_support_angle(params, step_length)
+    walker = WalkerState.from_arrays(angle, -angle, 0.0, 0.0, 0.0, stance_leg)
+    kin = initial_kinematics(KinematicConfig(), walker, np.asarray(position_xy, float), heading, 1,
+                             np.random.default_rng(0), body=body, params=params)
+    parts, _ = render_labels(body, pose_body(body, params, walker, kin).segments, camera)
+    return class_labels_from_parts(parts, tuple(p.part_class for p in body.parts))
