@@ -16,14 +16,13 @@ psi_hip = phi1 - phi2, the sagittal angle of the swing leg behind the stance leg
 early in the stride, straight towards its end).
 
 Units of sigma (the paper does not state them): **deg/s^2**. Decided by sampling the prior
-(``benchmarks/bench_render.py`` prints the figures; numbers at dt = 1/30 s, 2000 particles,
-60 frames): with sigma in deg/s^2 the median per-frame change is 0.5 deg for the swing knee
-and 0.05-0.15 deg for the torso and ankles, the heading wanders ~10 deg/s, and the knee
-still bends ~50 deg early in each swing through its rest-angle spring: human-like. Read as
-rad/s^2, sigma = 300 alone moves a joint by sigma dt^2 = 0.33 rad (19 deg) in one frame and
-the velocity term accumulates it to several radians per second: torso and heading spin
-wildly and every limited joint sits on its limits. ``KinematicConfig.sigma_unit`` holds the
-conversion factor to rad (pi/180).
+on the walker's 1.3 m/s cyclic gait (``benchmarks/bench_render.py``, 2000 particles, 60
+frames at 30 Hz). Read as deg/s^2: median per-frame change 0.04 deg (torso, hips), 0.08 deg
+(ankles), 0.33 deg (heading); the heading wanders 10 deg (std) in 2 s; the swing knee peaks
+at ~90 deg through its rest-angle spring: human-like. Read as rad/s^2: 2-3 deg per frame
+for torso, hips and ankles (95th percentile ~7-10 deg), 19 deg per frame for the heading
+(560 deg std after 2 s: the body spins), the swing knee slams into its 180 deg limit.
+``KinematicConfig.sigma_unit`` holds the conversion factor to rad (pi/180).
 
 Stance-foot contact: the foot's sole is a rocker, a circular arc of radius
 ``body.sole_radius`` through the heel and toe ends of the sole line (bulging ``sole_sag`` below
