@@ -7,7 +7,7 @@
 - "sigma_units": the kinematic prior (eq. 6, Table 1) simulated on the walker's cyclic gait
   (1.3 m/s, 0.7 m, 30 Hz, 2000 particles, 60 frames) with sigma read as deg/s^2 and as rad/s^2:
   median and 95th percentile per-frame change of each DOF (deg), heading drift after 2 s (deg),
-  the fraction of limited-joint values within 1 deg of a limit, and the swing-knee peak (deg).
+  and the swing-knee peak (deg).
 """
 from __future__ import annotations
 
