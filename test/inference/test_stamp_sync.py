@@ -74,3 +74,12 @@ def test_single_camera_passes_through_and_bad_setup():
         StampSynchronizer([])
     with pytest.raises(ValueError):
         StampSynchronizer(["a", "a"])
+
+
+def test_discard_gives_up_on_a_frame():
+    sync = StampSynchronizer(["a", "b"])
+    sync.add("a", 1, "a1")
+    issue = sync.discard(1, "timed out")
+    assert issue.kind == "incomplete" and issue.cameras == ("b",) and "timed out" in issue.message
+    assert sync.discard(1) is None and sync.pending_stamps == []
+    assert sync.add("b", 1, "b1")[1][0].kind == "out_of_order"      # too late now

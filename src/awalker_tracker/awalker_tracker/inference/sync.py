@@ -93,6 +93,13 @@ class StampSynchronizer:
                                      f"more than {self.max_pending} incomplete frames waiting"))
         return frames, issues
 
+    def discard(self, stamp_ns: int, why: str = "timed out") -> SyncIssue | None:
+        """Give up on one incomplete frame (e.g. a camera's message never came); None if not pending."""
+        if int(stamp_ns) not in self._pending:
+            return None
+        self._last_emitted = max(int(stamp_ns), self._last_emitted or int(stamp_ns))
+        return self._drop(int(stamp_ns), "incomplete", why)
+
     def flush(self) -> list[SyncIssue]:
         """Report and forget every incomplete frame (call at the end of a sequence)."""
         return [self._drop(s, "incomplete", "end of input") for s in sorted(self._pending)]

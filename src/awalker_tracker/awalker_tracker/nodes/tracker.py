@@ -85,6 +85,8 @@ class TrackerNode(Node):
         ack_topic = declare("ack_topic", "/awalker/ack", "std_msgs/Header acks of processed frames")
         self.idle_flush_s = float(declare("idle_flush_s", 2.0, "complete pending frames after this idle time (s)"))
         queue = declare("sync_queue", 30, "incomplete frames kept while pairing cameras")
+        self.sync_timeout_s = float(declare("sync_timeout_s", 2.0,
+                                            "give up (report, ack) on a frame missing a camera after this (s)"))
         if not cameras:
             raise InputError("awalker_tracker: parameter 'cameras' is required (e.g. -p cameras:=[cam0])")
         self.camera_names = tuple(cameras)
@@ -99,6 +101,8 @@ class TrackerNode(Node):
         self.summaries: list[CoreSummary] = []
         self.keep_summaries = False
         self._pending: list[_Pending] = []
+        self._frame_counter = 0                     # frame index = distinct stamps seen, dropped ones included
+        self._arrivals: dict[int, float] = {}       # stamp -> arrival time of its first camera message
         self._first_stamps: list[int] = []
         self._last_frame_time = time.monotonic()
         self._dirty = False   # frames pushed since the last flush
@@ -183,20 +187,29 @@ class TrackerNode(Node):
             self.get_logger().error(f"/{cam}/features at {stamp} ns: {exc}; frame skipped")
             self._ack(stamp)
             return
+        self._arrivals.setdefault(stamp, time.monotonic())
         frames, issues = self.sync.add(cam, stamp, item)
-        for issue in issues:
-            self.stats.sync_issues.append(issue.message)
-            self.get_logger().warning(issue.message)
-            if issue.kind in ("incomplete", "overflow"):
-                self._ack(issue.stamp_ns)
+        self._report(issues)
         for frame in frames:
-            self._pending.append(_Pending(frame.stamp_ns, self.stats.frames_received, frame.items))
+            self._arrivals.pop(frame.stamp_ns, None)
+            self._pending.append(_Pending(frame.stamp_ns, self._frame_counter, frame.items))
+            self._frame_counter += 1
             self.stats.frames_received += 1
             if len(self._first_stamps) < 2:
                 self._first_stamps.append(frame.stamp_ns)
             self._process_pending()
             self._ack(frame.stamp_ns)
         self._last_frame_time = time.monotonic()
+
+    def _report(self, issues: list) -> None:
+        """Log synchronisation problems; frames given up on still count and are acknowledged."""
+        for issue in issues:
+            self.stats.sync_issues.append(issue.message)
+            self.get_logger().warning(issue.message)
+            if issue.kind in ("incomplete", "overflow"):
+                self._arrivals.pop(issue.stamp_ns, None)
+                self._frame_counter += 1
+                self._ack(issue.stamp_ns)
 
     def _ack(self, stamp_ns: int) -> None:
         self.ack_pub.publish(header(stamp_ns, self.world_frame))
@@ -259,6 +272,12 @@ class TrackerNode(Node):
         return len(summaries)
 
     def _on_timer(self) -> None:
+        now = time.monotonic()
+        for stamp in [s for s, t in self._arrivals.items() if now - t > self.sync_timeout_s]:
+            issue = self.sync.discard(stamp, f"waited {self.sync_timeout_s:.1f} s")
+            self._arrivals.pop(stamp, None)
+            if issue is not None:
+                self._report([issue])
         if self._dirty and time.monotonic() - self._last_frame_time > self.idle_flush_s:
             self.flush()
 

@@ -1,0 +1,99 @@
+"""Tracker node in-process: two cameras' features paired by stamp, acks for every frame (also for a
+frame one camera never delivered), posteriors stamped with the image stamps, flushed when idle."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+
+def _features_msg(stamp_ns: int, cam: str):
+    from awalker_tracker.model.body import PART_CLASSES
+    from awalker_tracker.nodes.convert import header
+    from awalker_tracker.nodes.features import features_to_msg
+    from awalker_tracker.vision.features import FrameFeatures
+    from awalker_tracker.vision.flow import FlowGrid
+
+    rows, cols, cell = 4, 5, 16
+    centers = np.stack(np.meshgrid(np.arange(cols) * cell + 8.0, np.arange(rows) * cell + 8.0), -1)
+    flow = FlowGrid(centers.astype(np.float32), np.zeros((rows, cols, 2), np.float32),
+                    np.tile(np.eye(2, dtype=np.float32), (rows, cols, 1, 1)), np.zeros((rows, cols), bool), cell)
+    feats = FrameFeatures(PART_CLASSES, np.zeros((len(PART_CLASSES), 16, 20), np.float32), 4, 80, 64, flow)
+    return features_to_msg(feats, header(stamp_ns, f"{cam}_optical_frame"), cam)
+
+
+@pytest.fixture
+def tracker_files(tmp_path):
+    from awalker_tracker.inference.tracker import StartDescription
+    from awalker_tracker.model.body import BodyDescription
+    from awalker_tracker.vision.camera import Camera, save_calibration
+
+    cams = [Camera.look_at("cam0", 80, 64, 60.0, np.array([0.0, -6.0, 1.5]), np.array([0.0, 0.0, 0.9])),
+            Camera.look_at("cam1", 80, 64, 60.0, np.array([6.0, 0.0, 1.5]), np.array([0.0, 0.0, 0.9]))]
+    save_calibration(cams, tmp_path / "calibration.yaml")
+    (tmp_path / "start.yaml").write_text(StartDescription(1, (0.0, 0.0), 0.0, 1.3, 0.7, 0).to_yaml_text())
+    (tmp_path / "body.yaml").write_text(BodyDescription.default().to_yaml_text())
+    return tmp_path
+
+
+def test_tracker_node_pairs_cameras_acks_and_publishes(ros_context, tracker_files):
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import Header
+
+    from awalker_msgs.msg import ImageFeatures, PosteriorSummary
+    from awalker_tracker.nodes.convert import stamp_to_ns
+    from awalker_tracker.nodes.tracker import TrackerNode
+
+    node = TrackerNode(context=ros_context, parameter_overrides=[
+        Parameter("cameras", value=["cam0", "cam1"]),
+        Parameter("calibration", value=str(tracker_files / "calibration.yaml")),
+        Parameter("start_description", value=str(tracker_files / "start.yaml")),
+        Parameter("body_description", value=str(tracker_files / "body.yaml")),
+        Parameter("num_particles", value=50), Parameter("idle_flush_s", value=0.5)])
+    probe = Node("probe", context=ros_context)
+    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    pubs = {c: probe.create_publisher(ImageFeatures, f"/{c}/features", qos) for c in ("cam0", "cam1")}
+    posteriors, acks = [], []
+    probe.create_subscription(PosteriorSummary, "/awalker/posterior", posteriors.append, qos)
+    probe.create_subscription(Header, "/awalker/ack", acks.append, qos)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(probe)
+    stamps = [2_000_000_000 + k * 33_333_333 for k in range(8)]
+    try:
+        deadline = time.monotonic() + 5
+        while any(p.get_subscription_count() == 0 for p in pubs.values()) and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        for k, stamp in enumerate(stamps):
+            pubs["cam0"].publish(_features_msg(stamp, "cam0"))
+            if k != 4:                                   # cam1 never delivers frame 4
+                pubs["cam1"].publish(_features_msg(stamp, "cam1"))
+            for _ in range(5):
+                executor.spin_once(timeout_sec=0.02)
+        deadline = time.monotonic() + 10
+        while len(posteriors) < 6 and time.monotonic() < deadline:     # frames 1-7 minus frame 4
+            executor.spin_once(timeout_sec=0.05)
+        for _ in range(10):
+            executor.spin_once(timeout_sec=0.02)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        probe.destroy_node()
+    assert sorted(stamp_to_ns(a.stamp) for a in acks) == stamps          # every frame acknowledged once
+    tracked = [s for k, s in enumerate(stamps) if k >= 1 and k != 4]     # start frame 1; frame 4 incomplete
+    assert [stamp_to_ns(p.header.stamp) for p in posteriors] == tracked
+    assert [p.frame_index for p in posteriors] == [1, 2, 3, 5, 6, 7]     # bag frame indices kept
+    assert all(p.num_particles == 50 and len(p.map_pose.markers) == 13 for p in posteriors)
+    assert node.stats.sync_issues and "cam1" in node.stats.sync_issues[0]
+
+
+def test_tracker_node_needs_cameras(ros_context):
+    from awalker_tracker.errors import InputError
+    from awalker_tracker.nodes.tracker import TrackerNode
+
+    with pytest.raises(InputError, match="'cameras' is required"):
+        TrackerNode(context=ros_context)
