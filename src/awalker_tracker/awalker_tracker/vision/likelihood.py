@@ -107,7 +107,7 @@ def _project(camera: Camera, points: np.ndarray, component_first: bool = False
 
 @dataclass
 class _Silhouettes:
-    """Projected parts of N states: axis ends (px), half-widths (px), depths (m), all (N, P)."""
+    """Projected parts of N states: axis ends (px), half-widths (px), depths (m), all (P, N)."""
 
     ax: np.ndarray
     ay: np.ndarray
