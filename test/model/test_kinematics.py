@@ -157,7 +157,9 @@ def test_body_follows_walker_legs_and_speed():
     walker_speed = PARAMS.step_length(0.35) / (16 / 30)
     travel = np.linalg.norm(poses[-1].markers[:, M["pelvis"], :2] - poses[0].markers[:, M["pelvis"], :2], axis=1)
     body_speed = travel / (63 / 30)
-    assert np.median(body_speed) == pytest.approx(walker_speed, rel=0.25)
+    # Slower than the walker (~0.85x here): the swing knee (Table 1: k = 15, alpha = 0.9) is still
+    # bent at heel strike, so the foot lands short of where the knee-less walker puts it.
+    assert 0.75 * walker_speed < np.median(body_speed) < 1.02 * walker_speed
     # Pelvis near the leg length above the ground.
     z = np.array([p.markers[:, M["pelvis"], 2] for p in poses])
     assert 0.8 * BODY.leg_length < z.min() and z.max() < BODY.leg_length + 0.03  # toe pivot lifts the hip a little
