@@ -122,21 +122,6 @@ class FeatureExtractor:
         if self.background is None and int(count) > self.frame_index:
             self.background_frames = int(count)
 
-    def learn(self, rgb: np.ndarray, class_labels: np.ndarray | None = None,
-              background: BackgroundModel | None = None, fill_with_bands: bool = False) -> None:
-        """Fit the foreground mixtures on ``rgb`` (optionally with a class-label image, full or map
-        resolution); ``background`` replaces the learned background if given."""
-        m = measurements(rgb, self.config.downsample)
-        if background is not None:
-            self.background = background
-        if self.background is None:
-            raise ValueError("learn: no background model yet")
-        labels = None if class_labels is None else self._labels_at_map(class_labels, m.shape[:2])
-        self.foreground = learn_foreground(m, self.background, labels, self.body, self.classes, seed=self.config.seed,
-                                           fill_with_bands=fill_with_bands)
-        self._log(f"foreground mixtures learned at frame {self.frame_index} "
-                  f"({'label image' if labels is not None else 'height bands of the foreground blob'})")
-
     def _labels_at_map(self, labels: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
         labels = np.asarray(labels)
         if labels.shape == shape:

@@ -25,8 +25,8 @@ flow cell invalid) or hidden by a nearer part are dropped. Self-occlusion is an 
 per-state test between part pairs that can overlap (``occluder_table``: the legs and feet of
 one side against those of the other side, the upper legs against the torso): a row of
 sample points is hidden when its axis point lies within the occluder's projected band and
-behind the occluder's axis depth there. Pairs whose image bounding boxes do not meet are
-skipped. Cameras are conditionally independent: their terms add (eq. 12).
+behind the occluder's axis depth there. Pairs whose image bounding boxes do not meet, or
+whose occludee lies wholly in front, are skipped. Cameras are conditionally independent: their terms add (eq. 12).
 
 Cost: O(N x parts x points) element operations, all vectorised over the N states
 (``benchmarks/bench_likelihood.py``).
@@ -286,8 +286,11 @@ def _hidden_rows(parts: tuple[PartShape, ...], sil: _Silhouettes, cx: np.ndarray
     hmax = np.maximum(sil.ha, sil.hb)
     x0, x1 = np.fmin(sil.ax, sil.bx) - hmax, np.fmax(sil.ax, sil.bx) + hmax
     y0, y1 = np.fmin(sil.ay, sil.by) - hmax, np.fmax(sil.ay, sil.by) + hmax
+    near, far = np.fmin(sil.da, sil.db), np.fmax(sil.da, sil.db)
     for i, j in zip(occludees, occluders):
-        meet = np.flatnonzero((x0[i] < x1[j]) & (x0[j] < x1[i]) & (y0[i] < y1[j]) & (y0[j] < y1[i]))
+        # Candidates: bounding boxes meet and the occludee is not wholly in front of the occluder.
+        meet = np.flatnonzero((x0[i] < x1[j]) & (x0[j] < x1[i]) & (y0[i] < y1[j]) & (y0[j] < y1[i])
+                              & (far[i] > near[j]))
         if meet.size == 0:
             continue
         ax, ay = sil.ax[j, meet], sil.ay[j, meet]
