@@ -190,3 +190,60 @@ def test_node_requires_a_camera_name(ros_context):
 
     with pytest.raises(InputError, match="camera_name"):
         FeatureNode(context=ros_context)
+
+
+def test_features_for_every_frame_of_a_replayed_bag(ros_context, tmp_path):
+    """A written sequence bag (compressed png, start description, camera pose) replayed in lockstep
+    into the node: one ImageFeatures per frame, in order, start-pose foreground learning."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile
+    from std_msgs.msg import Header
+
+    from awalker_msgs.msg import ImageFeatures
+    from awalker_tools.bagio import START_DESCRIPTION_TOPIC, SequenceWriter
+    from awalker_tools.replay import ReplayConfig, Replayer
+    from awalker_tracker.nodes.convert import stamp_to_ns
+    from awalker_tracker.nodes.features import FeatureNode, features_from_msg
+
+    frames = scene_frames()
+    cam = scene_camera()
+    stamps = [1_000_000_000 + k * 33_333_333 for k in range(len(frames))]
+    bag = tmp_path / "scene.bag"
+    with SequenceWriter(bag, [cam], compressed=True) as writer:
+        writer.write_text(START_DESCRIPTION_TOPIC, stamps[0], "start: {frame: 3, position: [0.0, 0.0], heading: 0.0, "
+                                                             "speed: 1.3, step_length: 0.7, stance_leg: left}\n")
+        for stamp, rgb in zip(stamps, frames):
+            writer.write_frame(stamp, {cam.name: rgb})
+    node = FeatureNode(context=ros_context, parameter_overrides=[
+        Parameter("camera_name", value=cam.name), Parameter("downsample", value=2), Parameter("flow_cell_size", value=8)])
+    driver = Node("replay_driver", context=ros_context)
+    acker = Node("acker", context=ros_context)
+    ack = acker.create_publisher(Header, "/awalker/ack", QoSProfile(depth=50))
+    received: list = []
+
+    def on_features(msg):
+        received.append(msg)
+        ack.publish(Header(stamp=msg.header.stamp))
+
+    acker.create_subscription(ImageFeatures, f"/{cam.name}/features", on_features, QoSProfile(depth=50))
+    executor = SingleThreadedExecutor(context=ros_context)
+    for n in (node, driver, acker):
+        executor.add_node(n)
+    try:
+        replayer = Replayer(driver, bag, ReplayConfig(lockstep=True, wait_for_subscribers=10.0, ack_timeout=20.0))
+        deadline = time.monotonic() + 60
+        while replayer.step() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=replayer.next_wait())
+        for _ in range(10):
+            executor.spin_once(timeout_sec=0.02)
+        assert replayer.summary.frames == len(frames)
+        assert [stamp_to_ns(m.header.stamp) for m in received] == stamps
+        assert node.stats.foreground_from == "start pose" and node.stats.skipped == 0
+        maps = [features_from_msg(m) for m in received]
+        assert not maps[2].llr.any() and maps[3].llr.max() > 5 and maps[-1].flow.valid.mean() > 0.5
+    finally:
+        executor.shutdown()
+        for n in (node, driver, acker):
+            n.destroy_node()
