@@ -118,7 +118,8 @@ def test_from_mocap(tmp_path):
 @pytest.mark.parametrize(
     ("args", "message"),
     [(["--cameras", "5"], "--cameras must be 1..4"), (["--turn", "120"], "--turn must be within"),
-     (["--from-mocap", "missing.asf", "missing.amc"], "missing.asf")],
+     (["--from-mocap", "missing.asf", "missing.amc"], "missing.asf"),
+     (["--from-mocap", "a.asf", "b.amc", "--turn", "30"], "is replayed as recorded")],
 )
 def test_bad_options_are_one_line_errors(tmp_path, capsys, args, message):
     assert synth(tmp_path, *args) == 2

@@ -71,6 +71,9 @@ class SynthConfig:
             raise InputError(f"synth: need --frames >= 2 (got {self.frames}) and background frames >= 0")
         if abs(self.turn_deg) > 90:
             raise InputError(f"synth: --turn must be within [-90, 90] degrees, got {self.turn_deg:g}")
+        if self.mocap is not None and (self.speed_change or self.turn_deg):
+            raise InputError("synth: --speed-change and --turn shape the walker's motion; a --from-mocap walk "
+                             "is replayed as recorded")
         if self.width < 64 or self.height < 48:
             raise InputError(f"synth: image size {self.width}x{self.height} is too small")
 

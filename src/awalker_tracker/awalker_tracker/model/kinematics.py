@@ -172,27 +172,45 @@ class KinematicState:
 
 
 # ---- rotations (vectorised) ---------------------------------------------------------------
-def _rot(axis: int, angle: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) about a coordinate axis (0 = x, 1 = y, 2 = z)."""
-    angle = np.asarray(angle, float)
+def _rot_z(angle: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) about z."""
     c, s = np.cos(angle), np.sin(angle)
-    r = np.zeros(angle.shape + (3, 3))
-    i, j = [(1, 2), (2, 0), (0, 1)][axis]
-    r[..., axis, axis] = 1.0
-    r[..., i, i] = c
-    r[..., j, j] = c
-    r[..., i, j] = -s
-    r[..., j, i] = s
+    r = np.zeros(np.shape(angle) + (3, 3))
+    r[..., 0, 0] = c
+    r[..., 0, 1] = -s
+    r[..., 1, 0] = s
+    r[..., 1, 1] = c
+    r[..., 2, 2] = 1.0
     return r
 
 
+def _turn(rotation: np.ndarray, axis: int, angle: np.ndarray) -> np.ndarray:
+    """rotation @ R_axis(angle) for stacks (..., 3, 3) and angles (...): only two columns change,
+    so this is much cheaper than a batched 3x3 matmul."""
+    c = np.cos(angle)[..., None]
+    s = np.sin(angle)[..., None]
+    i, j = ((1, 2), (2, 0), (0, 1))[axis]
+    col_i, col_j = rotation[..., :, i], rotation[..., :, j]
+    out = rotation.copy()
+    out[..., :, i] = c * col_i + s * col_j
+    out[..., :, j] = c * col_j - s * col_i
+    return out
+
+
 def _apply(rotation: np.ndarray, vector: np.ndarray) -> np.ndarray:
-    """rotation (..., 3, 3) @ vector (3,) or (..., 3)."""
-    return np.einsum("...ij,...j->...i", rotation, np.broadcast_to(vector, rotation.shape[:-1]))
+    """rotation (..., 3, 3) @ constant vector (3,) -> (..., 3), as a sum of scaled columns."""
+    out = 0.0
+    for k in range(3):
+        if vector[k] != 0.0:
+            out = out + vector[k] * rotation[..., :, k]
+    return out if not np.isscalar(out) else np.zeros(rotation.shape[:-1])
 
 
-_LEG_SEGMENT = np.diag([1.0, -1.0, -1.0])                        # (fwd, left, up) -> (fwd, -left, down)
-_FOOT_SEGMENT = np.array([[0.0, 0, 1], [0, -1, 0], [1, 0, 0]])   # (fwd, left, up) -> (up, -left, fwd)
+# Segment frames from joint frames (columns forward, left, up): legs (fwd, -left, down),
+# feet (up, -left, along the foot).
+_LEG_SEGMENT_SIGNS = np.array([1.0, -1.0, -1.0])
+_FOOT_SEGMENT_COLUMNS = np.array([2, 1, 0])
+_FOOT_SEGMENT_SIGNS = np.array([1.0, -1.0, 1.0])
 
 
 @dataclass
@@ -219,16 +237,16 @@ def leg_angles(walker: WalkerState) -> np.ndarray:
 def _local_pose(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray) -> _LocalPose:
     """Forward kinematics relative to the pelvis. legs (N, 2) sagittal leg angles, dofs (N, 13)."""
     d = KinematicState.unpack(dofs)
-    heading = _rot(2, d["heading"])                                           # (N,3,3)
-    torso = heading @ _rot(1, d["torso_lean"][:, 0]) @ _rot(0, d["torso_lean"][:, 1])
-    hips = np.stack([_apply(torso, [0.0, s * body.hip_width / 2, 0.0]) for s in _SIDE], axis=1)
+    heading = _rot_z(d["heading"])                                            # (N,3,3)
+    torso = _turn(_turn(heading, 1, d["torso_lean"][:, 0]), 0, d["torso_lean"][:, 1])
+    hips = (0.5 * body.hip_width) * _SIDE[None, :, None] * torso[:, None, :, 1]
     # Leg angle phi about the lateral axis (foot ahead for phi > 0), then abduction, rotation.
-    thigh = (heading[:, None] @ _rot(1, -legs) @ _rot(0, _SIDE * d["hip_abduction"])
-             @ _rot(2, -_SIDE * d["hip_rotation"]))
-    knees = hips + _apply(thigh, [0.0, 0.0, -body.upper_leg_length])
-    shank = thigh @ _rot(1, d["knee"])
-    ankles = knees + _apply(shank, [0.0, 0.0, -body.lower_leg_length])
-    foot = shank @ _rot(1, -d["ankle"][..., 0]) @ _rot(0, -_SIDE * d["ankle"][..., 1])
+    thigh = np.repeat(heading[:, None], 2, axis=1)
+    thigh = _turn(_turn(_turn(thigh, 1, -legs), 0, _SIDE * d["hip_abduction"]), 2, -_SIDE * d["hip_rotation"])
+    knees = hips - body.upper_leg_length * thigh[..., :, 2]
+    shank = _turn(thigh, 1, d["knee"])
+    ankles = knees - body.lower_leg_length * shank[..., :, 2]
+    foot = _turn(_turn(shank, 1, -d["ankle"][..., 0]), 0, -_SIDE * d["ankle"][..., 1])
     return _LocalPose(torso, hips, thigh, knees, shank, ankles, foot)
 
 
@@ -443,8 +461,8 @@ def pose_body(body: BodyDescription, params: WalkerParams, walker: WalkerState, 
     hips = local.hips + shift[:, None]
     knees = local.knees + shift[:, None]
     ankles = local.ankles + shift[:, None]
-    heel_local = np.array([-body.heel_offset, 0.0, -body.ankle_height])
-    toe_local = np.array([body.foot_length - body.heel_offset, 0.0, -body.ankle_height])
+    heel_local = (-body.heel_offset, 0.0, -body.ankle_height)
+    toe_local = (body.foot_length - body.heel_offset, 0.0, -body.ankle_height)
     heels = ankles + _apply(local.foot, heel_local)
     toes = ankles + _apply(local.foot, toe_local)
     markers = np.stack([pelvis, thorax, head, hips[:, 0], hips[:, 1], knees[:, 0], knees[:, 1],
@@ -452,12 +470,12 @@ def pose_body(body: BodyDescription, params: WalkerParams, walker: WalkerState, 
     assert markers.shape[1] == len(MARKER_NAMES)
 
     foot_axis_height = body.foot_radii_heel[0]  # the foot cylinder's bottom touches the heel end of the sole line
-    foot_origin = ankles + _apply(local.foot, heel_local + np.array([0.0, 0.0, foot_axis_height]))
+    foot_origin = ankles + _apply(local.foot, (heel_local[0], 0.0, heel_local[2] + foot_axis_height))
     origin = np.stack([pelvis, thorax, hips[:, 0], hips[:, 1], knees[:, 0], knees[:, 1],
                        foot_origin[:, 0], foot_origin[:, 1]], axis=1)
-    thigh = local.thigh @ _LEG_SEGMENT
-    shank = local.shank @ _LEG_SEGMENT
-    foot = local.foot @ _FOOT_SEGMENT
+    thigh = local.thigh * _LEG_SEGMENT_SIGNS
+    shank = local.shank * _LEG_SEGMENT_SIGNS
+    foot = local.foot[..., _FOOT_SEGMENT_COLUMNS] * _FOOT_SEGMENT_SIGNS
     rotation = np.stack([local.torso, local.torso, thigh[:, 0], thigh[:, 1], shank[:, 0], shank[:, 1],
                          foot[:, 0], foot[:, 1]], axis=1)
 
