@@ -101,3 +101,34 @@ def test_extractor_learns_from_the_median_when_no_background_frames_are_known():
     out = extractor.process(walker[0], occlusion_mask=mask)
     assert not out.llr[:, :, : CAM.width // 4].any() and out.llr[:, :, CAM.width // 4 :].any()
     assert not out.flow.valid[:, : out.flow.shape[1] // 2].any() and out.flow.valid[:, out.flow.shape[1] // 2 + 1 :].any()
+
+
+def test_lighting_changes_are_divided_out():
+    """The room darkens by 25 % with a tint after the background frames: with gain compensation the
+    background stays background and the walker stands out; without it the background does not."""
+    import cv2
+
+    from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
+    from awalker_tracker.vision.foreground import class_labels_from_parts
+    from vision_scene import BODY, render_frames, walking_poses
+
+    rng = np.random.default_rng(5)
+    clean = background_image(CAM)
+    frames, parts = render_frames(CAM, walking_poses(3), clean)
+    body = cv2.dilate((parts[2] >= 0).astype(np.uint8), np.ones((9, 9), np.uint8))[1::2, 1::2] > 0
+    inner = class_labels_from_parts(parts[2], tuple(p.part_class for p in BODY.parts))[1::2, 1::2] >= 0
+
+    def lit(image, gain):
+        return np.clip(image * np.asarray(gain), 0, 255).astype(np.uint8)
+
+    results = {}
+    for compensate in (True, False):
+        extractor = FeatureExtractor(FeatureConfig(background_frames=4, downsample=2, compensate_gain=compensate))
+        for k in range(4):
+            extractor.process(noisy(lit(clean, 1.0 - 0.03 * k), rng))
+        extractor.process(lit(frames[0], 0.9))                      # learns the foreground
+        out = extractor.process(lit(frames[2], (0.72, 0.75, 0.8)))  # darker, bluish light
+        best = out.llr.max(axis=0)
+        results[compensate] = (np.mean(best[~body] < 0), np.mean(best[inner]))
+    assert results[True][0] > 0.97 and results[True][1] > 5, results
+    assert results[False][0] < 0.5, results

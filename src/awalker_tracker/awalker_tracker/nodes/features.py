@@ -164,6 +164,7 @@ class FeatureNode(Node):
         outlier = declare("outlier_probability", 0.02, "uniform outlier share of the appearance densities")
         clip = declare("llr_clip", 25.0, "bound on each pixel's log-likelihood ratio")
         adapt = declare("adapt_rate", 0.0, "background adaptation rate per frame (0 = frozen)")
+        gain = declare("compensate_gain", True, "divide out global per-channel lighting changes")
         self.use_start_pose = bool(declare("start_pose_labels", True, "learn the foreground from the body "
                                            "projected at the start pose (needs camera_info and camera_pose)"))
         self.verbose = bool(declare("verbose", False, "log model learning to stderr"))
@@ -173,7 +174,7 @@ class FeatureNode(Node):
             self.config = FeatureConfig(
                 downsample=int(downsample), background_frames=max(self.background_param, 0),
                 median_frames=int(median), outlier_probability=float(outlier), llr_clip=float(clip),
-                adapt_rate=float(adapt), flow=FlowConfig(cell_size=int(cell), scale=float(scale), floor_std=float(floor)))
+                adapt_rate=float(adapt), compensate_gain=bool(gain), flow=FlowConfig(cell_size=int(cell), scale=float(scale), floor_std=float(floor)))
         except ValueError as exc:
             raise InputError(f"awalker_features ({self.camera_name}): {exc}") from None
         self.extractor = FeatureExtractor(self.config, verbose=self.verbose)

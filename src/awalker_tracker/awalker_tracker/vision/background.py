@@ -11,7 +11,9 @@ the person moves (``learn_background_robust``: the temporal median, then pixels 
 Mahalanobis residual exceeds a chi-square threshold are rejected as outliers and the mean and
 covariance are re-estimated from the inliers). A covariance floor keeps the model from
 becoming over-confident on perfectly static synthetic frames. ``adapt`` blends in a new frame
-where it is classified as background (optional slow adaptation).
+where it is classified as background (optional slow adaptation). ``illumination_gains``
+estimates a global per-channel gain between a frame and the background, so that lighting
+changes (camera auto-exposure, clouds) can be divided out before comparing.
 """
 from __future__ import annotations
 
@@ -82,6 +84,21 @@ class BackgroundModel:
         keep = self.foreground_mask(m) if foreground is None else foreground
         weight = np.where(keep, 0.0, rate).astype(np.float32)[..., None]
         return BackgroundModel(self.mean + weight * (m - self.mean), self.covariance)
+
+
+def illumination_gains(m: np.ndarray, reference: np.ndarray, stride: int = 3) -> np.ndarray:
+    """Per-channel gains (5,) mapping ``reference`` measurements (h, w, 5) to ``m``: the median
+    ratio of each colour channel over every ``stride``-th pixel (robust to the person, who covers
+    a small part of the image), the mean colour gain for the two gradient channels."""
+    sample = m[::stride, ::stride, :3].reshape(-1, 3)
+    ref = reference[::stride, ::stride, :3].reshape(-1, 3)
+    gains = np.ones(MEASUREMENT_DIM, np.float32)
+    for c in range(3):
+        bright = ref[:, c] > 8.0
+        if np.count_nonzero(bright) >= 16:
+            gains[c] = np.median(sample[bright, c] / ref[bright, c])
+    gains[3:] = gains[:3].mean()
+    return np.clip(gains, 0.05, 20.0)
 
 
 def gaussian_log_density(residual: np.ndarray, covariance: np.ndarray) -> np.ndarray:

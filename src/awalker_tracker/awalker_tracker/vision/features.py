@@ -19,6 +19,10 @@ Learning, in order of preference (all automatic, no hand labels needed):
    leg phase is unknown) filled by (b); else (b) horizontal bands of the largest foreground
    blob at the body's proportions (head, torso, legs, feet from the top).
 Maps are zero before the models exist; the flow is valid from the second frame on.
+Illumination: each frame's global per-channel gain relative to the first frame
+(``illumination_gains``, a median ratio) is divided out of its measurements before learning
+and comparing (``compensate_gain``), so slow or sudden lighting changes do not turn the whole
+background into foreground.
 Occlusion mask (255 / True = occluded): its pixels get ratio 0, cells it touches are invalid.
 """
 from __future__ import annotations
@@ -33,6 +37,7 @@ from awalker_tracker.vision.background import (
     BackgroundModel,
     fit_background,
     fit_background_robust,
+    illumination_gains,
     measurements,
 )
 from awalker_tracker.vision.flow import FlowConfig, FlowGrid, GridFlow, to_grey
@@ -49,6 +54,7 @@ class FeatureConfig:
     outlier_probability: float = 0.02  # uniform outlier share of both appearance densities
     llr_clip: float = 25.0            # |log-likelihood ratio| bound per pixel (a safety net)
     adapt_rate: float = 0.0           # background adaptation per frame (0 = frozen)
+    compensate_gain: bool = True      # divide out global per-channel illumination changes
     flow: FlowConfig = field(default_factory=FlowConfig)
     seed: int = 0
 
@@ -153,6 +159,12 @@ class FeatureExtractor:
         map_mask = occlusion_map_mask(occlusion_mask, cfg.downsample, m.shape[:2])
         if self.background is not None and self.background.shape != m.shape[:2]:
             raise ValueError(f"frame size {width}x{height} differs from the first frames'")
+        if cfg.compensate_gain:
+            # Lighting: measurements are expressed in the illumination of the first frame seen.
+            reference = self.background.mean if self.background is not None else (
+                self._buffer[0] if self._buffer else None)
+            if reference is not None and reference.shape == m.shape:
+                m = m / illumination_gains(m, reference)
         # ---- model learning ----------------------------------------------------------------
         if self.background is None:
             known = self.background_frames > 0
