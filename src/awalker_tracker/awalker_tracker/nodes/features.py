@@ -169,7 +169,7 @@ class FeatureNode(Node):
                                            "projected at the start pose (needs camera_info and camera_pose)"))
         self.verbose = bool(declare("verbose", False, "log model learning to stderr"))
         if not self.camera_name:
-            raise InputError("awalker_features: parameter 'camera_name' is required (e.g. -p camera_name:=cam0)")
+            raise InputError("parameter 'camera_name' is required (e.g. --ros-args -p camera_name:=cam0)")
         try:
             self.config = FeatureConfig(
                 downsample=int(downsample), background_frames=max(self.background_param, 0),
@@ -299,17 +299,21 @@ class FeatureNode(Node):
         self.get_logger().error(f"{text}; frame skipped ({self.stats.skipped} so far)")
 
 
-def main(args: list[str] | None = None) -> None:
+def main(args: list[str] | None = None) -> int:
+    """Console script ``awalker_features``; exit status 2 on bad parameters."""
     rclpy.init(args=args)
     node = None
+    status = 0
     try:
         node = FeatureNode()
         rclpy.spin(node)
     except InputError as exc:
         print(f"awalker_features: error: {exc}", file=sys.stderr)
+        status = 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    return status
