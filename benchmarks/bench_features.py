@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -158,6 +159,7 @@ def main() -> None:
     flow_ms = (time.perf_counter() - t0) / (len(greys) - 1)
     print(json.dumps({
         "benchmark": "features", "width": 640, "height": 480, "frames": args.frames,
+        "load_average_1min": os.getloadavg()[0], "cpus": os.cpu_count(),
         "downsample": config.downsample, "flow_cell_size": config.flow.cell_size, "flow_scale": config.flow.scale,
         "frames_per_s": args.frames / total,
         "ms_per_frame": {k: 1e3 * v / args.frames for k, v in stages.items()},
