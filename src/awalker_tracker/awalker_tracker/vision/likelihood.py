@@ -50,13 +50,15 @@ class LikelihoodConfig:
     points_along: int = 6           # sample rows along each part's axis
     points_across: int = 2          # samples per row across the silhouette
     flow_row_step: int = 2          # flow compared at every flow_row_step-th row (cells >> rows)
+    chunk_states: int = 4096        # states per chunk (keeps the sample arrays in cache)
     appearance_weight: float = 1.0  # multiplies each part's mean log-likelihood ratio
     flow_weight: float = 1.0        # multiplies each part's mean flow log-ratio
     self_occlusion: bool = True
 
     def __post_init__(self) -> None:
-        if self.points_along < 1 or self.points_across < 1 or self.flow_row_step < 1:
-            raise ValueError("LikelihoodConfig: points_along, points_across and flow_row_step must be >= 1")
+        if min(self.points_along, self.points_across, self.flow_row_step, self.chunk_states) < 1:
+            raise ValueError("LikelihoodConfig: points_along, points_across, flow_row_step and chunk_states "
+                             "must be >= 1")
 
 
 def occluder_table(parts: tuple[PartShape, ...]) -> np.ndarray:
@@ -118,6 +120,10 @@ class _Silhouettes:
     da: np.ndarray
     db: np.ndarray
 
+    def take(self, chunk: slice) -> "_Silhouettes":
+        """The states in ``chunk`` (views)."""
+        return _Silhouettes(*(getattr(self, f)[:, chunk] for f in ("ax", "ay", "bx", "by", "ha", "hb", "da", "db")))
+
 
 def _silhouettes(parts: tuple[PartShape, ...], segments: BodySegments, camera: Camera,
                  widths: bool = True) -> _Silhouettes:
@@ -160,69 +166,122 @@ def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, 
                           config: LikelihoodConfig = LikelihoodConfig()) -> np.ndarray:
     """Log-likelihood (N,) of one camera's features (see the module docstring).
 
-    Arrays are laid out (A, P, N) and (J, A, P, N) so that sums over the few sample rows and
-    columns add contiguous blocks and per-part slices are contiguous."""
+    The states are processed in chunks of ``config.chunk_states`` so that the per-sample arrays
+    stay in the CPU cache; arrays are laid out (A, P, n) and (J, A, P, n) so that sums over the
+    few sample rows and columns add contiguous blocks."""
     n, p = segments.origin.shape[:2]
     if p != len(parts):
         raise ValueError(f"likelihood: segments have {p} parts, body has {len(parts)}")
     if (features.image_width, features.image_height) != (camera.width, camera.height):
         raise ValueError(f"likelihood: features of camera {camera.name} are {features.image_width}x"
                          f"{features.image_height}, calibration says {camera.width}x{camera.height}")
+    sil = _silhouettes(parts, segments, camera)
+    # Eq. 11: 1 / expected area of each part, its side-on area at the part's median depth (P,).
+    size = np.array([q.length * (np.mean(q.radii_start) + np.mean(q.radii_end)) for q in parts])   # m^2
+    median_depth = np.maximum(np.median(0.5 * (sil.da + sil.db), axis=1), 1e-3)
+    expected = np.maximum(camera.K[0, 0] * camera.K[1, 1] * size / median_depth ** 2, 1.0).astype(np.float32)
+    appearance = _AppearanceTable(parts, features, occlusion_mask)
+    flow = _FlowTable(features.flow, occlusion_mask) if config.flow_weight > 0 else None
+    if flow is not None and not flow.any:
+        flow = None
+    prev = _silhouettes(parts, prev_segments, camera, widths=False) if flow is not None else None
+    total = np.empty(n)
+    step = max(int(config.chunk_states), 1)
+    for start in range(0, n, step):
+        chunk = slice(start, min(start + step, n))
+        total[chunk] = _chunk_log_likelihood(parts, sil.take(chunk), None if prev is None else prev.take(chunk),
+                                             expected, appearance, flow, config)
+    return total
+
+
+class _AppearanceTable:
+    """Log-likelihood-ratio maps with a zero border (indices clipped into it contribute nothing),
+    flattened, and each part's class offset into them."""
+
+    def __init__(self, parts: tuple[PartShape, ...], features: FrameFeatures, occlusion_mask: np.ndarray | None):
+        llr = features.llr
+        mask_map = occlusion_map_mask(occlusion_mask, features.downsample, features.map_shape)
+        if mask_map is not None:
+            llr = np.where(mask_map[None], np.float32(0), llr)
+        self.h, self.w = features.map_shape
+        padded = np.zeros((len(features.classes), self.h + 2, self.w + 2), np.float32)
+        padded[:, 1:-1, 1:-1] = llr
+        self.values = padded.reshape(-1)
+        self.inv_ds = np.float32(1.0 / features.downsample)
+        classes = np.array([features.classes.index(q.part_class) for q in parts], np.int32)
+        self.offsets = (classes * ((self.h + 2) * (self.w + 2)))[:, None]
+
+
+class _FlowTable:
+    """Per-cell measured flow, inverse covariance and log(1 + e0^2) (the zero-motion term), as one
+    table with a trailing 'invalid' row; cells under the occlusion mask are invalid."""
+
+    def __init__(self, grid, occlusion_mask: np.ndarray | None):
+        valid = grid.valid
+        cell_mask = occlusion_cell_mask(occlusion_mask, *grid.shape, grid.cell_size)
+        if cell_mask is not None:
+            valid = valid & ~cell_mask
+        self.any = bool(valid.any())
+        self.rows, self.cols = grid.shape
+        self.inv_cell = np.float32(1.0 / grid.cell_size)
+        cov = grid.covariance.astype(np.float64)
+        det = cov[..., 0, 0] * cov[..., 1, 1] - cov[..., 0, 1] * cov[..., 1, 0]
+        i00, i01, i11 = cov[..., 1, 1] / det, -cov[..., 0, 1] / det, cov[..., 0, 0] / det
+        fx, fy = grid.flow[..., 0].astype(np.float64), grid.flow[..., 1].astype(np.float64)
+        e0 = (fx * (i00 * fx + 2 * i01 * fy) + i11 * fy * fy) / STUDENT_T_DOF
+
+        def padded(a: np.ndarray) -> np.ndarray:
+            return np.append(np.where(valid, a, 0).reshape(-1), 0).astype(np.float32)
+
+        self.fx, self.fy, self.i00, self.i01, self.i11, self.log0 = (
+            padded(a) for a in (fx, fy, i00, i01, i11, np.log1p(e0)))
+        self.valid = np.append(valid.reshape(-1), False)
+
+
+def _chunk_log_likelihood(parts: tuple[PartShape, ...], sil: "_Silhouettes", prev: "_Silhouettes | None",
+                          expected: np.ndarray, appearance: _AppearanceTable, flow: _FlowTable | None,
+                          config: LikelihoodConfig) -> np.ndarray:
+    """Appearance + flow log-likelihood of a chunk of states, (n,) float64."""
     A, J = config.points_along, config.points_across
     t = ((np.arange(A) + 0.5) / A).astype(np.float32)[:, None, None]      # row positions along the axis
     s = (2 * (np.arange(J) + 0.5) / J - 1).astype(np.float32)              # across, in half-widths
-    sil = _silhouettes(parts, segments, camera)
     dx, dy = sil.bx - sil.ax, sil.by - sil.ay
     length = np.sqrt(dx * dx + dy * dy)
     long_enough = length > 1e-3
     inv_len = np.float32(1) / np.where(long_enough, length, np.float32(1))
     nx = np.where(long_enough, -dy * inv_len, np.float32(1))              # unit normal of the axis in the image
     ny = np.where(long_enough, dx * inv_len, np.float32(0))
-    # Row centres, half-widths and depths (A, P, N).
+    # Row centres and half-widths (A, P, n).
     cx = sil.ax + t * dx
     cy = sil.ay + t * dy
     half = sil.ha + t * (sil.hb - sil.ha)
-    depth = sil.da + t * (sil.db - sil.da)
     in_front = (sil.da > 1e-6) & (sil.db > 1e-6)
     row_ok = np.broadcast_to(in_front, cx.shape).copy()
     if config.self_occlusion:
         # The occlusion test at every other row (pairs of rows share it): it is the costliest step.
-        hidden = _hidden_rows(parts, sil, cx[::2], cy[::2], depth[::2])
+        t_even = t[::2]
+        hidden = _hidden_rows(parts, sil, cx[::2], cy[::2], sil.da + t_even * (sil.db - sil.da))
         row_ok &= ~np.repeat(hidden, 2, axis=0)[:A]
-    # Eq. 11 weights: projected area over expected area (P, N).
-    area = np.where(in_front, length * (sil.ha + sil.hb), np.float32(0))
-    size = np.array([q.length * (np.mean(q.radii_start) + np.mean(q.radii_end)) for q in parts])   # m^2
-    median_depth = np.maximum(np.median(0.5 * (sil.da + sil.db), axis=1), 1e-3)
-    expected = np.maximum(camera.K[0, 0] * camera.K[1, 1] * size / median_depth ** 2, 1.0).astype(np.float32)
-    scale = area / expected[:, None]
-    # ---- appearance: sample points (J, A, P, N) --------------------------------------------
-    llr = features.llr
-    mask_map = occlusion_map_mask(occlusion_mask, features.downsample, features.map_shape)
-    if mask_map is not None:
-        llr = np.where(mask_map[None], np.float32(0), llr)
-    h, w = features.map_shape
-    # Maps padded with a zero border: indices clipped into the border contribute nothing.
-    padded = np.zeros((len(features.classes), h + 2, w + 2), np.float32)
-    padded[:, 1:-1, 1:-1] = llr
-    table = padded.reshape(-1)
-    inv_ds = np.float32(1.0 / features.downsample)
-    offset = s[:, None, None, None] * half                                  # (J, A, P, N) px
+    # Eq. 11 weights: projected area over expected area (P, n).
+    scale = np.where(in_front, length * (sil.ha + sil.hb), np.float32(0)) / expected[:, None]
+    # ---- appearance: sample points (J, A, P, n) --------------------------------------------
+    tab = appearance
+    offset = s[:, None, None, None] * half                                  # px across the axis
     col = offset * nx
     col += cx
-    col *= inv_ds
+    col *= tab.inv_ds
     col += 1
     row = offset * ny
     row += cy
-    row *= inv_ds
+    row *= tab.inv_ds
     row += 1
-    np.clip(col, 0, w + 1, out=col)
-    np.clip(row, 0, h + 1, out=row)
-    class_index = np.array([features.classes.index(q.part_class) for q in parts], np.int32)
+    np.clip(col, 0, tab.w + 1, out=col)
+    np.clip(row, 0, tab.h + 1, out=row)
     flat = row.astype(np.int32)
-    flat *= w + 2
+    flat *= tab.w + 2
     flat += col.astype(np.int32)
-    flat += (class_index * ((h + 2) * (w + 2)))[:, None]
-    values = table[flat]
+    flat += tab.offsets
+    values = tab.values[flat]
     row_sums = values[0]
     for j in range(1, J):
         row_sums = row_sums + values[j]
@@ -231,50 +290,24 @@ def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, 
     for a in range(1, A):
         part_sums = part_sums + row_sums[a]
     total = config.appearance_weight / (A * J) * np.sum(scale * part_sums, axis=0, dtype=np.float64)
-    # ---- flow at the row centres (A, P, N) ------------------------------------------------
-    grid = features.flow
-    valid = grid.valid
-    cell_mask = occlusion_cell_mask(occlusion_mask, *grid.shape, grid.cell_size)
-    if cell_mask is not None:
-        valid = valid & ~cell_mask
-    if config.flow_weight > 0 and valid.any():
+    # ---- flow at the axis points of every flow_row_step-th row (rows, P, n) ---------------
+    if flow is not None and prev is not None:
         pick = slice(None, None, config.flow_row_step)       # flow cells are coarser than the rows
-        rows_used = len(range(A)[pick])
-        total += config.flow_weight / rows_used * _flow_term(parts, prev_segments, camera, grid, valid, t[pick],
-                                                              cx[pick], cy[pick], row_ok[pick], scale)
+        tp, fx_, fy_, ok = t[pick], cx[pick], cy[pick], row_ok[pick]
+        mu = fx_ - (prev.ax + tp * (prev.bx - prev.ax))                    # predicted motion (px/frame)
+        mv = fy_ - (prev.ay + tp * (prev.by - prev.ay))
+        fcol, frow = fx_ * flow.inv_cell, fy_ * flow.inv_cell
+        inside = (fcol >= 0) & (fcol < flow.cols) & (frow >= 0) & (frow < flow.rows) & ok
+        inside &= (prev.da > 1e-6) & (prev.db > 1e-6)
+        cell = np.where(inside, frow.astype(np.int32) * flow.cols + fcol.astype(np.int32), flow.valid.size - 1)
+        du = flow.fx[cell] - mu
+        dv = flow.fy[cell] - mv
+        e2 = (du * (flow.i00[cell] * du + 2 * flow.i01[cell] * dv) + flow.i11[cell] * dv * dv) \
+            * np.float32(1 / STUDENT_T_DOF)
+        ratio = np.float32(-0.5 * (STUDENT_T_DOF + 2)) * (np.log1p(e2) - flow.log0[cell])
+        ratio = np.where(flow.valid[cell], ratio, np.float32(0))
+        total += config.flow_weight / ratio.shape[0] * np.sum(scale * ratio.sum(axis=0), axis=0, dtype=np.float64)
     return total
-
-
-def _flow_term(parts: tuple[PartShape, ...], prev_segments: BodySegments, camera: Camera, grid, valid: np.ndarray,
-               t: np.ndarray, cx: np.ndarray, cy: np.ndarray, row_ok: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """Sum over parts of scale x sum over rows of log p(v | u) - log p(v | 0), (N,) float64."""
-    rows, cols = grid.shape
-    prev = _silhouettes(parts, prev_segments, camera, widths=False)
-    mu = cx - (prev.ax + t * (prev.bx - prev.ax))                           # predicted motion (px/frame)
-    mv = cy - (prev.ay + t * (prev.by - prev.ay))
-    cov = grid.covariance.astype(np.float64)
-    det = cov[..., 0, 0] * cov[..., 1, 1] - cov[..., 0, 1] * cov[..., 1, 0]
-    i00, i01, i11 = cov[..., 1, 1] / det, -cov[..., 0, 1] / det, cov[..., 0, 0] / det
-    fx, fy = grid.flow[..., 0].astype(np.float64), grid.flow[..., 1].astype(np.float64)
-    e0 = (fx * (i00 * fx + 2 * i01 * fy) + i11 * fy * fy) / STUDENT_T_DOF
-
-    def padded(a: np.ndarray) -> np.ndarray:    # per-cell table with a trailing 'invalid' entry
-        return np.append(np.where(valid, a, 0).reshape(-1), 0).astype(np.float32)
-
-    T_fx, T_fy, T_00, T_01, T_11, T_l0 = (padded(a) for a in (fx, fy, i00, i01, i11, np.log1p(e0)))
-    ok = np.append(valid.reshape(-1), False)
-    inv_cell = np.float32(1.0 / grid.cell_size)
-    fcol, frow = cx * inv_cell, cy * inv_cell
-    inside = (fcol >= 0) & (fcol < cols) & (frow >= 0) & (frow < rows) & row_ok
-    inside &= (prev.da > 1e-6) & (prev.db > 1e-6)
-    cell = np.where(inside, frow.astype(np.int32) * cols + fcol.astype(np.int32), ok.size - 1)
-    du = T_fx[cell] - mu
-    dv = T_fy[cell] - mv
-    e2 = (du * (T_00[cell] * du + 2 * T_01[cell] * dv) + T_11[cell] * dv * dv) * np.float32(1 / STUDENT_T_DOF)
-    ratio = np.float32(-0.5 * (STUDENT_T_DOF + 2)) * (np.log1p(e2) - T_l0[cell])
-    ratio = np.where(ok[cell], ratio, np.float32(0))
-    per_part = ratio.sum(axis=0)
-    return np.sum(scale * per_part, axis=0, dtype=np.float64)
 
 
 def _hidden_rows(parts: tuple[PartShape, ...], sil: _Silhouettes, cx: np.ndarray, cy: np.ndarray,
