@@ -45,6 +45,7 @@ class TrackOptions:
     lookahead: int = 3
     trust: float = 0.9
     seed: int = 0
+    likelihood_scale: float = 0.1
     overlays: bool = True
     storage: str = "mcap"
     quiet: bool = False
@@ -182,6 +183,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
             Parameter("body_description", value=str(out / BODY_FILE)),
             Parameter("num_particles", value=int(options.particles)), Parameter("lookahead", value=int(options.lookahead)),
             Parameter("trust", value=float(options.trust)), Parameter("seed", value=int(options.seed)),
+            Parameter("likelihood_scale", value=float(options.likelihood_scale)),
             Parameter("idle_flush_s", value=1.0e9)])
         tracker.keep_summaries = True
         nodes.append(tracker)
@@ -252,6 +254,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     (out / RUN_FILE).write_text(yaml.safe_dump({
         "input": str(bag.resolve()), "start_source": start_src, "body_source": body_src,
         "particles": options.particles, "lookahead": options.lookahead, "trust": options.trust, "seed": options.seed,
+        "likelihood_scale": options.likelihood_scale,
         "frames": result.frames, "posteriors": result.summaries, "seconds": round(result.seconds, 3),
         "seconds_in_filter": round(result.seconds_in_filter, 3), "sync_issues": result.sync_issues,
         "recorded": result.recorded}, sort_keys=False))

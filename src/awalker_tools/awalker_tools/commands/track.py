@@ -12,12 +12,14 @@ def run(args: argparse.Namespace) -> int:
 
     if args.particles < 1:
         raise InputError(f"--particles must be >= 1, got {args.particles}")
+    if not args.likelihood_scale > 0:
+        raise InputError(f"--likelihood-scale must be > 0, got {args.likelihood_scale}")
     if args.lookahead < 0:
         raise InputError(f"--lookahead must be >= 0, got {args.lookahead}")
     run_tracking(TrackOptions(
         bag=Path(args.bag), out=Path(args.out), start=Path(args.start) if args.start else None,
         body=Path(args.body) if args.body else None, particles=args.particles, lookahead=args.lookahead,
-        seed=args.seed, overlays=not args.no_overlay, storage=args.storage))
+        seed=args.seed, likelihood_scale=args.likelihood_scale, overlays=not args.no_overlay, storage=args.storage))
     return 0
 
 
@@ -36,6 +38,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--particles", type=int, default=5000, help="number of particles (default 5000)")
     parser.add_argument("--lookahead", type=int, default=3, help="look-ahead tau in frames (default 3)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    parser.add_argument("--likelihood-scale", type=float, default=0.1,
+                        help="exponent on the image likelihood (tempering, default 0.1)")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="result bag storage")
     parser.add_argument("--no-overlay", action="store_true", help="skip overlay images and video")
     parser.set_defaults(func=run)

@@ -80,6 +80,8 @@ class TrackerNode(Node):
         fraction = declare("resample_fraction", 0.1, "resample when N_eff < fraction * N")
         scheme = declare("resampling", "systematic", "systematic | stratified | multinomial")
         seed = declare("seed", 0, "random seed")
+        self.likelihood_scale = float(declare("likelihood_scale", TrackerConfig.likelihood_scale,
+                                              "exponent (tempering) of the image likelihood"))
         self.frame_rate = float(declare("frame_rate", 0.0, "frames/s; 0: from the first two frame stamps"))
         self.world_frame = declare("world_frame", "world", "world frame id of the outputs")
         ack_topic = declare("ack_topic", "/awalker/ack", "std_msgs/Header acks of processed frames")
@@ -227,7 +229,7 @@ class TrackerNode(Node):
             return False
         body = self.body or BodyDescription.default()
         cameras = [self.cameras[c] for c in self.camera_names]
-        config = TrackerConfig(smc=self.smc_config, dt=dt)
+        config = TrackerConfig(smc=self.smc_config, dt=dt, likelihood_scale=self.likelihood_scale)
         model = TrackerModel(body, self.start, image_likelihood(body, cameras), config)
         self.tracker = Tracker(model)
         self.get_logger().info(f"tracking with {self.smc_config.num_particles} particles, dt {dt * 1e3:.1f} ms, "

@@ -1,0 +1,119 @@
+"""The composed tracker (walker + control + kinematics + SMC) on sequences it did not produce itself:
+marker observations of a walk simulated by the model's own components with a different seed."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from awalker_tracker.errors import InputError
+from awalker_tracker.inference.smc import SMCConfig
+from awalker_tracker.inference.tracker import (
+    InitialSpread, StartDescription, Tracker, TrackerConfig, TrackerModel, marker_likelihood, where_arrays)
+from awalker_tracker.model.body import MARKER_NAMES, BodyDescription
+from awalker_tracker.model.walker import LEFT, WalkerState
+
+EVAL = [MARKER_NAMES.index(n) for n in ("pelvis", "thorax", "left_hip", "right_hip", "left_knee", "right_knee",
+                                        "left_ankle", "right_ankle")]
+
+
+def simulate_walk(frames: int, speed: float, step_length: float, heading: float, seed: int, dt: float = 1 / 30):
+    """True markers (F, 13, 3), stance legs (F,) and pelvis speed of one walker (a quieter control
+    prior than the tracker's, so that the truth walker keeps walking)."""
+    from awalker_tracker.model import control, gaits, kinematics
+
+    body = BodyDescription.default()
+    params = body.walker_params()
+    table = gaits.GaitTable.load()
+    prior = control.ControlPrior.from_gait_table(table, kappa_noise_variance=0.02, kappa_bar_variance=0.02)
+    rng = np.random.default_rng(seed)
+    walker = gaits.gait_initial_state(params, np.array([speed]), np.array([step_length]), stance_leg=LEFT, table=table)
+    _, _, stiffness, impulse = table.lookup(np.array([speed]), np.array([step_length]))
+    ctrl = control.initial_control(prior, 1, rng, stiffness=np.asarray(stiffness, float),
+                                   toe_off_impulse=np.asarray(impulse, float))
+    kcfg = kinematics.KinematicConfig(dt=dt)
+    kin = kinematics.initial_kinematics(kcfg, walker, np.array([0.3, -0.2]), heading, 1, rng, body=body, params=params)
+    markers, legs = [], []
+    for _ in range(frames):
+        markers.append(kinematics.pose_body(body, params, walker, kin).markers[0])
+        legs.append(int(walker.stance_leg[0]))
+        new_walker, ctrl, events = control.sample_transition(params, prior, walker, ctrl, dt, rng)
+        kin = kinematics.sample_kinematics(kcfg, body, params, walker, new_walker, events, kin, rng)
+        walker = new_walker
+        assert not events.fallen[0], "the simulated truth walker fell"
+    markers = np.array(markers)
+    pelvis = markers[:, 0, :2]
+    true_speed = np.linalg.norm(pelvis[-1] - pelvis[0]) / ((frames - 1) * dt)
+    return body, markers, np.array(legs), true_speed
+
+
+@pytest.fixture(scope="module")
+def walk():
+    return simulate_walk(45, 1.3, 0.7, 0.4, seed=12)
+
+
+def track(body, markers, start, n=600, seed=0, noise=0.01):
+    rng = np.random.default_rng(100 + seed)
+    obs = markers + noise * rng.standard_normal(markers.shape)
+    config = TrackerConfig(smc=SMCConfig(num_particles=n, seed=seed), dt=1 / 30)
+    model = TrackerModel(body, start, marker_likelihood(0.03), config)
+    tracker = Tracker(model)
+    summaries = []
+    for k, o in enumerate(obs):
+        summaries += tracker.push(k, 1_000 + k * 33_333_333, o)
+    summaries += tracker.finish()
+    return tracker, summaries
+
+
+def test_tracks_a_simulated_walk(walk):
+    body, markers, legs, true_speed = walk
+    start = StartDescription(0, tuple(markers[0, 0, :2]), 0.4, 1.3, 0.7, LEFT)
+    tracker, summaries = track(body, markers, start)
+    assert [s.frame_index for s in summaries] == list(range(len(markers)))
+    assert np.all(np.diff([s.stamp_ns for s in summaries]) > 0)
+    traj = tracker.map_trajectory()
+    # MAP trajectory error over pelvis, thorax, hips, knees, ankles (observation noise 10 mm;
+    # measured 24-54 mm mean over 3 walks x 2 filter seeds)
+    err = np.linalg.norm(traj.markers[:, EVAL] - markers[:, EVAL], axis=2).mean(axis=1) * 1000
+    assert np.mean(err) < 80.0 and np.max(err) < 200.0, err
+    filt = np.array([np.linalg.norm(s.map_markers[EVAL] - m[EVAL], axis=1).mean() * 1000
+                     for s, m in zip(summaries, markers)])
+    assert np.median(filt) < 100.0
+    stance_left = np.array([s.stance_left_probability for s in summaries])
+    assert np.mean((stance_left > 0.5) == (legs == LEFT)) > 0.9
+    assert np.mean(traj.stance_leg == legs) > 0.9
+    assert abs(np.median([s.speed for s in summaries[15:]]) - true_speed) < 0.25 * true_speed
+    assert any(s.resampled for s in summaries)
+
+
+def test_start_description_yaml():
+    s = StartDescription.from_yaml_text(StartDescription(3, (1.0, 2.0), 0.5, 1.2, 0.6, LEFT).to_yaml_text())
+    assert s.frame == 3 and s.position == (1.0, 2.0) and s.stance_leg == LEFT
+    with pytest.raises(InputError, match="stance_leg"):
+        StartDescription.from_yaml_text("start: {position: [0, 0], heading: 0, speed: 1, step_length: 0.7, "
+                                        "stance_leg: middle}", "start.yaml")
+    with pytest.raises(InputError, match="start.yaml: start is missing speed"):
+        StartDescription.from_yaml_text("start: {position: [0, 0], heading: 0, step_length: 0.7, stance_leg: left}",
+                                        "start.yaml")
+    with pytest.raises(InputError, match="top-level 'start:'"):
+        StartDescription.from_yaml_text("[1, 2]", "start.yaml")
+
+
+def test_where_arrays_mixes_particles():
+    a = WalkerState.from_arrays(np.zeros(3), 0, 0, 0, 0, LEFT)
+    b = WalkerState.from_arrays(np.ones(3), 1, 1, 1, 1, 1)
+    mixed = where_arrays(np.array([True, False, True]), a, b)
+    assert np.array_equal(mixed.stance_angle, [0, 1, 0]) and np.array_equal(mixed.stance_leg, [0, 1, 0])
+
+
+def test_initial_particles_spread_around_the_start():
+    body = BodyDescription.default()
+    start = StartDescription(0, (2.0, 1.0), 0.3, 1.4, 0.75, LEFT)
+    model = TrackerModel(body, start, marker_likelihood(), TrackerConfig(spread=InitialSpread(position_m=0.05)))
+    states = model.initial(400, np.random.default_rng(0))
+    pelvis = states.pose.markers[:, 0]
+    assert np.allclose(np.median(pelvis[:, :2], axis=0), [2.0, 1.0], atol=0.03)
+    assert 0.02 < np.std(pelvis[:, 0]) < 0.15
+    assert np.all(states.walker.stance_leg == LEFT)
+    assert np.median(states.speed) == pytest.approx(1.4, rel=0.05)
+    # phases spread within the step: the stance angle takes many values
+    assert np.ptp(states.walker.stance_angle) > 0.2
