@@ -118,10 +118,16 @@ def test_stance_foot_rolls_without_slip_or_penetration():
         heel = pose.markers[np.arange(len(kin)), M["left_heel"] + stance, 2]
         toe = pose.markers[np.arange(len(kin)), M["left_toe"] + stance, 2]
         assert heel.min() >= -1e-9 and toe.min() >= -1e-9
-        # Sample the whole rocker sole: its lowest point is the contact, on the ground.
+        # Sample the whole rocker sole of both feet: the stance foot's lowest point is the
+        # contact, on the ground; the swing foot clears the ground (its knee bends as needed).
         for beta in np.linspace(-BODY.sole_half_angle, BODY.sole_half_angle, 9):
-            z = sole_point_world(BODY, walker, kin, stance, np.full(len(kin), beta))[:, 2]
-            assert z.min() >= -1e-9
+            stance_z = sole_point_world(BODY, walker, kin, stance, np.full(len(kin), beta))[:, 2]
+            swing_z = sole_point_world(BODY, walker, kin, 1 - stance, np.full(len(kin), beta))[:, 2]
+            assert stance_z.min() >= -1e-9
+            trailing = walker.stance_angle > walker.swing_angle
+            if kin is not states[0]:
+                assert swing_z.min() >= -1e-4
+                assert np.all(swing_z[trailing] >= KinematicConfig().swing_clearance - 1e-4)
 
 
 def test_contact_rolls_heel_to_toe_and_switches_feet_continuously():
@@ -210,7 +216,7 @@ def test_swing_knee_bends_early_in_the_stride_and_straightens_late():
     swing_knee = np.degrees([np.where(w.stance_leg == LEFT, k.knee[:, 1], k.knee[:, 0]).mean()
                              for w, k in zip(walkers, states)])
     for stride in (swing_knee[16:32], swing_knee[32:48]):
-        assert stride[0] < 10                      # straight (former stance knee) at toe-off
+        assert stride[0] < 30                      # nearly straight at toe-off (bent only to clear the floor)
         assert stride.max() > 45                   # bends through the rest angle 5 psi_hip
         assert np.argmax(stride) < 13              # peaks before the end of the swing
         assert stride[-1] < stride.max() - 20      # and straightens towards heel strike

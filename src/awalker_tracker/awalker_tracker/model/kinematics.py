@@ -36,6 +36,13 @@ changes turn the body about it. At heel strike the contact passes to the other f
 the ground position under that foot's lowest point (its height is snapped to the ground: the
 paper's small "jump").
 
+Swing-foot clearance (our addition, MODEL.md: prefer testable physics): the knee-less walker's
+trailing leg sweeps through the floor just after toe-off; where the sampled swing knee would
+put the swing foot's sole lower than ``swing_clearance`` (2 cm, about the minimum toe
+clearance of human gait) above the ground while the swing leg trails the stance leg, or
+below the ground later in the swing, the knee is bent just enough to clear it (a
+pose-dependent lower joint limit, applied as a position projection that adds no knee velocity).
+
 ``plane_origin`` maps the walker's sagittal x to the world: the walker's stance contact
 x (``walker.stance_contact_x``) lands on ``contact_point``, x grows along the heading.
 """
@@ -103,6 +110,7 @@ class KinematicConfig:
     table: dict[str, JointPrior] = field(default_factory=lambda: dict(TABLE1))
     sigma_unit: float = np.pi / 180.0       # Table 1 sigma is in deg/s^2 (see module docstring)
     swing_knee_rest_gain: float = 5.0       # psi_bar_swing_knee = gain * psi_hip
+    swing_clearance: float = 0.02           # m: the swing foot's sole stays this far above the ground
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -339,6 +347,42 @@ def _plane_origin(params: WalkerParams, walker: WalkerState, contact_point: np.n
     return contact_point - stance_contact_x(params, walker)[:, None] * along
 
 
+def _swing_foot_lowest_z(body: BodyDescription, local: _LocalPose, swing: np.ndarray, knee: np.ndarray,
+                         ankle_dofs: np.ndarray, shift_z: np.ndarray) -> np.ndarray:
+    """World height (N,) of the lowest point of the swing foot's sole for a given swing knee angle."""
+    thigh = _pick(local.thigh, swing)
+    shank = _turn(thigh, 1, knee)
+    ankle = _pick(local.hips, swing) - body.upper_leg_length * thigh[:, :, 2] - body.lower_leg_length * shank[:, :, 2]
+    side = _SIDE[swing]
+    foot = _turn(_turn(shank, 1, -ankle_dofs[:, 0]), 0, -side * ankle_dofs[:, 1])
+    return _sole_point(body, ankle, foot, _lowest_roll(body, foot))[:, 2] + shift_z
+
+
+def _keep_swing_foot_above_ground(body: BodyDescription, local: _LocalPose, dofs: np.ndarray,
+                                  stance_leg: np.ndarray, shift_z: np.ndarray, iterations: int = 14) -> None:
+    """Ground clearance: where the swing foot would go below z = 0, bend the swing knee (in place
+    in ``dofs``) just enough, found by bisection. The knee-less walker's trailing leg sweeps
+    through the floor after toe-off; this pose-dependent lower knee limit keeps the body
+    physical (no penetration), like the joint limits of eq. (6)."""
+    swing = (1 - stance_leg).astype(np.intp)
+    rows = np.arange(dofs.shape[0])
+    knee_col = DOF_NAMES.index("left_knee") + swing
+    ankle_dofs = np.stack([dofs[rows, DOF_NAMES.index("left_ankle_flexion") + swing],
+                           dofs[rows, DOF_NAMES.index("left_ankle_inversion") + swing]], axis=1)
+    knee = dofs[rows, knee_col]
+    low = np.flatnonzero(_swing_foot_lowest_z(body, local, swing, knee, ankle_dofs, shift_z) < 0.0)
+    if low.size == 0:
+        return
+    sub = _LocalPose(*(getattr(local, f.name)[low] for f in fields(_LocalPose)))
+    below, above = knee[low], np.full(low.size, np.pi)
+    for _ in range(iterations):
+        middle = 0.5 * (below + above)
+        clear = _swing_foot_lowest_z(body, sub, swing[low], middle, ankle_dofs[low], shift_z[low]) >= 0.0
+        above = np.where(clear, middle, above)
+        below = np.where(clear, below, middle)
+    dofs[low, knee_col[low]] = above
+
+
 def initial_kinematics(
     config: KinematicConfig,
     walker: WalkerState,
@@ -432,6 +476,15 @@ def sample_kinematics(
         new_point = _sole_point(body, _pick(local.ankles, new_leg), _pick(local.foot, new_leg), new_beta)
         contact = np.where(switched[:, None], new_point[:, :2] + shift[:, :2], contact)
         beta = np.where(switched, new_beta, beta)
+    shift = _contact_translation(body, local, new_leg, beta, contact)
+    before = new.copy()
+    # Clearance while the swing leg trails the stance leg (early swing); later the foot must be
+    # free to come down for heel strike, and is only kept out of the ground.
+    margin = np.where(walker.stance_angle > walker.swing_angle, config.swing_clearance, 0.0)
+    _keep_swing_foot_above_ground(body, local, new, new_leg, shift[:, 2] - margin)
+    # The clearance moves the knee without giving it velocity (a position projection): shift
+    # psi_{t-1} along, so that eq. (6) next frame sees the sampled velocity.
+    current = current + (new - before)
     named = KinematicState.unpack(new)
     return KinematicState(
         heading=named["heading"], torso_lean=named["torso_lean"], hip_abduction=named["hip_abduction"],
