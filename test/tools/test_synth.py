@@ -80,6 +80,13 @@ def test_synth_is_complete_deterministic_and_lines_up(tmp_path):
     overlay = draw_body(frames[10][1]["cam0"], markers[7], cameras[0])
     assert np.count_nonzero(np.any(overlay != frames[10][1]["cam0"], axis=2)) > 50
     assert save_overlay_png(tmp_path / "overlay.png", frames[10][1]["cam0"], markers[7], cameras[0]).stat().st_size > 0
+    assert (a / "overlay_cam0.png").stat().st_size > 0 and (a / "overlay_cam1.png").is_file()
+    # Filled parts: the rendered body is blended in (more pixels change than for the skeleton alone).
+    from awalker_tracker.model.mocap import segments_from_markers
+    body = BodyDescription.default()
+    filled = draw_body(frames[10][1]["cam0"], markers[7], cameras[0], segments_from_markers(body, markers[7:8]), body)
+    assert np.count_nonzero(np.any(filled != frames[10][1]["cam0"], axis=2)) > \
+        np.count_nonzero(np.any(overlay != frames[10][1]["cam0"], axis=2))
 
 
 def test_turn_and_occluder(tmp_path):

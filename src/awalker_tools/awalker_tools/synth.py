@@ -11,8 +11,9 @@ first ``background_frames`` frames hold the empty room (for background models).
 Outputs in ``out_dir``: ``<name>.bag`` (bagio format, ground truth included),
 ``calibration.yaml``, ``body.yaml``, ``start.yaml`` (the paper's coarse hand
 initialisation: first frame with the person, pelvis ground position, heading, speed, step
-length, stance leg) and ``ground_truth.csv`` (``frame,stamp_ns,marker,x,y,z``; frame counts
-from 0 at the first bag frame).
+length, stance leg), ``ground_truth.csv`` (``frame,stamp_ns,marker,x,y,z``; frame counts
+from 0 at the first bag frame) and ``overlay_<cam>.png`` (the ground truth drawn over the
+middle frame with the person, to look at).
 """
 from __future__ import annotations
 
@@ -29,6 +30,7 @@ from awalker_tracker.vision.camera import Camera, save_calibration
 from awalker_tracker.vision.render import pixel_rays, render, render_rgb
 
 from awalker_tools import bagio
+from awalker_tools.overlay import save_overlay_png
 
 _M = {n: i for i, n in enumerate(MARKER_NAMES)}
 ROOM_HALF_SIZE = 8.0   # m: the room spans [-8, 8] x [-8, 8]
@@ -388,6 +390,7 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
     start_text = yaml.safe_dump(motion.start, sort_keys=False)
     (out / "start.yaml").write_text(start_text)
     csv_lines = ["frame,stamp_ns,marker,x,y,z"]
+    overlays: dict[str, Path] = {}
     with bagio.SequenceWriter(bag_path, cameras, storage=config.storage, compressed=config.compressed,
                               image_format=config.image_format) as writer:
         writer.write_text(bagio.START_DESCRIPTION_TOPIC, int(stamps[0]), start_text)
@@ -410,6 +413,11 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
                 noisy = lit + rng.normal(0.0, config.noise_sigma, lit.shape).astype(np.float32)
                 images[cam.name] = np.clip(np.round(noisy), 0, 255).astype(np.uint8)
             writer.write_frame(int(stamps[frame]), images)
+            if person == config.frames // 2:  # a look at the ground truth over the frames
+                for cam in cameras:
+                    segments = BodySegments(motion.segments.origin[person][None], motion.segments.rotation[person][None])
+                    overlays[cam.name] = save_overlay_png(out / f"overlay_{cam.name}.png", images[cam.name],
+                                                          motion.markers[person], cam, segments, motion.body)
             for name, depth in occluders.items():
                 writer.write_occlusion_mask(int(stamps[frame]), name, np.isfinite(depth))
             if person >= 0:
@@ -424,4 +432,5 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
                 print(f"synth: frame {frame + 1}/{total}", file=sys.stderr, flush=True)
     (out / "ground_truth.csv").write_text("\n".join(csv_lines) + "\n")
     return {"bag": bag_path, "calibration": out / "calibration.yaml", "body": out / "body.yaml",
-            "start": out / "start.yaml", "ground_truth": out / "ground_truth.csv"}
+            "start": out / "start.yaml", "ground_truth": out / "ground_truth.csv",
+            **{f"overlay {name}": path for name, path in overlays.items()}}
