@@ -49,7 +49,7 @@ class LikelihoodConfig:
 
     points_along: int = 6           # sample rows along each part's axis
     points_across: int = 2          # samples per row across the silhouette
-    flow_row_step: int = 2          # flow compared at every flow_row_step-th row (cells >> rows)
+    flow_row_step: int = 3          # flow compared at every flow_row_step-th row (cells >> rows)
     chunk_states: int = 4096        # states per chunk (keeps the sample arrays in cache)
     appearance_weight: float = 1.0  # multiplies each part's mean log-likelihood ratio
     flow_weight: float = 1.0        # multiplies each part's mean flow log-ratio
