@@ -21,6 +21,7 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 import yaml
 
@@ -109,8 +110,6 @@ def make_cameras(count: int, width: int, height: int, path_centre: np.ndarray) -
 
 def _value_noise(rng: np.random.Generator, shape: tuple[int, int], cell: int) -> np.ndarray:
     """Smooth noise in [0, 1] of the given shape with features of ~``cell`` pixels."""
-    import cv2
-
     coarse = rng.random((shape[0] // cell + 2, shape[1] // cell + 2)).astype(np.float32)
     return cv2.resize(coarse, (shape[1], shape[0]), interpolation=cv2.INTER_CUBIC).clip(0, 1)
 
@@ -118,8 +117,6 @@ def _value_noise(rng: np.random.Generator, shape: tuple[int, int], cell: int) ->
 def make_textures(rng: np.random.Generator) -> dict[str, np.ndarray]:
     """Floor and wall textures (float32 RGB 0-255) at ``TEXEL`` m per pixel: floor tiles with
     stains, walls covered with random shelves, posters and boxes (clutter)."""
-    import cv2
-
     size = int(2 * ROOM_HALF_SIZE / TEXEL)
     floor = np.empty((size, size, 3), np.float32)
     floor[:] = (150, 140, 120)
@@ -160,8 +157,6 @@ def _world_rays(camera: Camera) -> np.ndarray:
 
 
 def _sample(texture: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    import cv2
-
     # Coordinates of pixels that do not see this surface can be inf/NaN: clamp them (remap's
     # border handling is very slow for huge coordinates).
     u = np.clip(np.nan_to_num(u, nan=0.0, posinf=0.0, neginf=0.0), 0, texture.shape[1] - 1)

@@ -16,7 +16,7 @@ no heel joint). Source rate: 120 Hz.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -265,8 +265,6 @@ def body_from_markers(markers: np.ndarray, template: BodyDescription | None = No
 
     def length(a: str, b: str) -> float:
         return float(np.median(np.linalg.norm(markers[:, idx[a]] - markers[:, idx[b]], axis=-1)))
-
-    from dataclasses import replace
 
     return replace(
         template,
