@@ -5,7 +5,8 @@ Subscribes (camera ``<cam>`` from the ``camera_name`` parameter):
   ``/<cam>/image_raw/compressed`` (sensor_msgs/CompressedImage: jpeg/png), sensor-data QoS
   (a best-effort reader also receives the replay's reliable publications);
 - optional ``/<cam>/occlusion_mask`` (mono8, 255 = occluded; used for the frame with the same
-  stamp when it arrives before the image) and ``/<cam>/foreground_labels`` (mono8 class label
+  stamp when it arrives before the image — the node never holds an image back, so a mask
+  arriving later is not applied to the maps; the likelihood honours masks separately) and ``/<cam>/foreground_labels`` (mono8 class label
   image for learning the foreground: 0 = none, k = 1 + index into PART_CLASSES);
 - ``/awalker/start_description`` (latched std_msgs/String): the frames before its ``frame``
   are background-only (``background_frames`` = -1, the default);
@@ -174,7 +175,8 @@ class FeatureNode(Node):
             self.config = FeatureConfig(
                 downsample=int(downsample), background_frames=max(self.background_param, 0),
                 median_frames=int(median), outlier_probability=float(outlier), llr_clip=float(clip),
-                adapt_rate=float(adapt), compensate_gain=bool(gain), flow=FlowConfig(cell_size=int(cell), scale=float(scale), floor_std=float(floor)))
+                adapt_rate=float(adapt), compensate_gain=bool(gain),
+                flow=FlowConfig(cell_size=int(cell), scale=float(scale), floor_std=float(floor)))
         except ValueError as exc:
             raise InputError(f"awalker_features ({self.camera_name}): {exc}") from None
         self.extractor = FeatureExtractor(self.config, verbose=self.verbose)
