@@ -120,6 +120,11 @@ def test_from_mocap(tmp_path):
     assert start["speed"] == pytest.approx(1.37, abs=0.15) and abs(start["heading"]) < 0.2
     body = BodyDescription.from_yaml(tmp_path / "body.yaml")
     assert body.leg_length == pytest.approx(0.9, abs=0.06)
+    # More frames than the walk holds: all of it is used, with a note.
+    assert cli.main(["synth", "--out", str(tmp_path / "long"), "--size", "80", "60",
+                     "--frames", "500", "--background-frames", "0",
+                     "--from-mocap", str(MOCAP_DIR / "07.asf"), str(MOCAP_DIR / "07_01.amc")]) == 0
+    assert len((tmp_path / "long" / "ground_truth.csv").read_text().splitlines()) == 1 + 79 * 13
 
 
 @pytest.mark.parametrize(

@@ -265,8 +265,8 @@ def mocap_motion(config: SynthConfig, start_xy: np.ndarray, heading: float) -> M
     trial = load_mocap(asf, amc).resample(config.rate)
     markers = trial.markers
     if markers.shape[0] < config.frames:
-        raise InputError(f"{amc}: the mocap walk has {markers.shape[0]} frames at {config.rate:g} Hz, "
-                         f"fewer than --frames {config.frames}")
+        print(f"synth: {amc} holds {markers.shape[0]} frames at {config.rate:g} Hz; using all of them "
+              f"(--frames {config.frames} asked for more)", file=sys.stderr)
     markers = markers[: config.frames]
     pelvis = markers[:, _M["pelvis"], :2]
     travel = pelvis[-1] - pelvis[0]
@@ -374,7 +374,8 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
             room[seen] = wood[seen]
             occluders[cam.name] = depth
 
-    total = config.background_frames + config.frames
+    person_frames = len(motion.markers)
+    total = config.background_frames + person_frames
     stamps = FIRST_STAMP_NS + np.round(np.arange(total) * 1e9 / config.rate).astype(np.int64)
     phase = np.arange(total) / max(total - 1, 1)
     gain = 1.0 - config.lighting_change * 0.5 * (1 - np.cos(2 * np.pi * phase))
@@ -408,7 +409,7 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
                 noisy = lit + rng.normal(0.0, config.noise_sigma, lit.shape).astype(np.float32)
                 images[cam.name] = np.clip(np.round(noisy), 0, 255).astype(np.uint8)
             writer.write_frame(int(stamps[frame]), images)
-            if person == config.frames // 2:  # a look at the ground truth over the frames
+            if person == person_frames // 2:  # a look at the ground truth over the frames
                 for cam in cameras:
                     segments = BodySegments(motion.segments.origin[person][None], motion.segments.rotation[person][None])
                     overlays[cam.name] = save_overlay_png(out / f"overlay_{cam.name}.png", images[cam.name],
