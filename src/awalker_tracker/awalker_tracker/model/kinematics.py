@@ -19,7 +19,7 @@ Units of sigma (the paper does not state them): **deg/s^2**. Decided by sampling
 on the walker's 1.3 m/s cyclic gait (``benchmarks/bench_render.py``, 2000 particles, 60
 frames at 30 Hz). Read as deg/s^2: median per-frame change 0.04 deg (torso, hips), 0.08 deg
 (ankles), 0.33 deg (heading); the heading wanders 10 deg (std) in 2 s; the swing knee peaks
-at ~90 deg through its rest-angle spring: human-like. Read as rad/s^2: 2-3 deg per frame
+at ~90 deg through its rest-angle spring (people: ~65 deg): plausible. Read as rad/s^2: 2-3 deg per frame
 for torso, hips and ankles (95th percentile ~7-10 deg), 19 deg per frame for the heading
 (560 deg std after 2 s: the body spins), the swing knee slams into its 180 deg limit.
 ``KinematicConfig.sigma_unit`` holds the conversion factor to rad (pi/180).
@@ -42,6 +42,11 @@ put the swing foot's sole lower than ``swing_clearance`` (2 cm, about the minimu
 clearance of human gait) above the ground while the swing leg trails the stance leg, or
 below the ground later in the swing, the knee is bent just enough to clear it (a
 pose-dependent lower joint limit, applied as a position projection that adds no knee velocity).
+
+Known consequence of Table 1's swing knee (k = 15, alpha = 0.9): it lags the stride and is
+still bent ~40 deg at heel strike, so the foot lands short of the knee-less walker's foot and
+the body walks at ~0.85 x the walker's speed (1.10 vs 1.30 m/s on the sample bag; measure
+speed from the pelvis, not from the walker).
 
 ``plane_origin`` maps the walker's sagittal x to the world: the walker's stance contact
 x (``walker.stance_contact_x``) lands on ``contact_point``, x grows along the heading.
