@@ -221,3 +221,24 @@ def test_swing_knee_bends_early_in_the_stride_and_straightens_late():
         assert np.argmax(stride) < 13              # peaks before the end of the swing
         assert stride[-1] < stride.max() - 20      # and straightens towards heel strike
     assert RIGHT == 1
+
+
+def test_initial_spread_places_pelvis_and_heading():
+    config = KinematicConfig()
+    walker = hand_made_walk(1, 1)[0]
+    n = 4000
+    kin = initial_kinematics(config, walker, [1.0, -2.0], 0.5, n, np.random.default_rng(9), body=BODY,
+                             position_spread=0.1, heading_spread=0.2, joint_spread=0.3)
+    pose = pose_body(BODY, PARAMS, walker.take(np.zeros(n, np.intp)), kin)
+    pelvis = pose.markers[:, M["pelvis"], :2]
+    assert np.allclose(pelvis.mean(axis=0), [1.0, -2.0], atol=0.01)
+    assert np.allclose(pelvis.std(axis=0), 0.1, rtol=0.1)
+    assert kin.heading.mean() == pytest.approx(0.5, abs=0.01) and kin.heading.std() == pytest.approx(0.2, rel=0.1)
+    limits = config.arrays()
+    dofs = kin.dofs()
+    limited = np.isfinite(limits["lower"])
+    assert np.all(dofs[:, limited] >= limits["lower"][limited]) and np.all(dofs[:, limited] <= limits["upper"][limited])
+    assert np.all(np.abs(kin.previous - dofs) == 0)  # starts at rest
+    # The stance foot is on the ground at its contact point.
+    contact = sole_point_world(BODY, walker.take(np.zeros(n, np.intp)), kin, kin.contact_leg, kin.contact_roll)
+    assert np.allclose(contact[:, 2], 0.0, atol=1e-9) and np.allclose(contact[:, :2], kin.contact_point)
