@@ -1,6 +1,6 @@
 """Synthetic test sequences: a walking person in a textured room, seen by 1-4 calibrated cameras.
 
-The person's motion comes from the generative model itself (the walker prior plus the
+The person's motion comes from the generative model itself (the walker dynamics steered along the cyclic gaits plus the
 conditional kinematics, with optional scripted speed change and turn) or from a CMU motion
 capture walk (``--from-mocap``), so the tracker can also be tested on motion it did not
 produce. Frames are ray-cast (``vision/render.py``): a room with a tiled, noisy floor and

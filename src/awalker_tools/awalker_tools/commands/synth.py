@@ -13,7 +13,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="synthesise a walking-person bag with exact ground truth",
         description="Render a person walking through a textured room, seen by 1-4 calibrated cameras, into "
         "DIR/<name>.bag with DIR/calibration.yaml, body.yaml, start.yaml and ground_truth.csv. Motion comes "
-        "from the walker prior and conditional kinematics, or from a CMU mocap walk (--from-mocap).",
+        "from the walker dynamics on the cyclic gaits and the conditional kinematics, or from a CMU mocap walk (--from-mocap).",
     )
     parser.add_argument("--out", required=True, type=Path, help="output directory (created if needed)")
     parser.add_argument("--name", default="synth", help="bag name inside DIR (default: synth)")
