@@ -168,3 +168,14 @@ def test_truth_read_from_a_bag(tmp_path):
     evaluation.write_poses_csv(run / "poses.csv", shifted(truth, NAMES, np.array([0.005, 0.0, 0.0])))
     assert main(["eval", str(run), "--truth", str(bag)]) == 0
     assert json.loads((run / "eval.json").read_text())["absolute_mm"]["mean"] == pytest.approx(5.0)
+
+
+def test_skate_counts_only_the_stance_foot_when_known():
+    truth = walking_truth()
+    markers = truth.markers.copy()
+    swing = NAMES.index("right_toe")
+    markers[:15, swing, 2] = 0.005                        # right toe glides just above the floor ...
+    track = PoseTrack(truth.frames, truth.stamps_ns, NAMES, markers)
+    assert evaluation.foot_plausibility(track)["skate_mm"]["max"] > 20     # ... and counts as slip by height
+    stance_left = np.arange(FRAMES) < 15                  # but the left foot is the stance foot then
+    assert evaluation.foot_plausibility(track, stance_left=stance_left)["skate_mm"]["max"] == pytest.approx(0.0)

@@ -188,12 +188,15 @@ def ground_contact(track: PoseTrack, tolerance_m: float = 0.02) -> dict[str, np.
     return contact
 
 
-def foot_plausibility(track: PoseTrack, tolerance_m: float = 0.02) -> dict[str, object]:
+def foot_plausibility(track: PoseTrack, tolerance_m: float = 0.02,
+                      stance_left: np.ndarray | None = None) -> dict[str, object]:
     """Foot skate, penetration and float of a pose track (mm).
 
     Skate: horizontal displacement between consecutive frames of each heel/toe marker that is
-    in ground contact in both frames. Penetration: depth of the lowest foot marker below z = 0.
-    Float: height of the lowest foot marker above z = 0 (the stance foot's clearance).
+    in ground contact in both frames; with ``stance_left`` (per frame, e.g. the tracker's MAP
+    stance leg) only the stance foot's markers count, and only while it stays the stance foot
+    (a low swing foot gliding over the floor is not skating). Penetration: depth of the lowest
+    foot marker below z = 0. Float: height of the lowest foot marker above z = 0.
     """
     for names in FOOT_MARKERS.values():
         for n in names:
@@ -206,6 +209,9 @@ def foot_plausibility(track: PoseTrack, tolerance_m: float = 0.02) -> dict[str, 
         xy = track.marker(name)[:, :2]
         step = 1000.0 * np.linalg.norm(np.diff(xy, axis=0), axis=1)
         both = touching[1:] & touching[:-1] & consecutive
+        if stance_left is not None:
+            on_foot = np.asarray(stance_left, bool) == name.startswith("left")
+            both &= on_foot[1:] & on_foot[:-1]
         slips.append(step[both])
     slips_all = np.concatenate(slips) if slips else np.zeros(0)
     foot_z = np.stack([track.marker(n)[:, 2] for names in FOOT_MARKERS.values() for n in names], axis=1)
@@ -238,11 +244,16 @@ def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarra
              ) -> dict[str, object]:
     """All metrics as a JSON-ready dict (per-frame series included)."""
     errors = marker_errors(estimate, truth)
+    stance_left = None
+    if summary is not None:
+        lookup = dict(zip(summary["stamp_ns"].tolist(), summary["stance_leg"].tolist()))
+        if all(int(s) in lookup for s in estimate.stamps_ns):
+            stance_left = np.array([lookup[int(s)] == "left" for s in estimate.stamps_ns])
     result: dict[str, object] = {
         "absolute_mm": statistics(errors["absolute_mm"]),
         "relative_mm": statistics(errors["relative_mm"]),
         "per_marker_absolute_mm": errors["per_marker_mm"],
-        "estimate_feet": foot_plausibility(estimate),
+        "estimate_feet": foot_plausibility(estimate, stance_left=stance_left),
         "truth_feet": foot_plausibility(truth),
         "per_frame": {"frame": errors["frames"].tolist(), "stamp_ns": errors["stamps_ns"].tolist(),
                       "absolute_mm": errors["absolute_mm"].round(3).tolist(),
