@@ -4,7 +4,7 @@ FeatureNode in an rclpy executor, fed Image messages one at a time (next image w
 previous frame's features arrive: DDS, callbacks and (de)serialisation included); (3) the
 flow's median endpoint error on the walker against the rendered motion. Prints JSON.
 
-    .venv/bin/python benchmarks/bench_features.py [--frames 90]
+    .venv/bin/python benchmarks/bench_features.py [--frames 90] [--opencv-threads 1]
 
 Frames are a rendered walker over a textured background (rendered once, cycled).
 """
@@ -115,7 +115,12 @@ def node_throughput(msgs: list, frames: int) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--frames", type=int, default=90)
+    parser.add_argument("--opencv-threads", type=int, default=1, help="cv2.setNumThreads (0 = OpenCV default)")
     args = parser.parse_args()
+    if args.opencv_threads > 0:
+        import cv2
+
+        cv2.setNumThreads(args.opencv_threads)
     cam = side_camera(640, 480, 600.0)
     bg = background_image(cam)
     rng = np.random.default_rng(0)
@@ -130,7 +135,7 @@ def main() -> None:
     for _ in range(5):
         extractor.process(noisy(bg, rng))
     stages = {"decode": 0.0, "extract": 0.0, "to_msg": 0.0}
-    started = time.perf_counter()
+    started, cpu_started = time.perf_counter(), time.process_time()
     for k in range(args.frames):
         t0 = time.perf_counter()
         rgb = image_from_msg(msgs[k % len(msgs)])
@@ -145,6 +150,7 @@ def main() -> None:
         if k % 30 == 29:
             print(f"{k + 1}/{args.frames} frames", file=sys.stderr, flush=True)
     total = time.perf_counter() - started
+    cpu = time.process_time() - cpu_started
     # Split of the extract stage: appearance maps vs flow.
     t0 = time.perf_counter()
     for f in frames:
@@ -159,9 +165,11 @@ def main() -> None:
     flow_ms = (time.perf_counter() - t0) / (len(greys) - 1)
     print(json.dumps({
         "benchmark": "features", "width": 640, "height": 480, "frames": args.frames,
+        "opencv_threads": args.opencv_threads,
         "load_average_1min": os.getloadavg()[0], "cpus": os.cpu_count(),
         "downsample": config.downsample, "flow_cell_size": config.flow.cell_size, "flow_scale": config.flow.scale,
         "frames_per_s": args.frames / total,
+        "cpu_ms_per_frame": 1e3 * cpu / args.frames,
         "ms_per_frame": {k: 1e3 * v / args.frames for k, v in stages.items()},
         "extract_split_ms": {"appearance_maps": 1e3 * appearance, "grid_flow": 1e3 * flow_ms},
         "node_in_executor": node_throughput(background_msgs + msgs, args.frames),

@@ -168,6 +168,8 @@ class FeatureNode(Node):
         gain = declare("compensate_gain", True, "divide out global per-channel lighting changes")
         self.use_start_pose = bool(declare("start_pose_labels", True, "learn the foreground from the body "
                                            "projected at the start pose (needs camera_info and camera_pose)"))
+        threads = int(declare("opencv_threads", 1, "OpenCV worker threads (process-wide; 1 is fastest when "
+                                                   "cores are shared, e.g. one features node per camera; 0 = OpenCV default)"))
         self.verbose = bool(declare("verbose", False, "log model learning to stderr"))
         if not self.camera_name:
             raise InputError("parameter 'camera_name' is required (e.g. --ros-args -p camera_name:=cam0)")
@@ -179,6 +181,8 @@ class FeatureNode(Node):
                 flow=FlowConfig(cell_size=int(cell), scale=float(scale), floor_std=float(floor)))
         except ValueError as exc:
             raise InputError(f"awalker_features ({self.camera_name}): {exc}") from None
+        if threads > 0:
+            cv2.setNumThreads(threads)
         self.extractor = FeatureExtractor(self.config, verbose=self.verbose)
         self.stats = FeatureNodeStats()
         self._last_stamp = -1
