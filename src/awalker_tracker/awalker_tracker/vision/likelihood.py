@@ -312,30 +312,37 @@ def _chunk_log_likelihood(parts: tuple[PartShape, ...], sil: "_Silhouettes", pre
 
 def _hidden_rows(parts: tuple[PartShape, ...], sil: _Silhouettes, cx: np.ndarray, cy: np.ndarray,
                  depth: np.ndarray) -> np.ndarray:
-    """(A, P, N) True where a row's axis point is hidden by another part (module docstring)."""
+    """(A, P, n) True where a row's axis point is hidden by another part (module docstring).
+
+    All candidate (pair, state) combinations are tested at once: those whose image bounding
+    boxes meet and whose occludee is not wholly in front of the occluder."""
     hidden = np.zeros(cx.shape, bool)
     occludees, occluders = occluder_pairs(parts)
-    # Image bounding boxes of the parts (P, N), including their half-widths.
+    if occludees.size == 0:
+        return hidden
     hmax = np.maximum(sil.ha, sil.hb)
     x0, x1 = np.fmin(sil.ax, sil.bx) - hmax, np.fmax(sil.ax, sil.bx) + hmax
     y0, y1 = np.fmin(sil.ay, sil.by) - hmax, np.fmax(sil.ay, sil.by) + hmax
     near, far = np.fmin(sil.da, sil.db), np.fmax(sil.da, sil.db)
-    for i, j in zip(occludees, occluders):
-        # Candidates: bounding boxes meet and the occludee is not wholly in front of the occluder.
-        meet = np.flatnonzero((x0[i] < x1[j]) & (x0[j] < x1[i]) & (y0[i] < y1[j]) & (y0[j] < y1[i])
-                              & (far[i] > near[j]))
-        if meet.size == 0:
-            continue
-        ax, ay = sil.ax[j, meet], sil.ay[j, meet]
-        sx, sy = sil.bx[j, meet] - ax, sil.by[j, meet] - ay
-        px, py = cx[:, i, meet] - ax, cy[:, i, meet] - ay                   # (A, M)
-        tau = np.clip((px * sx + py * sy) / np.maximum(sx * sx + sy * sy, np.float32(1e-6)), 0, 1)
-        ex, ey = px - tau * sx, py - tau * sy
-        ha = sil.ha[j, meet]
-        radius = ha + tau * (sil.hb[j, meet] - ha)
-        da = sil.da[j, meet]
-        occ_depth = da + tau * (sil.db[j, meet] - da)
-        hidden[:, i, meet] |= (ex * ex + ey * ey < radius * radius) & (depth[:, i, meet] > occ_depth)
+    I, J = occludees, occluders
+    meet = (x0[I] < x1[J]) & (x0[J] < x1[I]) & (y0[I] < y1[J]) & (y0[J] < y1[I]) & (far[I] > near[J])  # (Q, n)
+    q, k = np.nonzero(meet)
+    if q.size == 0:
+        return hidden
+    i, j = I[q], J[q]
+    ax, ay = sil.ax[j, k], sil.ay[j, k]
+    sx, sy = sil.bx[j, k] - ax, sil.by[j, k] - ay
+    px, py = cx[:, i, k] - ax, cy[:, i, k] - ay                               # (A, M)
+    tau = np.clip((px * sx + py * sy) / np.maximum(sx * sx + sy * sy, np.float32(1e-6)), 0, 1)
+    ex, ey = px - tau * sx, py - tau * sy
+    ha = sil.ha[j, k]
+    radius = ha + tau * (sil.hb[j, k] - ha)
+    da = sil.da[j, k]
+    behind = depth[:, i, k] > da + tau * (sil.db[j, k] - da)
+    covered = (ex * ex + ey * ey < radius * radius) & behind
+    for row in range(cx.shape[0]):       # set-only writes: repeated (part, state) entries are harmless
+        hit = covered[row]
+        hidden[row, i[hit], k[hit]] = True
     return hidden
 
 
