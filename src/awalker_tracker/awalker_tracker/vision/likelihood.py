@@ -266,21 +266,18 @@ def _chunk_log_likelihood(parts: tuple[PartShape, ...], sil: "_Silhouettes", pre
     scale = np.where(in_front, length * (sil.ha + sil.hb), np.float32(0)) / expected[:, None]
     # ---- appearance: sample points (J, A, P, n) --------------------------------------------
     tab = appearance
-    offset = s[:, None, None, None] * half                                  # px across the axis
-    col = offset * nx
-    col += cx
-    col *= tab.inv_ds
-    col += 1
-    row = offset * ny
-    row += cy
-    row *= tab.inv_ds
-    row += 1
-    np.clip(col, 0, tab.w + 1, out=col)
-    np.clip(row, 0, tab.h + 1, out=row)
-    flat = row.astype(np.int32)
-    flat *= tab.w + 2
-    flat += col.astype(np.int32)
-    flat += tab.offsets
+    # Map coordinates (+1 for the zero border) of the row centres and of the across-axis step.
+    base_col = cx * tab.inv_ds + np.float32(1)
+    base_row = cy * tab.inv_ds + np.float32(1)
+    step_col = half * nx * tab.inv_ds
+    step_row = half * ny * tab.inv_ds
+    flat = np.empty((J,) + cx.shape, np.int32)
+    for j in range(J):
+        col = np.clip(base_col + s[j] * step_col, 0, tab.w + 1)
+        row = np.clip(base_row + s[j] * step_row, 0, tab.h + 1)
+        np.multiply(row.astype(np.int32), tab.w + 2, out=flat[j])
+        flat[j] += col.astype(np.int32)
+        flat[j] += tab.offsets
     values = tab.values[flat]
     row_sums = values[0]
     for j in range(1, J):
