@@ -25,6 +25,13 @@ CASES = {
 }
 
 
+@pytest.fixture(autouse=True)
+def isolated_ros(monkeypatch, ros_domain_id: int) -> None:
+    """`awalker track` runs its nodes in this process: keep parallel test workers apart."""
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(ros_domain_id + 30))
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+
+
 @pytest.mark.parametrize("name", list(CASES))
 def test_tracking_accuracy(name: str, tmp_path: Path, capsys):
     synth_args, max_abs, max_rel, min_stance = CASES[name]

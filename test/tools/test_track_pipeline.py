@@ -17,6 +17,13 @@ from awalker_tools.cli import main
 FRAMES, BACKGROUND = 10, 4
 
 
+@pytest.fixture(autouse=True)
+def isolated_ros(monkeypatch, ros_domain_id: int) -> None:
+    """`awalker track` runs its nodes in this process: keep parallel test workers apart."""
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(ros_domain_id + 30))
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+
+
 @pytest.fixture(scope="module")
 def synth_bag(tmp_path_factory) -> Path:
     """A 160x120 one-camera synthetic walk (first seed whose walker does not fall)."""

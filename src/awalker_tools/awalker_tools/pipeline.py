@@ -300,7 +300,7 @@ def write_overlays(bag: Path, out: Path, camera: Any, body: BodyDescription, fps
             image = images[camera.name]
             if int(stamp) in by_stamp:
                 image = draw_body(image, poses.markers[by_stamp[int(stamp)]], camera)
-                cv2.imwrite(str(folder / f"frame_{by_stamp[int(stamp)]:05d}.png"), image[..., ::-1])
+                cv2.imwrite(str(folder / f"frame_{int(poses.frames[by_stamp[int(stamp)]]):05d}.png"), image[..., ::-1])
             if video is None:
                 video = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps,
                                         (image.shape[1], image.shape[0]))

@@ -39,6 +39,7 @@ from awalker_tracker.inference.tracker import (
     ImageObservation, StartDescription, Tracker, TrackerConfig, TrackerModel, image_likelihood)
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.nodes.convert import camera_from_msgs, header, stamp_to_ns, summary_to_msg
+from awalker_tracker.nodes.features import features_from_msg
 
 START_TOPIC = "/awalker/start_description"
 BODY_TOPIC = "/awalker/body_description"
@@ -180,8 +181,6 @@ class TrackerNode(Node):
             self._process_pending()
 
     def _on_features(self, cam: str, msg: ImageFeatures) -> None:
-        from awalker_tracker.nodes.features import features_from_msg
-
         stamp = stamp_to_ns(msg.header.stamp)
         try:
             item = features_from_msg(msg)
