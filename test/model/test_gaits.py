@@ -129,3 +129,25 @@ def test_bilinear_impulse_fit_matches_the_table(table: gaits.GaitTable) -> None:
     pred = coef[0] + coef[1] * pts["pre_stance_rate"] + coef[2] * pts["pre_swing_rate"] \
         + coef[3] * pts["pre_stance_rate"] * pts["pre_swing_rate"]
     assert np.sqrt(np.mean((pred - pts["toe_off_impulse"]) ** 2)) == pytest.approx(rms)
+
+
+def test_step_map_radius_predicts_growth_of_perturbations(table: gaits.GaitTable) -> None:
+    """Radius < 1: a perturbed gait returns; radius > 1: it drifts away (10 steps, fixed kappa/iota)."""
+    assert table.step_map_radius is not None and np.all(np.isfinite(table.step_map_radius[table.converged]))
+    for speed, step in ((4 / 3.6, 0.6), (6 / 3.6, 0.75)):
+        i = int(np.argmin(np.abs(table.speeds - speed)))
+        j = int(np.argmin(np.abs(table.step_lengths - step)))
+        x = np.array([table.stance_rate[i, j], table.swing_rate[i, j], table.stiffness[i, j],
+                      table.toe_off_impulse[i, j]])
+        radius = gaits.step_map_radius(PARAMS, table.speeds[i], table.step_lengths[j], x)
+        assert radius == pytest.approx(table.step_map_radius[i, j], rel=1e-3)
+        a = float(gaits.double_support_angle(PARAMS, table.step_lengths[j]))
+        nominal = np.array([a, x[0], x[1]])
+        state = gaits.WalkerState.from_arrays(a, -a, x[0] + 1e-4, x[1])
+        deviations = []
+        for _ in range(10):
+            state, _, _ = dynamics.simulate_to_strike(PARAMS, state, x[2], x[3], step=gaits.SOLVER_STEP)
+            deviations.append(np.abs(np.array([state.stance_angle[0], state.stance_rate[0], state.swing_rate[0]])
+                                     - nominal).max())
+        growth = deviations[-1] / deviations[1]
+        assert (growth < 1.0) == (radius < 1.0), (radius, deviations)

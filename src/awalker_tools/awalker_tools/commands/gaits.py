@@ -30,13 +30,15 @@ def run_solve(args: argparse.Namespace) -> int:
         raise InputError(f"--leg-length {args.leg_length}: expected a positive length in metres")
     params = WalkerParams(leg_length=args.leg_length, gravity=args.gravity)
     speeds, step_lengths = gaits.grid_axes(_range(args.speeds, "speeds"), _range(args.step_lengths, "step-lengths"))
-    table = gaits.solve_grid(params, speeds, step_lengths, progress=gaits.stderr_progress)
+    table = gaits.solve_grid(params, speeds, step_lengths, progress=gaits.stderr_progress, family=args.family)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     table.save(out)
     coef, rms = gaits.fit_impulse_mean(table) if table.converged.sum() >= 4 else (np.full(4, np.nan), np.nan)
+    radius = table.step_map_radius[table.converged]
     summary = {"out": str(out), "converged": int(table.converged.sum()), "points": int(table.converged.size),
                "max_residual_converged": float(np.max(table.residual[table.converged], initial=0.0)),
+               "locally_stable_points": int(np.sum(radius < 1.0)),
                "impulse_fit": {"coefficients": np.asarray(coef).tolist(), "rms_m_per_s": rms},
                "not_converged": [{"speed_kmh": round(float(table.speeds[i]) / gaits.KMH, 3),
                                   "step_length": float(table.step_lengths[j]), "reason": table.reason[i][j]}
@@ -101,6 +103,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     solve.add_argument("--step-lengths", default="0.5:1.2:15", help="m LOW:HIGH:COUNT (default 0.5:1.2:15)")
     solve.add_argument("--leg-length", type=float, default=WalkerParams().leg_length, help="L in m")
     solve.add_argument("--gravity", type=float, default=WalkerParams().gravity, help="g in m/s^2")
+    solve.add_argument("--family", choices=("symmetric", "stable"), default="symmetric",
+                       help="which cyclic gait to keep where several solve eq. (3) (default: symmetric)")
     solve.set_defaults(func=run_solve)
     plot = sub.add_parser("plot", help="PNG plots of kappa/iota over the grid (Fig. 3) and the iota fit (Fig. 4)")
     plot.add_argument("--out", required=True, help="output directory")

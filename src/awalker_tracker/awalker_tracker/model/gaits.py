@@ -20,6 +20,7 @@ kappa and iota maps (Fig. 3). Nearby asymmetric solutions exist too (e.g. 5 km/h
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import sys
@@ -82,6 +83,7 @@ class GaitSolution:
     reason: str
     iterations: int
     pre_collision_rates: np.ndarray  # (phi1'-, phi2'-) just before the strike (rad/s)
+    step_map_radius: float = np.nan  # largest |Floquet multiplier| of the step-to-step map (< 1: stable)
 
 
 def _pre_collision_rates(params: WalkerParams, speed: float, step_length: float, x: np.ndarray) -> np.ndarray:
@@ -221,6 +223,7 @@ class GaitTable:
     pre_swing_rate: np.ndarray    # (S, P) phi2' just before heel strike
     residual: np.ndarray          # (S, P) max |residual| of eq. (3)
     converged: np.ndarray         # (S, P) bool
+    step_map_radius: np.ndarray | None = None  # (S, P) largest |Floquet multiplier| (< 1: stable)
     reason: tuple[tuple[str, ...], ...] = field(default=())
     solver_step: float = SOLVER_STEP
     version: int = TABLE_VERSION
@@ -239,6 +242,8 @@ class GaitTable:
             **{name: _nan_to_none(getattr(self, name)) for name in (
                 "stance_rate", "swing_rate", "stiffness", "toe_off_impulse", "pre_stance_rate",
                 "pre_swing_rate", "residual")},
+            "step_map_radius": _nan_to_none(self.step_map_radius if self.step_map_radius is not None
+                                            else np.full(self.stiffness.shape, np.nan)),
             "converged": self.converged.tolist(),
             "reason": [list(r) for r in self.reason],
         }
@@ -256,6 +261,8 @@ class GaitTable:
             table = cls(params=params, speeds=np.array(data["speeds"], float),
                         step_lengths=np.array(data["step_lengths"], float), **arrays,
                         converged=np.array(data["converged"], bool),
+                        step_map_radius=np.array(data["step_map_radius"], float) if "step_map_radius" in data
+                        else None,
                         reason=tuple(tuple(r) for r in data.get("reason", ())),
                         solver_step=float(data.get("solver_step", SOLVER_STEP)),
                         version=int(data.get("version", 0)))
@@ -344,18 +351,82 @@ def fit_impulse_mean(table: GaitTable) -> tuple[np.ndarray, float]:
     return coef, rms
 
 
+def step_map_radius(params: WalkerParams, speed: float, step_length: float, unknowns: np.ndarray) -> float:
+    """Spectral radius of the step-to-step map (post-strike a, phi1', phi2') at fixed kappa, iota.
+
+    Below 1 the cyclic gait is locally stable without any control; FD Jacobian, one batch.
+    """
+    x = np.asarray(unknowns, float)
+    a = float(double_support_angle(params, step_length))
+    base = np.array([a, x[0], x[1]])
+    probes = np.vstack([base, base + 1e-6 * np.eye(3)])
+    start = WalkerState.from_arrays(probes[:, 0], -probes[:, 0], probes[:, 1], probes[:, 2])
+    post, _, _ = simulate_to_strike(params, start, x[2], x[3], step=SOLVER_STEP,
+                                    max_time=1.5 * step_length / speed + 0.2)
+    image = np.stack([post.stance_angle, post.stance_rate, post.swing_rate], axis=1)
+    jac = (image[1:] - image[0]).T / 1e-6
+    return float(np.max(np.abs(np.linalg.eigvals(jac)))) if np.all(np.isfinite(jac)) else np.inf
+
+
+def _best_solution(params: WalkerParams, v: float, s: float, continued: list[np.ndarray],
+                   fresh: list[np.ndarray], family: str) -> GaitSolution:
+    """Collect the distinct gaits reachable from the guesses and pick one per ``family``.
+
+    The symmetric solver runs from the guesses until it converges once; the general solver runs
+    from every continuation guess (neighbours may lie on different families); the fresh guesses
+    are tried only when nothing converged.
+    """
+    found: list[GaitSolution] = []
+    failures: list[GaitSolution] = []
+
+    def add(sol: GaitSolution) -> bool:
+        if not sol.converged:
+            failures.append(sol)
+            return False
+        if not any(np.allclose(sol.unknowns, f.unknowns, atol=1e-6) for f in found):
+            found.append(sol)
+        return True
+
+    for guess in continued + fresh:
+        sol = solve_symmetric_point(params, v, s, guess)
+        if sol.converged and is_symmetric(sol) and add(sol):
+            break
+    if family == "stable" or not found:
+        for guess in continued:
+            add(solve_point(params, v, s, guess))
+    if not found:
+        for guess in fresh:
+            if add(solve_point(params, v, s, guess)):
+                break
+    if not found:
+        return min(failures, key=lambda f: f.residual)
+    found = [dataclasses.replace(f, step_map_radius=step_map_radius(params, v, s, f.unknowns)) for f in found]
+    if family == "symmetric" and any(is_symmetric(f) for f in found):
+        best = next(f for f in found if is_symmetric(f))
+    else:
+        best = min(found, key=lambda f: f.step_map_radius)
+    if not is_symmetric(best):
+        best = dataclasses.replace(best, reason=best.reason + " (asymmetric gait)")
+    return best
+
+
 def solve_grid(
     params: WalkerParams,
     speeds: np.ndarray,
     step_lengths: np.ndarray,
     progress: Callable[[str], None] | None = None,
     seed_point: tuple[float, float] = (5.0 * KMH, 0.7),
+    family: str = "symmetric",
 ) -> GaitTable:
     """Solve eq. (3) over a grid by continuation from the grid point nearest ``seed_point``.
 
     Points are visited in order of distance from the seed; each tries the solutions of its
-    already solved neighbours first, then :func:`default_guesses`. ``progress`` receives one line per point.
+    already solved neighbours first, then :func:`default_guesses`. ``family`` picks among the
+    solutions found at a point: "stable" (smallest step-map radius) or "symmetric" (the
+    mirror-symmetric gait when found). ``progress`` receives one line per point.
     """
+    if family not in ("stable", "symmetric"):
+        raise ValueError(f"family must be 'stable' or 'symmetric', got {family!r}")
     speeds, step_lengths = np.asarray(speeds, float), np.asarray(step_lengths, float)
     shape = (speeds.size, step_lengths.size)
     solutions: dict[tuple[int, int], GaitSolution] = {}
@@ -377,29 +448,12 @@ def solve_grid(
             sol = solutions.get(key)
             if sol is not None and sol.converged:
                 guesses.append(sol.unknowns)
-        guesses += default_guesses(params, v, s)
-        best: GaitSolution | None = None
-        # prefer the mirror-symmetric (human-like) family; fall back to any cyclic gait
-        for solver in (solve_symmetric_point, solve_point):
-            for guess in guesses:
-                sol = solver(params, v, s, guess)
-                if sol.converged and not is_symmetric(sol) and solver is solve_symmetric_point:
-                    continue
-                if best is None or (sol.converged and not best.converged) or (
-                        sol.converged == best.converged and sol.residual < best.residual):
-                    best = sol
-                if sol.converged:
-                    break
-            if best is not None and best.converged:
-                break
-        assert best is not None
-        if best.converged and not is_symmetric(best):
-            best = GaitSolution(**{**best.__dict__, "reason": best.reason + " (asymmetric gait)"})
+        best = _best_solution(params, v, s, guesses, default_guesses(params, v, s), family)
         solutions[(i, j)] = best
         if progress is not None:
             progress(f"[{count}/{len(order)}] {v / KMH:.2f} km/h, {s:.3f} m: {best.reason}, "
-                     f"residual {best.residual:.1e}, kappa {best.unknowns[2]:.3f}, iota {best.unknowns[3]:.3f} "
-                     f"({time.monotonic() - started:.0f} s)")
+                     f"residual {best.residual:.1e}, kappa {best.unknowns[2]:.3f}, iota {best.unknowns[3]:.3f}, "
+                     f"step-map radius {best.step_map_radius:.3f} ({time.monotonic() - started:.0f} s)")
 
     def grid(fn) -> np.ndarray:
         return np.array([[fn(solutions[(i, j)]) for j in range(shape[1])] for i in range(shape[0])], float)
@@ -411,6 +465,7 @@ def solve_grid(
         pre_stance_rate=grid(lambda s: s.pre_collision_rates[0]),
         pre_swing_rate=grid(lambda s: s.pre_collision_rates[1]),
         residual=grid(lambda s: s.residual),
+        step_map_radius=grid(lambda s: s.step_map_radius),
         converged=grid(lambda s: s.converged).astype(bool),
         reason=tuple(tuple(solutions[(i, j)].reason for j in range(shape[1])) for i in range(shape[0])),
     )
