@@ -300,12 +300,13 @@ def test_strike_located_inside_the_frame() -> None:
 
 def test_fallen_walkers_flagged_and_frozen() -> None:
     # 0: falls backwards (rate pushes the stance leg forward past horizontal); 1: walks; 2: no strike too long
-    state = WalkerState.from_arrays([0.3, 0.35, 0.1], [-0.3, -0.35, -0.1], [12.0, -1.9, -0.001], [0.0, -1.2, 0.0])
+    a = 0.39608  # the 5 km/h, 0.7 m cyclic gait for walker 1 (see test_gaits.py)
+    state = WalkerState.from_arrays([0.3, a, 0.1], [-0.3, -a, -0.1], [12.0, -1.9093, -0.001], [0.0, -1.3005, 0.0])
     tss = np.array([0.0, 0.0, 1.99])
     fallen_ever = np.zeros(3, bool)
     for _ in range(30):
         before = state.copy()
-        state, ev = dynamics.advance(PARAMS, state, 0.7, 0.3, 1 / 30, time_since_strike=tss)
+        state, ev = dynamics.advance(PARAMS, state, 0.749, 0.398, 1 / 30, time_since_strike=tss)
         tss = ev.time_since_strike
         assert np.all(np.isfinite(state.stance_angle)) and np.all(np.isfinite(state.swing_rate))
         for i in np.flatnonzero(ev.fallen):
