@@ -8,7 +8,7 @@ import pytest
 
 from awalker_tracker.errors import InputError
 from awalker_tracker.model import dynamics, gaits
-from awalker_tracker.model.walker import RIGHT, WalkerParams
+from awalker_tracker.model.walker import RIGHT, WalkerParams, WalkerState
 
 PARAMS = WalkerParams()
 
@@ -143,7 +143,7 @@ def test_step_map_radius_predicts_growth_of_perturbations(table: gaits.GaitTable
         assert radius == pytest.approx(table.step_map_radius[i, j], rel=1e-3)
         a = float(gaits.double_support_angle(PARAMS, table.step_lengths[j]))
         nominal = np.array([a, x[0], x[1]])
-        state = gaits.WalkerState.from_arrays(a, -a, x[0] + 1e-4, x[1])
+        state = WalkerState.from_arrays(a, -a, x[0] + 1e-4, x[1])
         deviations = []
         for _ in range(10):
             state, _, _ = dynamics.simulate_to_strike(PARAMS, state, x[2], x[3], step=gaits.SOLVER_STEP)

@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .dynamics import simulate_to_strike
+from .dynamics import _consts, _rk4, heel_strike, simulate_to_strike  # _rk4: the same fixed-step integrator
 from .walker import LEFT, WalkerParams, WalkerState
 
 TABLE_VERSION = 1
@@ -156,8 +156,6 @@ def symmetric_residual(params: WalkerParams, speed: float, step_length: float, u
     rates, and it is cyclic iff the impact (with iota) leaves the rates unchanged. These are the
     human-like gaits (mid-swing at mid-stance); they form one smooth family over the grid.
     """
-    from .dynamics import _consts, _rk4, heel_strike  # the solver's fixed-step integrator
-
     x = np.atleast_2d(np.asarray(unknowns, float))
     a = float(double_support_angle(params, step_length))
     half = 0.5 * step_length / speed
