@@ -3,7 +3,7 @@
 Walkers start spread over the phase of the 5 km/h, 0.7 m cyclic gait so that about 1/15 of them
 strike in every frame, as in tracking. Prints JSON: per N the median and min ms per frame, the
 strikes per frame, and the share of time spent in strike handling.
-Usage: .venv/bin/python benchmarks/bench_walker.py [--frames 30] [--sizes 1000 5000 20000]
+Usage: .venv/bin/python benchmarks/bench_walker.py [--frames 30] [--sizes 1000 5000 20000] [--substeps 4]
 """
 from __future__ import annotations
 
@@ -38,6 +38,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--frames", type=int, default=30)
     parser.add_argument("--sizes", type=int, nargs="+", default=[1000, 5000, 20000])
+    parser.add_argument("--substeps", type=int, default=None, help="RK4 sub-steps per frame (default: dynamics'")
     args = parser.parse_args()
     params = WalkerParams()
     table = gaits.GaitTable.load()
@@ -49,7 +50,8 @@ def main() -> None:
         times, strikes = [], []
         for _ in range(args.frames):
             t0 = time.perf_counter()
-            walkers, ev = dynamics.advance(params, walkers, kappa, iota, 1 / 30, time_since_strike=tss)
+            walkers, ev = dynamics.advance(params, walkers, kappa, iota, 1 / 30, substeps=args.substeps,
+                                           time_since_strike=tss)
             times.append(time.perf_counter() - t0)
             tss = ev.time_since_strike
             strikes.append(int(ev.heel_strike.sum()))
@@ -58,14 +60,14 @@ def main() -> None:
         still = WalkerState.from_arrays(np.full(n, 0.3), np.full(n, -0.3), np.full(n, -1.0), np.full(n, 0.5))
         for _ in range(args.frames):
             t0 = time.perf_counter()
-            dynamics.advance(params, still, kappa, iota, 1 / 30)
+            dynamics.advance(params, still, kappa, iota, 1 / 30, substeps=args.substeps)
             no_strike.append(time.perf_counter() - t0)
         results.append({"walkers": n, "ms_per_frame_median": 1e3 * float(np.median(times)),
                         "ms_per_frame_min": 1e3 * float(np.min(times)),
                         "ms_per_frame_without_strikes_median": 1e3 * float(np.median(no_strike)),
                         "strikes_per_frame_mean": float(np.mean(strikes)),
                         "fallen_after": int(ev.fallen.sum()),
-                        "substeps": dynamics.substeps_for(1 / 30)})
+                        "substeps": args.substeps or dynamics.substeps_for(1 / 30)})
     print(json.dumps({"benchmark": "walker advance, 1/30 s frame", "results": results}, indent=1))
 
 
