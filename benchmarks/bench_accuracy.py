@@ -125,7 +125,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="40 frames at 320x240 with 500 particles")
     parser.add_argument("--particles", type=int, help=f"particles (default {default_particles}; --quick 500)")
     parser.add_argument("--frames", type=int, help="frames with the person (default 90; --quick 40)")
-    parser.add_argument("--size", nargs=2, type=int, metavar=("W", "H"), help="image size (default 640 480; --quick 320 240)")
+    parser.add_argument("--size", nargs=2, type=int, metavar=("W", "H"),
+                        help="image size (default 640 480; --quick 320 240)")
     parser.add_argument("--background-frames", type=int, default=5, help="empty frames before the person (default 5)")
     parser.add_argument("--seed", type=int, default=1, help="first synthesis seed tried (default 1)")
     parser.add_argument("--track-seed", type=int, default=0, help="tracker seed (default 0)")
@@ -174,7 +175,8 @@ def main(argv: list[str] | None = None) -> int:
         "  speed err  frames/s")
     for name, e in report["sequences"].items():
         a, r = e["absolute_mm"], e["relative_mm"]
-        log(f"{name:<21} {a['median']:8.1f} {a['mean']:7.1f} +- {a['std']:5.1f}   {r['median']:8.1f} {r['mean']:7.1f} +- "
+        log(f"{name:<21} {a['median']:8.1f} {a['mean']:7.1f} +- {a['std']:5.1f}   "
+            f"{r['median']:8.1f} {r['mean']:7.1f} +- "
             f"{r['std']:5.1f}   {e['foot_skate_mm']['mean']:5.2f}  {e['stance_leg_correct_fraction']}/"
             f"{e['stance_leg_correct_fraction_planted_foot']}  {e['speed_m_s']['mean_abs_error']:8.3f}  "
             f"{e['frames_per_s']:7.2f}")
