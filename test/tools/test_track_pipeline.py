@@ -156,3 +156,10 @@ def test_track_without_start_description_says_what_to_provide(tmp_path: Path, ca
     assert "no start description" in err and "--start START.yaml" in err
     assert main(["track", str(tmp_path / "missing.bag"), "--out", str(tmp_path / "out")]) == 2
     assert "no such bag" in capsys.readouterr().err
+
+
+def test_track_option_errors(tmp_path: Path, capsys):
+    for option, value, text in (("--particles", "0", "--particles"), ("--trust", "1.5", "--trust"),
+                                ("--lookahead", "-1", "--lookahead"), ("--likelihood-scale", "0", "--likelihood-scale")):
+        assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), option, value]) == 2
+        assert text in capsys.readouterr().err

@@ -14,11 +14,14 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--particles must be >= 1, got {args.particles}")
     if not args.likelihood_scale > 0:
         raise InputError(f"--likelihood-scale must be > 0, got {args.likelihood_scale}")
+    if not 0.0 <= args.trust <= 1.0:
+        raise InputError(f"--trust (gamma) must lie in [0, 1], got {args.trust}")
     if args.lookahead < 0:
         raise InputError(f"--lookahead must be >= 0, got {args.lookahead}")
     run_tracking(TrackOptions(
         bag=Path(args.bag), out=Path(args.out), start=Path(args.start) if args.start else None,
         body=Path(args.body) if args.body else None, particles=args.particles, lookahead=args.lookahead,
+        trust=args.trust,
         seed=args.seed, likelihood_scale=args.likelihood_scale, overlays=not args.no_overlay, storage=args.storage))
     return 0
 
@@ -37,6 +40,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--body", help="body description YAML (segment sizes in metres)")
     parser.add_argument("--particles", type=int, default=5000, help="number of particles (default 5000)")
     parser.add_argument("--lookahead", type=int, default=3, help="look-ahead tau in frames (default 3)")
+    parser.add_argument("--trust", type=float, default=0.9,
+                        help="gamma: trust in the look-ahead weights when resampling (default 0.9)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--likelihood-scale", type=float, default=0.1,
                         help="exponent on the image likelihood (tempering, default 0.1)")
