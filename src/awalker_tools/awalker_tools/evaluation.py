@@ -216,7 +216,7 @@ def foot_plausibility(track: PoseTrack, tolerance_m: float = 0.02,
     slips_all = np.concatenate(slips) if slips else np.zeros(0)
     foot_z = np.stack([track.marker(n)[:, 2] for names in FOOT_MARKERS.values() for n in names], axis=1)
     lowest = 1000.0 * np.nanmin(foot_z, axis=1)
-    penetration = np.maximum(0.0, -lowest)
+    penetration = np.maximum(0.0, -lowest) + 0.0   # + 0.0: no "-0.0" in reports
     floating = np.maximum(0.0, lowest)
     return {
         "skate_mm": {"mean": float(slips_all.mean()) if slips_all.size else 0.0,
