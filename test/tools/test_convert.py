@@ -11,6 +11,7 @@ from awalker_tools import cli
 from awalker_tools.bagio import BODY_DESCRIPTION_TOPIC, START_DESCRIPTION_TOPIC, SequenceReader
 from awalker_tools.convert import image_files, read_timestamps
 from awalker_tracker.errors import InputError
+from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.vision.camera import Camera, save_calibration
 
 START_YAML = "start: {frame: 0, position: [0.5, -1.0], heading: 0.3, speed: 1.2, step_length: 0.6, stance_leg: left}\n"
@@ -48,7 +49,7 @@ def test_image_folders_round_trip_with_timestamps(tmp_path: Path, storage: str) 
     stamps_s = [f"1700000000.{i * 40000000:09d}" for i in range(frames)]
     (tmp_path / "stamps.txt").write_text("# seconds\n" + "\n".join(stamps_s) + "\n")
     (tmp_path / "start.yaml").write_text(START_YAML)
-    (tmp_path / "body.yaml").write_text("body: {height: 1.75}\n")
+    (tmp_path / "body.yaml").write_text(BodyDescription.default().to_yaml_text())
     out = tmp_path / "out"
     rc = cli.main(["convert", "--calibration", str(cal), "--out", str(out), "--storage", storage,
                    "--images", f"cam0={tmp_path / 'c0'}", "--images", f"cam1={tmp_path / 'c1'}",
@@ -65,7 +66,7 @@ def test_image_folders_round_trip_with_timestamps(tmp_path: Path, storage: str) 
             np.testing.assert_array_equal(images["cam0"], im0[i])
             np.testing.assert_array_equal(images["cam1"], im1[i])
         assert reader.text(START_DESCRIPTION_TOPIC) == START_YAML
-        assert reader.text(BODY_DESCRIPTION_TOPIC) == "body: {height: 1.75}\n"
+        assert reader.text(BODY_DESCRIPTION_TOPIC) == BodyDescription.default().to_yaml_text()
 
 
 def test_video_with_fps_from_file_compressed(tmp_path: Path) -> None:

@@ -16,16 +16,16 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.inference.tracker import StartDescription
+from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.vision.camera import Camera, load_calibration
 
 from awalker_tools.bagio import BODY_DESCRIPTION_TOPIC, START_DESCRIPTION_TOPIC, SequenceWriter
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
 PROGRESS_PERIOD_S = 2.0
-START_KEYS = ("frame", "position", "heading", "speed", "step_length", "stance_leg")
 
 
 @dataclass(frozen=True)
@@ -137,30 +137,13 @@ def read_timestamps(path: Path) -> list[int]:
 
 
 def read_description(path: Path, kind: str) -> str:
-    """A start/body description YAML file's text, checked to parse as a mapping."""
+    """A start/body description YAML file's text, validated by the parser the tracker uses."""
     try:
         text = Path(path).read_text()
     except OSError as exc:
         raise InputError(f"{path}: cannot read {kind} description ({exc.strerror or exc})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise InputError(f"{path}: {kind} description is not valid YAML ({exc})") from None
-    if not isinstance(data, dict):
-        raise InputError(f"{path}: {kind} description must be a YAML mapping")
-    if kind == "start":
-        start = data.get("start")
-        if not isinstance(start, dict):
-            raise InputError(f"{path}: start description needs a 'start:' mapping with {', '.join(START_KEYS)}")
-        missing = [k for k in ("position", "heading") if k not in start]
-        if missing:
-            raise InputError(f"{path}: start description is missing {', '.join(missing)}")
-        position = start["position"]
-        if not (isinstance(position, list) and len(position) == 2
-                and all(isinstance(v, (int, float)) for v in position)):
-            raise InputError(f"{path}: start.position must be [x, y] in metres, got {position!r}")
-        if start.get("stance_leg", "left") not in ("left", "right"):
-            raise InputError(f"{path}: start.stance_leg must be left or right, got {start['stance_leg']!r}")
+    parse = StartDescription.from_yaml_text if kind == "start" else BodyDescription.from_yaml_text
+    parse(text, f"{path} ({kind} description)")
     return text
 
 

@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from awalker_tracker.errors import InputError
+from awalker_tracker.errors import InputError, parse_yaml
 from awalker_tracker.model.walker import WalkerParams
 
 MARKER_NAMES: tuple[str, ...] = (
@@ -194,10 +194,7 @@ class BodyDescription:
     @classmethod
     def from_yaml_text(cls, text: str, where: str = "body description") -> "BodyDescription":
         """Parse the body YAML; ``where`` names the file or topic in errors."""
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            raise InputError(f"{where}: not valid YAML ({exc})") from None
+        data = parse_yaml(text, where)
         if not isinstance(data, dict) or not isinstance(data.get("body"), dict):
             raise InputError(f"{where}: expected a top-level 'body:' mapping of segment sizes in metres")
         entries: dict[str, Any] = data["body"]

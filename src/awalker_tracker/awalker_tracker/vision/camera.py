@@ -27,7 +27,7 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from awalker_tracker.errors import InputError
+from awalker_tracker.errors import InputError, parse_yaml
 
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 _DISTORTION_SIZES = (0, 4, 5, 8)
@@ -203,10 +203,7 @@ def load_calibration(path: str | Path) -> list[Camera]:
         raise InputError(f"{path}: calibration file not found") from None
     except OSError as exc:
         raise InputError(f"{path}: cannot read calibration file ({exc.strerror})") from None
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise InputError(f"{path}: not valid YAML ({exc})") from None
+    data = parse_yaml(text, str(path))
     if not isinstance(data, dict) or not isinstance(data.get("cameras"), list) or not data["cameras"]:
         raise InputError(f"{path}: expected a top-level 'cameras:' list with at least one camera")
     cameras = [camera_from_dict(entry, f"{path}: cameras[{i}]") for i, entry in enumerate(data["cameras"])]
