@@ -49,6 +49,10 @@ class TrackOptions:
     overlays: bool = True
     storage: str = "mcap"
     quiet: bool = False
+    # False: the pipeline's DDS participants see nothing outside this process (another publisher of
+    # /<cam>/image_raw on the host cannot disturb the lockstep replay). True: visible on this host
+    # (ROS_DOMAIN_ID) so that RViz or `ros2 topic echo` can watch.
+    share_topics: bool = False
 
 
 @dataclass
@@ -164,7 +168,8 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     _progress(options, f"awalker track: {bag} ({num_frames} frames, cameras {', '.join(names)}), start frame "
                        f"{start.frame} from {start_src}, body from {body_src}, {options.particles} particles")
 
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    # Read by the rmw when the context starts.
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST" if options.share_topics else "OFF"
     context = Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     nodes: list[Any] = []

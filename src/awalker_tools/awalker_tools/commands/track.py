@@ -22,7 +22,8 @@ def run(args: argparse.Namespace) -> int:
         bag=Path(args.bag), out=Path(args.out), start=Path(args.start) if args.start else None,
         body=Path(args.body) if args.body else None, particles=args.particles, lookahead=args.lookahead,
         trust=args.trust,
-        seed=args.seed, likelihood_scale=args.likelihood_scale, overlays=not args.no_overlay, storage=args.storage))
+        seed=args.seed, likelihood_scale=args.likelihood_scale, overlays=not args.no_overlay, storage=args.storage,
+        share_topics=args.share_topics))
     return 0
 
 
@@ -47,4 +48,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="exponent on the image likelihood (tempering, default 0.1)")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="result bag storage")
     parser.add_argument("--no-overlay", action="store_true", help="skip overlay images and video")
+    parser.add_argument("--share-topics", action="store_true",
+                        help="let other ROS 2 processes on this host (RViz, ros2 topic echo) see the pipeline's "
+                             "topics on ROS_DOMAIN_ID; by default the in-process pipeline is isolated")
     parser.set_defaults(func=run)
