@@ -262,9 +262,8 @@ class TrackerModel:
     def transition(self, states: TrackerStates, rng: np.random.Generator) -> tuple[TrackerStates, Any]:
         walker, control, events = self._control.sample_transition(
             self.params, self.prior, states.walker, states.control, self.config.dt, rng)
-        kin = self._kin.sample_kinematics(self.kin_config, self.body, self.params, states.walker, walker,
-                                          events, states.kin, rng)
-        pose = self._kin.pose_body(self.body, self.params, walker, kin)
+        kin, pose = self._kin.sample_posed_kinematics(self.kin_config, self.body, self.params, walker,
+                                                      states.kin, rng)
         # walking speed: horizontal pelvis displacement per frame, averaged over about one step
         pelvis = MARKER_NAMES.index("pelvis")
         moved = np.linalg.norm(pose.markers[:, pelvis, :2] - states.pose.markers[:, pelvis, :2], axis=1)
