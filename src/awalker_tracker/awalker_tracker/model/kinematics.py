@@ -200,8 +200,11 @@ def _rot_z(angle: np.ndarray) -> np.ndarray:
 def _turn(rotation: np.ndarray, axis: int, angle: np.ndarray) -> np.ndarray:
     """rotation @ R_axis(angle) for stacks (..., 3, 3) and angles (...): only two columns change,
     so this is much cheaper than a batched 3x3 matmul."""
-    c = np.cos(angle)[..., None]
-    s = np.sin(angle)[..., None]
+    return _turn_cs(rotation, axis, np.cos(angle)[..., None], np.sin(angle)[..., None])
+
+
+def _turn_cs(rotation: np.ndarray, axis: int, c: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """``_turn`` with the angle's cosine and sine given, shaped (..., 1)."""
     i, j = ((1, 2), (2, 0), (0, 1))[axis]
     col_i, col_j = rotation[..., :, i], rotation[..., :, j]
     out = np.empty_like(rotation)
@@ -310,7 +313,11 @@ def truncated_normal(rng: np.random.Generator, mean: np.ndarray, sigma: np.ndarr
     flip = a > 0  # interval entirely above the mean: sample -x from [-b, -a]
     lo = np.where(flip, -b, a)
     hi = np.where(flip, -a, b)
-    cdf_lo, cdf_hi = ndtr(lo), ndtr(hi)
+    # ndtr is exactly 0 below -37.7 and exactly 1 above 8.3: evaluate it only for bounds nearer
+    # than that (most joints are far from their limits), same numbers for a fraction of the cost
+    near = ~((lo <= -38.0) & (hi >= 9.0))
+    cdf_lo, cdf_hi = np.zeros(mean.shape), np.ones(mean.shape)
+    cdf_lo[near], cdf_hi[near] = ndtr(lo[near]), ndtr(hi[near])
     u = rng.random(mean.shape)
     with np.errstate(divide="ignore", invalid="ignore"):
         z = ndtri(cdf_lo + u * (cdf_hi - cdf_lo))
@@ -356,14 +363,17 @@ def _plane_origin(params: WalkerParams, walker: WalkerState, contact_point: np.n
     return contact_point - stance_contact_x(params, walker)[:, None] * along
 
 
-def _swing_foot_lowest_z(body: BodyDescription, local: _LocalPose, swing: np.ndarray, knee: np.ndarray,
-                         ankle_dofs: np.ndarray, shift_z: np.ndarray) -> np.ndarray:
-    """World height (N,) of the lowest point of the swing foot's sole for a given swing knee angle."""
-    thigh = _pick(local.thigh, swing)
+def _swing_foot_lowest_z(body: BodyDescription, thigh: np.ndarray, knee_position: np.ndarray,
+                         knee: np.ndarray, ankle_turns: tuple[np.ndarray, ...], shift_z: np.ndarray) -> np.ndarray:
+    """World height (M,) of the lowest point of the swing foot's sole for a given swing knee angle.
+
+    thigh (M, 3, 3) and knee_position (M, 3) of the swing leg (pelvis-relative), knee (M,) rad,
+    ankle_turns: cos and sin (M, 1) of the foot's two turns (flexion about y, inversion about x).
+    """
     shank = _turn(thigh, 1, knee)
-    ankle = _pick(local.hips, swing) - body.upper_leg_length * thigh[:, :, 2] - body.lower_leg_length * shank[:, :, 2]
-    side = _SIDE[swing]
-    foot = _turn(_turn(shank, 1, -ankle_dofs[:, 0]), 0, -side * ankle_dofs[:, 1])
+    ankle = knee_position - body.lower_leg_length * shank[:, :, 2]
+    c_flex, s_flex, c_inv, s_inv = ankle_turns
+    foot = _turn_cs(_turn_cs(shank, 1, c_flex, s_flex), 0, c_inv, s_inv)
     return _sole_point(body, ankle, foot, _lowest_roll(body, foot))[:, 2] + shift_z
 
 
@@ -379,14 +389,20 @@ def _keep_swing_foot_above_ground(body: BodyDescription, local: _LocalPose, dofs
     ankle_dofs = np.stack([dofs[rows, DOF_NAMES.index("left_ankle_flexion") + swing],
                            dofs[rows, DOF_NAMES.index("left_ankle_inversion") + swing]], axis=1)
     knee = dofs[rows, knee_col]
-    low = np.flatnonzero(_swing_foot_lowest_z(body, local, swing, knee, ankle_dofs, shift_z) < 0.0)
+    thigh = _pick(local.thigh, swing)
+    knee_position = _pick(local.hips, swing) - body.upper_leg_length * thigh[:, :, 2]
+    flex, inversion = -ankle_dofs[:, 0], -_SIDE[swing] * ankle_dofs[:, 1]
+    turns = tuple(f(a)[:, None] for a in (flex, inversion) for f in (np.cos, np.sin))
+    low = np.flatnonzero(_swing_foot_lowest_z(body, thigh, knee_position, knee, turns, shift_z) < 0.0)
     if low.size == 0:
         return
-    sub = _LocalPose(*(getattr(local, f.name)[low] for f in fields(_LocalPose)))
+    # the bisection works on the low rows only, with everything but the knee angle fixed
+    thigh, knee_position, shift_low = thigh[low], knee_position[low], shift_z[low]
+    turns = tuple(t[low] for t in turns)
     below, above = knee[low], np.full(low.size, np.pi)
     for _ in range(iterations):
         middle = 0.5 * (below + above)
-        clear = _swing_foot_lowest_z(body, sub, swing[low], middle, ankle_dofs[low], shift_z[low]) >= 0.0
+        clear = _swing_foot_lowest_z(body, thigh, knee_position, middle, turns, shift_low) >= 0.0
         above = np.where(clear, middle, above)
         below = np.where(clear, below, middle)
     dofs[low, knee_col[low]] = above
