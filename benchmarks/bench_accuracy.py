@@ -13,9 +13,8 @@ with `awalker track` and scored with `awalker eval`, all through their public mo
 
 Prints ONE JSON document on stdout; progress and a summary table go to stderr. Errors in mm over
 pelvis, thorax, hips, knees and ankles (absolute, and relative = pelvis-aligned), statistics over
-frames. Stance leg: `stance_leg_correct_fraction` is `awalker eval`'s (true stance = the foot with
-the lower markers), `..._planted_foot` is test/tools/accuracy_helpers.py's (true stance = the
-planted foot, double support not scored; used by the accuracy tests). Speed: medians and the mean
+frames. Stance leg: `stance_leg_correct_fraction` is `awalker eval`'s (true stance = the
+planted foot, double support not scored). Speed: medians and the mean
 per-frame |estimated - true| (true = pelvis ground speed over ~1 stride).
 
     .venv/bin/python benchmarks/bench_accuracy.py                  # 90 frames, 640x480, tracker default particles
@@ -39,7 +38,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 MOCAP_DIR = REPO_ROOT / "test" / "data" / "mocap"
 sys.path.insert(0, str(REPO_ROOT / "test" / "tools"))
 
-from accuracy_helpers import speed_error, stance_agreement  # noqa: E402  (shared with test/tools/test_accuracy.py)
+from accuracy_helpers import speed_error  # noqa: E402  (shared with test/tools/test_accuracy.py)
 
 
 def sequence_arguments(turn_deg: float) -> dict[str, dict]:
@@ -93,7 +92,6 @@ def summarise(result: dict, track, track_dir: Path, particles: int) -> dict:
         return {k: round(v, 1) + 0.0 for k, v in d.items()}   # + 0.0: no "-0.0"
 
     feet = result["estimate_feet"]
-    planted, planted_frames = stance_agreement(track_dir, Path(result["truth_source"]))
     return {
         "frames": result["absolute_mm"]["frames"],
         "particles": particles,
@@ -105,8 +103,7 @@ def summarise(result: dict, track, track_dir: Path, particles: int) -> dict:
         "truth_float_mm": rounded(result["truth_feet"]["float_mm"]),
         "stance_leg_correct_fraction": (round(result["stance_correct_fraction"], 3)
                                         if "stance_correct_fraction" in result else None),
-        "stance_leg_correct_fraction_planted_foot": round(planted, 3),
-        "stance_leg_scored_frames_planted_foot": planted_frames,
+        "stance_leg_scored_frames": result.get("stance_scored_frames", 0),
         "speed_m_s": {"true_median": round(result.get("truth_speed_m_s", float("nan")), 3),
                       "estimated_median": round(result.get("estimated_speed_m_s", float("nan")), 3),
                       "mean_abs_error": round(speed_error(track_dir, Path(result["truth_source"])), 3)},
@@ -171,14 +168,14 @@ def main(argv: list[str] | None = None) -> int:
             log(f"[{k + 1}/{len(names)}] {name}: absolute {entry['absolute_mm']['mean']:.0f} mm, relative "
                 f"{entry['relative_mm']['mean']:.0f} mm, stance {entry['stance_leg_correct_fraction']}, "
                 f"{entry['frames_per_s']:.1f} frames/s")
-    log("sequence              absolute median/mean+-std   relative median/mean+-std   skate  stance (eval/planted)"
+    log("sequence              absolute median/mean+-std   relative median/mean+-std   skate  stance"
         "  speed err  frames/s")
     for name, e in report["sequences"].items():
         a, r = e["absolute_mm"], e["relative_mm"]
         log(f"{name:<21} {a['median']:8.1f} {a['mean']:7.1f} +- {a['std']:5.1f}   "
             f"{r['median']:8.1f} {r['mean']:7.1f} +- "
-            f"{r['std']:5.1f}   {e['foot_skate_mm']['mean']:5.2f}  {e['stance_leg_correct_fraction']}/"
-            f"{e['stance_leg_correct_fraction_planted_foot']}  {e['speed_m_s']['mean_abs_error']:8.3f}  "
+            f"{r['std']:5.1f}   {e['foot_skate_mm']['mean']:5.2f}  {e['stance_leg_correct_fraction']}  "
+            f"{e['speed_m_s']['mean_abs_error']:8.3f}  "
             f"{e['frames_per_s']:7.2f}")
     report["settings"]["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
     print(json.dumps(report, indent=1))
