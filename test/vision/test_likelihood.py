@@ -1,9 +1,12 @@
 """Batched image likelihood on rendered frames with known truth (issue 5 section 6)."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
+from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import BodySegments, PartShape
 from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor, FrameFeatures
 from awalker_tracker.vision.flow import FlowConfig, FlowGrid
@@ -150,6 +153,9 @@ def test_bad_inputs(scene):
         log_likelihood(BODY.parts, seg, seg, cameras, features, [None])
     with pytest.raises(ValueError, match="parts"):
         log_likelihood(BODY.parts[:3], seg, seg, cameras, features)
+    small = dataclasses.replace(cameras[0], width=cameras[0].width // 2, height=cameras[0].height // 2)
+    with pytest.raises(InputError, match=f"features of camera {small.name} are .* calibration says"):
+        log_likelihood(BODY.parts, seg, seg, [small, *cameras[1:]], features)
 
 
 def test_chunking_does_not_change_the_result(scene):

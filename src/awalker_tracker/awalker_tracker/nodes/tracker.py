@@ -184,6 +184,10 @@ class TrackerNode(Node):
         stamp = stamp_to_ns(msg.header.stamp)
         try:
             item = features_from_msg(msg)
+            camera = self.cameras.get(cam)
+            if camera is not None and (item.image_width, item.image_height) != (camera.width, camera.height):
+                raise InputError(f"features of a {item.image_width}x{item.image_height} image, but the "
+                                 f"calibration of {cam} says {camera.width}x{camera.height}")
         except (InputError, ValueError) as exc:
             self.get_logger().error(f"/{cam}/features at {stamp} ns: {exc}; frame skipped")
             self._ack(stamp)

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import BodySegments, PartShape
 from awalker_tracker.vision.camera import Camera
 from awalker_tracker.vision.features import FrameFeatures, occlusion_cell_mask, occlusion_map_mask
@@ -173,7 +174,7 @@ def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, 
     if p != len(parts):
         raise ValueError(f"likelihood: segments have {p} parts, body has {len(parts)}")
     if (features.image_width, features.image_height) != (camera.width, camera.height):
-        raise ValueError(f"likelihood: features of camera {camera.name} are {features.image_width}x"
+        raise InputError(f"likelihood: features of camera {camera.name} are {features.image_width}x"
                          f"{features.image_height}, calibration says {camera.width}x{camera.height}")
     sil = _silhouettes(parts, segments, camera)
     # Eq. 11: 1 / expected area of each part, its side-on area at the part's median depth (P,).
