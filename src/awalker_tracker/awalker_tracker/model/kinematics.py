@@ -272,16 +272,26 @@ def _local_pose(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray) -> _L
 
 def _sole_point(body: BodyDescription, ankles: np.ndarray, foot: np.ndarray, beta: np.ndarray) -> np.ndarray:
     """Point at angle beta on the rocker sole (..., 3) for feet at ``ankles`` with frames ``foot``."""
+    along, up = _sole_offsets(body, beta)
+    return ankles + foot[..., :, 0] * along[..., None] + foot[..., :, 2] * up[..., None]
+
+
+def _sole_offsets(body: BodyDescription, beta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Foot-frame coordinates (along the foot, up; m) of the rocker sole's point at angle beta
+    (the circle's centre lies above the sole's middle; the lateral coordinate is 0)."""
     rho = body.sole_radius
-    x_mid = body.foot_length / 2 - body.heel_offset
-    centre_local = np.array([x_mid, 0.0, -body.ankle_height - body.sole_sag + rho])
-    offset = np.stack([rho * np.sin(beta), np.zeros_like(beta), -rho * np.cos(beta)], axis=-1)
-    return ankles + np.einsum("...ij,...j->...i", foot, centre_local + offset)
+    along = (body.foot_length / 2 - body.heel_offset) + rho * np.sin(beta)
+    up = (-body.ankle_height - body.sole_sag + rho) - rho * np.cos(beta)
+    return along, up
 
 
 def _lowest_roll(body: BodyDescription, foot: np.ndarray) -> np.ndarray:
     """beta of the rocker sole's lowest point, clipped to the sole's ends (heel/toe pivots)."""
-    along_z, up_z = foot[..., 2, 0], foot[..., 2, 2]
+    return _lowest_roll_from(body, foot[..., 2, 0], foot[..., 2, 2])
+
+
+def _lowest_roll_from(body: BodyDescription, along_z: np.ndarray, up_z: np.ndarray) -> np.ndarray:
+    """``_lowest_roll`` from the world z components of the foot's along and up axes."""
     beta = np.arctan2(-along_z, up_z)
     limit = body.sole_half_angle
     return np.clip(beta, -limit, limit)
@@ -363,18 +373,20 @@ def _plane_origin(params: WalkerParams, walker: WalkerState, contact_point: np.n
     return contact_point - stance_contact_x(params, walker)[:, None] * along
 
 
-def _swing_foot_lowest_z(body: BodyDescription, thigh: np.ndarray, knee_position: np.ndarray,
+def _swing_foot_lowest_z(body: BodyDescription, thigh_z: np.ndarray, knee_z: np.ndarray,
                          knee: np.ndarray, ankle_turns: tuple[np.ndarray, ...], shift_z: np.ndarray) -> np.ndarray:
     """World height (M,) of the lowest point of the swing foot's sole for a given swing knee angle.
 
-    thigh (M, 3, 3) and knee_position (M, 3) of the swing leg (pelvis-relative), knee (M,) rad,
-    ankle_turns: cos and sin (M, 1) of the foot's two turns (flexion about y, inversion about x).
+    thigh_z (M, 1, 3): the z row of the swing thigh's frame; knee_z (M,): the knee's height
+    (pelvis-relative); knee (M,) rad; ankle_turns: cos and sin (M, 1) of the foot's two turns
+    (flexion about y, inversion about x). Only the frames' z rows are turned (the height needs no more).
     """
-    shank = _turn(thigh, 1, knee)
-    ankle = knee_position - body.lower_leg_length * shank[:, :, 2]
+    shank_z = _turn(thigh_z, 1, knee)
+    ankle_z = knee_z - body.lower_leg_length * shank_z[:, 0, 2]
     c_flex, s_flex, c_inv, s_inv = ankle_turns
-    foot = _turn_cs(_turn_cs(shank, 1, c_flex, s_flex), 0, c_inv, s_inv)
-    return _sole_point(body, ankle, foot, _lowest_roll(body, foot))[:, 2] + shift_z
+    foot_z = _turn_cs(_turn_cs(shank_z, 1, c_flex, s_flex), 0, c_inv, s_inv)[:, 0]
+    along, up = _sole_offsets(body, _lowest_roll_from(body, foot_z[:, 0], foot_z[:, 2]))
+    return ankle_z + foot_z[:, 0] * along + foot_z[:, 2] * up + shift_z
 
 
 def _keep_swing_foot_above_ground(body: BodyDescription, local: _LocalPose, dofs: np.ndarray,
@@ -389,20 +401,20 @@ def _keep_swing_foot_above_ground(body: BodyDescription, local: _LocalPose, dofs
     ankle_dofs = np.stack([dofs[rows, DOF_NAMES.index("left_ankle_flexion") + swing],
                            dofs[rows, DOF_NAMES.index("left_ankle_inversion") + swing]], axis=1)
     knee = dofs[rows, knee_col]
-    thigh = _pick(local.thigh, swing)
-    knee_position = _pick(local.hips, swing) - body.upper_leg_length * thigh[:, :, 2]
+    thigh_z = _pick(local.thigh, swing)[:, 2:3, :]
+    knee_z = _pick(local.hips, swing)[:, 2] - body.upper_leg_length * thigh_z[:, 0, 2]
     flex, inversion = -ankle_dofs[:, 0], -_SIDE[swing] * ankle_dofs[:, 1]
     turns = tuple(f(a)[:, None] for a in (flex, inversion) for f in (np.cos, np.sin))
-    low = np.flatnonzero(_swing_foot_lowest_z(body, thigh, knee_position, knee, turns, shift_z) < 0.0)
+    low = np.flatnonzero(_swing_foot_lowest_z(body, thigh_z, knee_z, knee, turns, shift_z) < 0.0)
     if low.size == 0:
         return
     # the bisection works on the low rows only, with everything but the knee angle fixed
-    thigh, knee_position, shift_low = thigh[low], knee_position[low], shift_z[low]
+    thigh_z, knee_z, shift_low = thigh_z[low], knee_z[low], shift_z[low]
     turns = tuple(t[low] for t in turns)
     below, above = knee[low], np.full(low.size, np.pi)
     for _ in range(iterations):
         middle = 0.5 * (below + above)
-        clear = _swing_foot_lowest_z(body, thigh, knee_position, middle, turns, shift_low) >= 0.0
+        clear = _swing_foot_lowest_z(body, thigh_z, knee_z, middle, turns, shift_low) >= 0.0
         above = np.where(clear, middle, above)
         below = np.where(clear, below, middle)
     dofs[low, knee_col[low]] = above
