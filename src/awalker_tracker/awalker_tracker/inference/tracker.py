@@ -381,13 +381,15 @@ class ImageObservation:
 
 def image_likelihood(body: BodyDescription, cameras: list[Any]) -> LikelihoodFn:
     """The image likelihood of paper Sec. 5.1 (eq. 9-12) over ``cameras`` (vision.likelihood)."""
-    from awalker_tracker.vision.likelihood import log_likelihood
+    from awalker_tracker.vision.likelihood import SilhouetteMemo, log_likelihood
 
     parts = body.parts
+    memo = SilhouetteMemo()   # each frame's poses are the next frame's previous poses
 
     def loglik(prev: TrackerStates | None, states: TrackerStates, obs: ImageObservation) -> np.ndarray:
         prev_segments = states.pose.segments if prev is None else prev.pose.segments
         masks = list(obs.occlusion_masks) or [None] * len(cameras)
-        return log_likelihood(parts, states.pose.segments, prev_segments, cameras, list(obs.features), masks)
+        return log_likelihood(parts, states.pose.segments, prev_segments, cameras, list(obs.features), masks,
+                              memo=memo)
 
     return loglik

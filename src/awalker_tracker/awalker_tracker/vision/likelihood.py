@@ -162,21 +162,47 @@ def _silhouettes(parts: tuple[PartShape, ...], segments: BodySegments, camera: C
     return _Silhouettes(u[..., 0], v[..., 0], u[..., 1], v[..., 1], ha, hb, da, db)
 
 
-def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, prev_segments: BodySegments,
-                          camera: Camera, features: FrameFeatures, occlusion_mask: np.ndarray | None = None,
-                          config: LikelihoodConfig = LikelihoodConfig()) -> np.ndarray:
-    """Log-likelihood (N,) of one camera's features (see the module docstring).
+class SilhouetteMemo:
+    """The last poses' projected silhouettes per camera. A tracker's next frame scores new poses
+    against these poses as its previous ones (the flow term), so with a memo they are projected
+    once instead of twice. Matched by object identity of the ``BodySegments``."""
 
-    The states are processed in chunks of ``config.chunk_states`` so that the per-sample arrays
-    stay in the CPU cache; arrays are laid out (A, P, n) and (J, A, P, n) so that sums over the
-    few sample rows and columns add contiguous blocks."""
-    n, p = segments.origin.shape[:2]
+    def __init__(self) -> None:
+        self._segments: BodySegments | None = None
+        self._silhouettes: list[_Silhouettes] = []
+
+    def lookup(self, segments: BodySegments, camera_index: int) -> _Silhouettes | None:
+        if segments is self._segments and camera_index < len(self._silhouettes):
+            return self._silhouettes[camera_index]
+        return None
+
+    def store(self, segments: BodySegments, silhouettes: list[_Silhouettes]) -> None:
+        self._segments, self._silhouettes = segments, silhouettes
+
+
+def _check_inputs(parts: tuple[PartShape, ...], segments: BodySegments, camera: Camera,
+                  features: FrameFeatures) -> None:
+    p = segments.origin.shape[1]
     if p != len(parts):
         raise ValueError(f"likelihood: segments have {p} parts, body has {len(parts)}")
     if (features.image_width, features.image_height) != (camera.width, camera.height):
         raise InputError(f"likelihood: features of camera {camera.name} are {features.image_width}x"
                          f"{features.image_height}, calibration says {camera.width}x{camera.height}")
-    sil = _silhouettes(parts, segments, camera)
+
+
+def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, prev_segments: BodySegments,
+                          camera: Camera, features: FrameFeatures, occlusion_mask: np.ndarray | None = None,
+                          config: LikelihoodConfig = LikelihoodConfig(), silhouettes: _Silhouettes | None = None,
+                          prev_silhouettes: _Silhouettes | None = None) -> np.ndarray:
+    """Log-likelihood (N,) of one camera's features (see the module docstring).
+
+    ``silhouettes`` / ``prev_silhouettes``: the poses already projected into this camera
+    (``_silhouettes``), if known. The states are processed in chunks of ``config.chunk_states``
+    so that the per-sample arrays stay in the CPU cache; arrays are laid out (A, P, n) and
+    (J, A, P, n) so that sums over the few sample rows and columns add contiguous blocks."""
+    _check_inputs(parts, segments, camera, features)
+    n = segments.origin.shape[0]
+    sil = _silhouettes(parts, segments, camera) if silhouettes is None else silhouettes
     # Eq. 11: 1 / expected area of each part, its side-on area at the part's median depth (P,).
     size = np.array([q.length * (np.mean(q.radii_start) + np.mean(q.radii_end)) for q in parts])   # m^2
     median_depth = np.maximum(np.median(0.5 * (sil.da + sil.db), axis=1), 1e-3)
@@ -185,7 +211,10 @@ def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, 
     flow = _FlowTable(features.flow, occlusion_mask) if config.flow_weight > 0 else None
     if flow is not None and not flow.any:
         flow = None
-    prev = _silhouettes(parts, prev_segments, camera, widths=False) if flow is not None else None
+    prev = None
+    if flow is not None:
+        prev = prev_silhouettes if prev_silhouettes is not None else _silhouettes(parts, prev_segments, camera,
+                                                                                  widths=False)
     total = np.empty(n)
     step = max(int(config.chunk_states), 1)
     for start in range(0, n, step):
@@ -347,8 +376,9 @@ def _hidden_rows(parts: tuple[PartShape, ...], sil: _Silhouettes, cx: np.ndarray
 def log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, prev_segments: BodySegments | None,
                    cameras: list[Camera], features: list[FrameFeatures],
                    occlusion_masks: list[np.ndarray | None] | None = None,
-                   config: LikelihoodConfig = LikelihoodConfig()) -> np.ndarray:
-    """log p(z_t | s_t) (N,) up to a constant, summed over cameras (eq. 12)."""
+                   config: LikelihoodConfig = LikelihoodConfig(), memo: SilhouetteMemo | None = None) -> np.ndarray:
+    """log p(z_t | s_t) (N,) up to a constant, summed over cameras (eq. 12). ``memo`` (optional)
+    reuses the previous call's projections when ``prev_segments`` is that call's ``segments``."""
     if len(cameras) != len(features):
         raise ValueError(f"likelihood: {len(cameras)} cameras but {len(features)} feature frames")
     masks = list(occlusion_masks) if occlusion_masks else [None] * len(cameras)
@@ -356,6 +386,13 @@ def log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, prev_se
         raise ValueError(f"likelihood: {len(cameras)} cameras but {len(masks)} occlusion masks")
     prev = segments if prev_segments is None else prev_segments
     total = np.zeros(len(segments))
-    for camera, feats, mask in zip(cameras, features, masks):
-        total += camera_log_likelihood(parts, segments, prev, camera, feats, mask, config)
+    projected = []
+    for index, (camera, feats, mask) in enumerate(zip(cameras, features, masks)):
+        _check_inputs(parts, segments, camera, feats)
+        sil = _silhouettes(parts, segments, camera)
+        prev_sil = sil if prev is segments else (memo.lookup(prev, index) if memo is not None else None)
+        total += camera_log_likelihood(parts, segments, prev, camera, feats, mask, config, sil, prev_sil)
+        projected.append(sil)
+    if memo is not None:
+        memo.store(segments, projected)
     return total
