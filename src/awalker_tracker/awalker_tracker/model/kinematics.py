@@ -587,36 +587,38 @@ def _posed_body(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray, local
                 shift: np.ndarray) -> BodyPoseBatch:
     """``pose_body`` from the pelvis-relative pose ``local`` and the pelvis world position ``shift`` (N, 3)."""
     n = dofs.shape[0]
-    pelvis = shift
+    # written straight into the output arrays (MARKER_NAMES, PART_NAMES and JOINT_NAMES order)
+    markers = np.empty((n, len(MARKER_NAMES), 3))
     torso_up = local.torso[:, :, 2]
-    thorax = pelvis + body.torso_length * torso_up
-    head = thorax + 0.5 * body.head_length * torso_up
-    hips = local.hips + shift[:, None]
-    knees = local.knees + shift[:, None]
-    ankles = local.ankles + shift[:, None]
+    markers[:, 0] = shift                                                           # pelvis
+    np.add(shift, body.torso_length * torso_up, out=markers[:, 1])                 # thorax
+    np.add(markers[:, 1], 0.5 * body.head_length * torso_up, out=markers[:, 2])    # head
+    np.add(local.hips, shift[:, None], out=markers[:, 3:5])
+    np.add(local.knees, shift[:, None], out=markers[:, 5:7])
+    ankles = markers[:, 7:9]
+    np.add(local.ankles, shift[:, None], out=ankles)
     heel_local = (-body.heel_offset, 0.0, -body.ankle_height)
     toe_local = (body.foot_length - body.heel_offset, 0.0, -body.ankle_height)
-    heels = ankles + _apply(local.foot, heel_local)
-    toes = ankles + _apply(local.foot, toe_local)
-    markers = np.stack([pelvis, thorax, head, hips[:, 0], hips[:, 1], knees[:, 0], knees[:, 1],
-                        ankles[:, 0], ankles[:, 1], heels[:, 0], heels[:, 1], toes[:, 0], toes[:, 1]], axis=1)
-    assert markers.shape[1] == len(MARKER_NAMES)
+    np.add(ankles, _apply(local.foot, heel_local), out=markers[:, 9:11])
+    np.add(ankles, _apply(local.foot, toe_local), out=markers[:, 11:13])
 
     foot_axis_height = body.foot_radii_heel[0]  # the foot cylinder's bottom touches the heel end of the sole line
-    foot_origin = ankles + _apply(local.foot, (heel_local[0], 0.0, heel_local[2] + foot_axis_height))
-    origin = np.stack([pelvis, thorax, hips[:, 0], hips[:, 1], knees[:, 0], knees[:, 1],
-                       foot_origin[:, 0], foot_origin[:, 1]], axis=1)
-    thigh = local.thigh * _LEG_SEGMENT_SIGNS
-    shank = local.shank * _LEG_SEGMENT_SIGNS
-    foot = local.foot[..., _FOOT_SEGMENT_COLUMNS] * _FOOT_SEGMENT_SIGNS
-    rotation = np.stack([local.torso, local.torso, thigh[:, 0], thigh[:, 1], shank[:, 0], shank[:, 1],
-                         foot[:, 0], foot[:, 1]], axis=1)
+    origin = np.empty((n, 8, 3))
+    origin[:, 0:2] = markers[:, 0:2]            # torso at the pelvis, head at the thorax
+    origin[:, 2:6] = markers[:, 3:7]            # upper legs at the hips, lower legs at the knees
+    np.add(ankles, _apply(local.foot, (heel_local[0], 0.0, heel_local[2] + foot_axis_height)), out=origin[:, 6:8])
+    rotation = np.empty((n, 8, 3, 3))
+    rotation[:, 0] = local.torso
+    rotation[:, 1] = local.torso
+    np.multiply(local.thigh, _LEG_SEGMENT_SIGNS, out=rotation[:, 2:4])
+    np.multiply(local.shank, _LEG_SEGMENT_SIGNS, out=rotation[:, 4:6])
+    np.multiply(local.foot[..., _FOOT_SEGMENT_COLUMNS], _FOOT_SEGMENT_SIGNS, out=rotation[:, 6:8])
 
-    d = KinematicState.unpack(dofs)
-    per_leg = [legs, d["hip_abduction"], d["hip_rotation"], d["knee"], d["ankle"][..., 0], d["ankle"][..., 1]]
-    joints = np.column_stack([d["torso_lean"][:, 0], d["torso_lean"][:, 1], d["heading"]]
-                             + [a[:, 0] for a in per_leg] + [a[:, 1] for a in per_leg])
-    assert joints.shape == (n, len(JOINT_NAMES))
+    joints = np.empty((n, len(JOINT_NAMES)))
+    joints[:, 0:3] = dofs[:, 0:3]               # torso pitch, roll, yaw (heading)
+    for side in (0, 1):                         # hip flexion (walker leg angle), abduction, rotation, knee, ankle x2
+        joints[:, 3 + 6 * side] = legs[:, side]
+        joints[:, 4 + 6 * side: 9 + 6 * side] = dofs[:, 3 + side:13:2]
     return BodyPoseBatch(markers=markers, joint_angles=joints, segments=BodySegments(origin, rotation))
 
 
