@@ -261,35 +261,34 @@ def _rk4(k: _Consts, p1, p2, w1, w2, kappa, h):
     """One classical RK4 step of size h (scalar or array) for the raw state arrays.
 
     Stage angles are q + delta; their sines/cosines come from the step start's by :func:`_rotate`.
+    Both angles (and rates) are stacked in (2, N) arrays so that each numpy call serves both
+    legs (the arrays are small: the cost is mostly per call). Returns rows of (2, N) arrays.
     """
-    s1, c1, s2, c2 = np.sin(p1), np.cos(p1), np.sin(p2), np.cos(p2)
-    gap = p2 - p1
+    q = np.stack(np.broadcast_arrays(p1, p2))          # (phi1, phi2)
+    w = np.stack(np.broadcast_arrays(w1, w2))          # (phi1', phi2')
+    sin, cos = np.sin(q), np.cos(q)
+    gap = q[1] - q[0]
     hh = 0.5 * h
-    a1, a2 = _acc_trig(k, s1, c1, s2, c2, gap, w1, w2, kappa)
+    a = np.stack(_acc_trig(k, sin[0], cos[0], sin[1], cos[1], gap, w[0], w[1], kappa))
     # stage 2: q + h/2 q'
-    d1, d2 = hh * w1, hh * w2
-    sa, ca = _rotate(s1, c1, d1)
-    sb, cb = _rotate(s2, c2, d2)
-    v1, v2 = w1 + hh * a1, w2 + hh * a2
-    b1, b2 = _acc_trig(k, sa, ca, sb, cb, gap + (d2 - d1), v1, v2, kappa)
+    d = hh * w
+    s_, c_ = _rotate(sin, cos, d)
+    v = w + hh * a
+    b = np.stack(_acc_trig(k, s_[0], c_[0], s_[1], c_[1], gap + (d[1] - d[0]), v[0], v[1], kappa))
     # stage 3: q + h/2 (q' + h/2 a)
-    e1, e2 = hh * v1, hh * v2
-    sa, ca = _rotate(s1, c1, e1)
-    sb, cb = _rotate(s2, c2, e2)
-    u1, u2 = w1 + hh * b1, w2 + hh * b2
-    g1, g2 = _acc_trig(k, sa, ca, sb, cb, gap + (e2 - e1), u1, u2, kappa)
+    e = hh * v
+    s_, c_ = _rotate(sin, cos, e)
+    u = w + hh * b
+    g = np.stack(_acc_trig(k, s_[0], c_[0], s_[1], c_[1], gap + (e[1] - e[0]), u[0], u[1], kappa))
     # stage 4: q + h (q' + h/2 b)
-    f1, f2 = h * u1, h * u2
-    sa, ca = _rotate(s1, c1, f1)
-    sb, cb = _rotate(s2, c2, f2)
-    z1, z2 = w1 + h * g1, w2 + h * g2
-    j1, j2 = _acc_trig(k, sa, ca, sb, cb, gap + (f2 - f1), z1, z2, kappa)
+    f = h * u
+    s_, c_ = _rotate(sin, cos, f)
+    z = w + h * g
+    j = np.stack(_acc_trig(k, s_[0], c_[0], s_[1], c_[1], gap + (f[1] - f[0]), z[0], z[1], kappa))
     h6 = h / 6.0
-    np1 = p1 + h6 * (w1 + 2.0 * (v1 + u1) + z1)
-    np2 = p2 + h6 * (w2 + 2.0 * (v2 + u2) + z2)
-    nw1 = w1 + h6 * (a1 + 2.0 * (b1 + g1) + j1)
-    nw2 = w2 + h6 * (a2 + 2.0 * (b2 + g2) + j2)
-    return np1, np2, nw1, nw2
+    new_q = q + h6 * (w + 2.0 * (v + u) + z)
+    new_w = w + h6 * (a + 2.0 * (b + g) + j)
+    return new_q[0], new_q[1], new_w[0], new_w[1]
 
 
 def _locate_strike(k: _Consts, p1, p2, w1, w2, kappa, h, s0, s1, iterations: int = 8):
