@@ -264,10 +264,17 @@ def _local_pose(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray) -> _L
     thigh = np.repeat(heading[:, None], 2, axis=1)
     thigh = _turn(_turn(_turn(thigh, 1, -legs), 0, _SIDE * d["hip_abduction"]), 2, -_SIDE * d["hip_rotation"])
     knees = hips - body.upper_leg_length * thigh[..., :, 2]
-    shank = _turn(thigh, 1, d["knee"])
-    ankles = knees - body.lower_leg_length * shank[..., :, 2]
-    foot = _turn(_turn(shank, 1, -d["ankle"][..., 0]), 0, -_SIDE * d["ankle"][..., 1])
+    shank, ankles, foot = _lower_legs(body, thigh, knees, dofs)
     return _LocalPose(torso, hips, thigh, knees, shank, ankles, foot)
+
+
+def _lower_legs(body: BodyDescription, thigh: np.ndarray, knees: np.ndarray,
+                dofs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Shank frames, ankle positions and foot frames (N, 2, ...) below the given thighs and knees."""
+    shank = _turn(thigh, 1, dofs[:, 7:9])                         # knee flexion
+    ankles = knees - body.lower_leg_length * shank[..., :, 2]
+    foot = _turn(_turn(shank, 1, -dofs[:, 9:11]), 0, -_SIDE * dofs[:, 11:13])   # ankle flexion, inversion
+    return shank, ankles, foot
 
 
 def _sole_point(body: BodyDescription, ankles: np.ndarray, foot: np.ndarray, beta: np.ndarray) -> np.ndarray:
@@ -551,13 +558,12 @@ def _sample_kinematics(
     # The clearance moves the knee without giving it velocity (a position projection): shift
     # psi_{t-1} along, so that eq. (6) next frame sees the sampled velocity.
     current = current + (new - before)
-    # The clearance bent some swing knees: pose those bodies again (their contact foot and so
-    # ``shift`` are unchanged).
+    # The clearance bent some swing knees: pose those lower legs again (their contact foot and
+    # so ``shift`` are unchanged).
     changed = np.flatnonzero(np.any(new != before, axis=1))
     if changed.size:
-        patch = _local_pose(body, legs[changed], new[changed])
-        for f in fields(_LocalPose):
-            getattr(local, f.name)[changed] = getattr(patch, f.name)
+        local.shank[changed], local.ankles[changed], local.foot[changed] = _lower_legs(
+            body, local.thigh[changed], local.knees[changed], new[changed])
     named = KinematicState.unpack(new)
     state = KinematicState(
         heading=named["heading"], torso_lean=named["torso_lean"], hip_abduction=named["hip_abduction"],
