@@ -308,7 +308,7 @@ def _chunk_log_likelihood(parts: tuple[PartShape, ...], sil: "_Silhouettes", pre
         np.multiply(row.astype(np.int32), tab.w + 2, out=flat[j])
         flat[j] += col.astype(np.int32)
         flat[j] += tab.offsets
-    values = tab.values[flat]
+    values = np.take(tab.values, flat)   # take: ~2x faster than fancy indexing here
     row_sums = values[0]
     for j in range(1, J):
         row_sums = row_sums + values[j]
@@ -357,15 +357,25 @@ def _hidden_rows(parts: tuple[PartShape, ...], sil: _Silhouettes, cx: np.ndarray
     if q.size == 0:
         return hidden
     i, j = I[q], J[q]
-    ax, ay = sil.ax[j, k], sil.ay[j, k]
-    sx, sy = sil.bx[j, k] - ax, sil.by[j, k] - ay
-    px, py = cx[:, i, k] - ax, cy[:, i, k] - ay                               # (A, M)
+    # gathers by flat index with np.take (several times faster than 2-D fancy indexing)
+    n = cx.shape[-1]
+    jk, ik = j * n + k, i * n + k
+
+    def at_occluder(a: np.ndarray) -> np.ndarray:      # a (P, n) -> (M,)
+        return np.take(a, jk)
+
+    def at_row(a: np.ndarray) -> np.ndarray:           # a (A, P, n) -> (A, M)
+        return np.take(a.reshape(a.shape[0], -1), ik, axis=1)
+
+    ax, ay = at_occluder(sil.ax), at_occluder(sil.ay)
+    sx, sy = at_occluder(sil.bx) - ax, at_occluder(sil.by) - ay
+    px, py = at_row(cx) - ax, at_row(cy) - ay                                 # (A, M)
     tau = np.clip((px * sx + py * sy) / np.maximum(sx * sx + sy * sy, np.float32(1e-6)), 0, 1)
     ex, ey = px - tau * sx, py - tau * sy
-    ha = sil.ha[j, k]
-    radius = ha + tau * (sil.hb[j, k] - ha)
-    da = sil.da[j, k]
-    behind = depth[:, i, k] > da + tau * (sil.db[j, k] - da)
+    ha = at_occluder(sil.ha)
+    radius = ha + tau * (at_occluder(sil.hb) - ha)
+    da = at_occluder(sil.da)
+    behind = at_row(depth) > da + tau * (at_occluder(sil.db) - da)
     covered = (ex * ex + ey * ey < radius * radius) & behind
     for row in range(cx.shape[0]):       # set-only writes: repeated (part, state) entries are harmless
         hit = covered[row]
