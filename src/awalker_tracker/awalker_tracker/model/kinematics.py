@@ -306,7 +306,8 @@ def _lowest_roll_from(body: BodyDescription, along_z: np.ndarray, up_z: np.ndarr
 
 def _pick(values: np.ndarray, leg: np.ndarray) -> np.ndarray:
     """values (N, 2, ...) at the given leg index per particle -> (N, ...)."""
-    return values[np.arange(values.shape[0]), leg.astype(np.intp)]
+    n = values.shape[0]   # flat take: several times faster than fancy indexing
+    return np.take(values.reshape((2 * n,) + values.shape[2:]), 2 * np.arange(n) + leg.astype(np.intp), axis=0)
 
 
 def _horizontal_direction(foot: np.ndarray) -> np.ndarray:
