@@ -619,7 +619,8 @@ def _posed_body(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray, local
     rotation[:, 1] = local.torso
     np.multiply(local.thigh, _LEG_SEGMENT_SIGNS, out=rotation[:, 2:4])
     np.multiply(local.shank, _LEG_SEGMENT_SIGNS, out=rotation[:, 4:6])
-    np.multiply(local.foot[..., _FOOT_SEGMENT_COLUMNS], _FOOT_SEGMENT_SIGNS, out=rotation[:, 6:8])
+    for column, (source, sign) in enumerate(zip(_FOOT_SEGMENT_COLUMNS, _FOOT_SEGMENT_SIGNS)):
+        np.multiply(local.foot[..., source], sign, out=rotation[:, 6:8, :, column])
 
     joints = np.empty((n, len(JOINT_NAMES)))
     joints[:, 0:3] = dofs[:, 0:3]               # torso pitch, roll, yaw (heading)
