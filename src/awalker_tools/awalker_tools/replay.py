@@ -41,6 +41,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rosbags.interfaces import Connection
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.nodes.spin import run_node
 
 from awalker_tools.bagio import (
     COMPRESSED_IMAGE,
@@ -522,20 +523,8 @@ def _spin_replay(node: ReplayNode) -> int:
 
 def main(args: list[str] | None = None) -> int:
     """Console script ``awalker_replay --ros-args -p bag:=PATH [-p lockstep:=true] ...``."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ReplayNode()
-        return _spin_replay(node)
-    except InputError as exc:
-        print(f"awalker_replay: error: {exc}", file=sys.stderr)
-        return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 130
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    return run_node("awalker_replay", ReplayNode, args, spin=_spin_replay)
+
 
 
 if __name__ == "__main__":

@@ -37,7 +37,6 @@ import rclpy
 from awalker_msgs.msg import FlowGrid as FlowGridMsg
 from awalker_msgs.msg import ImageFeatures
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from geometry_msgs.msg import PoseStamped
@@ -47,6 +46,7 @@ from std_msgs.msg import Header, String
 from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import PART_CLASSES, BodyDescription
 from awalker_tracker.nodes.convert import camera_from_msgs, stamp_to_ns
+from awalker_tracker.nodes.spin import run_node
 from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor, FrameFeatures
 from awalker_tracker.vision.flow import FlowConfig, FlowGrid
 from awalker_tracker.vision.foreground import start_pose_labels
@@ -307,19 +307,5 @@ class FeatureNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Console script ``awalker_features``; exit status 2 on bad parameters."""
-    rclpy.init(args=args)
-    node = None
-    status = 0
-    try:
-        node = FeatureNode()
-        rclpy.spin(node)
-    except InputError as exc:
-        print(f"awalker_features: error: {exc}", file=sys.stderr)
-        status = 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return status
+    return run_node("awalker_features", FeatureNode, args)
+

@@ -15,7 +15,6 @@ import numpy as np
 import rclpy
 from awalker_msgs.msg import PosteriorSummary
 from geometry_msgs.msg import Point, Vector3
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -24,6 +23,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.nodes.convert import points_from_msg
+from awalker_tracker.nodes.spin import run_node
 
 BONES = (("pelvis", "thorax"), ("thorax", "head"), ("pelvis", "left_hip"), ("pelvis", "right_hip"),
          ("left_hip", "left_knee"), ("left_knee", "left_ankle"), ("left_ankle", "left_heel"),
@@ -176,13 +176,7 @@ def _tf_broadcaster(node: Node):
     return TransformBroadcaster(node)
 
 
-def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = PosePublisherNode()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+def main(args: list[str] | None = None) -> int:
+    """Console script ``awalker_pose_publisher``; exit status 2 on bad parameters."""
+    return run_node("awalker_pose_publisher", PosePublisherNode, args)
+

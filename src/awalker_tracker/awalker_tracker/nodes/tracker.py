@@ -15,7 +15,6 @@ Frames that arrive before everything is known are kept and processed as soon as 
 """
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -24,7 +23,6 @@ import rclpy
 from awalker_msgs.msg import ImageFeatures, PosteriorSummary
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -40,6 +38,7 @@ from awalker_tracker.inference.tracker import (
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.nodes.convert import camera_from_msgs, header, stamp_to_ns, summary_to_msg
 from awalker_tracker.nodes.features import features_from_msg
+from awalker_tracker.nodes.spin import run_node
 
 START_TOPIC = "/awalker/start_description"
 BODY_TOPIC = "/awalker/body_description"
@@ -287,18 +286,7 @@ class TrackerNode(Node):
             self.flush()
 
 
-def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = TrackerNode()
-        rclpy.spin(node)
-    except InputError as exc:
-        print(f"awalker_tracker_node: error: {exc}", file=sys.stderr)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+def main(args: list[str] | None = None) -> int:
+    """Console script ``awalker_tracker_node``; exit status 2 on bad parameters."""
+    return run_node("awalker_tracker_node", TrackerNode, args)
 
