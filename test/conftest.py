@@ -8,7 +8,6 @@ from pathlib import Path
 import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-SHARED = REPO_ROOT.parent / "shared"
 MOCAP_DIR = REPO_ROOT / "test" / "data" / "mocap"  # copy of ../shared/data/mocap/cmu_subject07 (07.asf, 07_01.amc)
 
 

@@ -1,6 +1,6 @@
 """CMU/Acclaim motion capture (ASF skeleton + AMC motion) -> our 13 markers in the world frame.
 
-Forward kinematics (the Acclaim convention, see ../shared/data/mocap/README.md): a bone's
+Forward kinematics (the Acclaim convention, see test/data/mocap/README.md): a bone's
 global rotation is ``parent * C * M * C^-1`` with C from its ``axis`` angles and M = Rz Ry Rx
 from its DOF values (degrees); its end is its parent's end plus ``length * rotation @
 direction``. The root's rotation uses its ``orientation`` as C and the root DOFs; its
