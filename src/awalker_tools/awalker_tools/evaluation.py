@@ -59,18 +59,22 @@ def write_poses_csv(path: Path, track: PoseTrack) -> None:
                 writer.writerow([int(frame), int(stamp), name, f"{x:.6f}", f"{y:.6f}", f"{z:.6f}"])
 
 
+def _read_csv_rows(path: Path, columns: Sequence[str], missing_file: str) -> list[dict[str, str]]:
+    """The rows of a CSV file as dicts; InputError if the file or one of ``columns`` is missing."""
+    if not path.is_file():
+        raise InputError(f"{path}: {missing_file}")
+    with open(path, newline="") as fh:
+        reader = csv.DictReader(fh)
+        missing = [c for c in columns if c not in (reader.fieldnames or [])]
+        if missing:
+            raise InputError(f"{path}: missing column(s) {', '.join(missing)} (expected header {','.join(columns)})")
+        return list(reader)
+
+
 def read_poses_csv(path: Path) -> PoseTrack:
     """Read a poses/ground-truth CSV; extra columns are ignored, missing ones are an InputError."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such pose file (expected CSV with columns {','.join(POSE_COLUMNS)})")
-    with open(path, newline="") as fh:
-        reader = csv.DictReader(fh)
-        missing = [c for c in POSE_COLUMNS if c not in (reader.fieldnames or [])]
-        if missing:
-            raise InputError(f"{path}: missing column(s) {', '.join(missing)} "
-                             f"(expected header {','.join(POSE_COLUMNS)})")
-        rows = list(reader)
+    rows = _read_csv_rows(path, POSE_COLUMNS, f"no such pose file (expected CSV with columns {','.join(POSE_COLUMNS)})")
     if not rows:
         raise InputError(f"{path}: no pose rows (expected one row per frame and marker)")
     names: list[str] = []
@@ -111,14 +115,7 @@ def write_summary_csv(path: Path, rows: Sequence[dict]) -> None:
 def read_summary_csv(path: Path) -> dict[str, np.ndarray]:
     """Columns of summary.csv as arrays (heel_strike and stance_leg as strings)."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: no such summary file (written by `awalker track`)")
-    with open(path, newline="") as fh:
-        reader = csv.DictReader(fh)
-        missing = [c for c in SUMMARY_COLUMNS if c not in (reader.fieldnames or [])]
-        if missing:
-            raise InputError(f"{path}: missing column(s) {', '.join(missing)}")
-        rows = list(reader)
+    rows = _read_csv_rows(path, SUMMARY_COLUMNS, "no such summary file (written by `awalker track`)")
     out: dict[str, np.ndarray] = {}
     try:
         for key in SUMMARY_COLUMNS:

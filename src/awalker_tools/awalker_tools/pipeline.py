@@ -75,26 +75,22 @@ def resolve_descriptions(bag: Path, reader: Any, start_path: Path | None, body_p
     from awalker_tools.bagio import BODY_DESCRIPTION_TOPIC, START_DESCRIPTION_TOPIC
 
     beside = [bag.parent, bag] if bag.is_dir() else [bag.parent]
-    if start_path is not None:
-        start, start_src = StartDescription.from_yaml(start_path), str(start_path)
-    elif (text := reader.text(START_DESCRIPTION_TOPIC)) is not None:
-        start, start_src = StartDescription.from_yaml_text(text, f"{bag}:{START_DESCRIPTION_TOPIC}"), START_DESCRIPTION_TOPIC
-    elif found := [d / START_FILE for d in beside if (d / START_FILE).is_file()]:
-        start, start_src = StartDescription.from_yaml(found[0]), str(found[0])
-    else:
-        raise InputError(
-            f"{bag}: no start description (no {START_DESCRIPTION_TOPIC} topic, no {START_FILE} beside the bag); "
-            "pass --start START.yaml with 'start: {frame, position: [x, y], heading, speed, step_length, "
-            "stance_leg: left|right}' (metres, radians, m/s)")
-    if body_path is not None:
-        body, body_src = BodyDescription.from_yaml(body_path), str(body_path)
-    elif (text := reader.text(BODY_DESCRIPTION_TOPIC)) is not None:
-        body, body_src = BodyDescription.from_yaml_text(text, f"{bag}:{BODY_DESCRIPTION_TOPIC}"), BODY_DESCRIPTION_TOPIC
-    elif found := [d / BODY_FILE for d in beside if (d / BODY_FILE).is_file()]:
-        body, body_src = BodyDescription.from_yaml(found[0]), str(found[0])
-    else:
-        raise InputError(f"{bag}: no body description (no {BODY_DESCRIPTION_TOPIC} topic, no {BODY_FILE} beside "
-                         "the bag); pass --body BODY.yaml with 'body: {upper_leg_length, lower_leg_length, ...}' (m)")
+
+    def resolve(parser: Any, path: Path | None, topic: str, file_name: str, kind: str, usage: str) -> tuple[Any, str]:
+        if path is not None:
+            return parser.from_yaml(path), str(path)
+        if (text := reader.text(topic)) is not None:
+            return parser.from_yaml_text(text, f"{bag}:{topic}"), topic
+        if found := [d / file_name for d in beside if (d / file_name).is_file()]:
+            return parser.from_yaml(found[0]), str(found[0])
+        raise InputError(f"{bag}: no {kind} description (no {topic} topic, no {file_name} beside the bag); "
+                         f"pass --{kind} {usage}")
+
+    start, start_src = resolve(StartDescription, start_path, START_DESCRIPTION_TOPIC, START_FILE, "start",
+                               "START.yaml with 'start: {frame, position: [x, y], heading, speed, step_length, "
+                               "stance_leg: left|right}' (metres, radians, m/s)")
+    body, body_src = resolve(BodyDescription, body_path, BODY_DESCRIPTION_TOPIC, BODY_FILE, "body",
+                             "BODY.yaml with 'body: {upper_leg_length, lower_leg_length, ...}' (m)")
     return start, start_src, body, body_src
 
 
