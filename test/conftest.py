@@ -22,21 +22,33 @@ def ros_domain_id() -> int:
     return _worker_domain()
 
 
-@pytest.fixture
-def ros_context(ros_domain_id: int) -> Iterator[object]:
-    """A private rclpy Context on this worker's domain, shut down after the test.
+def _private_context(domain: int, discovery_range: str, monkeypatch: pytest.MonkeyPatch) -> Iterator[object]:
+    """A private rclpy Context on ``domain`` with ROS_AUTOMATIC_DISCOVERY_RANGE=``discovery_range``.
 
-    In-process only: ROS_AUTOMATIC_DISCOVERY_RANGE=OFF keeps other processes out. Tests that
-    span processes set LOCALHOST themselves (see test/tools/test_replay_multiprocess.py).
-    """
+    The environment is set too, so that subprocesses started by the test join the same domain."""
     import rclpy
     from rclpy.context import Context
     from rclpy.signals import SignalHandlerOptions
 
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", discovery_range)
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
     ctx = Context()
-    rclpy.init(context=ctx, domain_id=ros_domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    rclpy.init(context=ctx, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
     try:
         yield ctx
     finally:
         ctx.try_shutdown()
+
+
+@pytest.fixture
+def ros_context(ros_domain_id: int, monkeypatch: pytest.MonkeyPatch) -> Iterator[object]:
+    """A private rclpy Context on this worker's domain, in-process only (discovery OFF keeps other
+    processes out), shut down after the test."""
+    yield from _private_context(ros_domain_id, "OFF", monkeypatch)
+
+
+@pytest.fixture
+def localhost_context(ros_domain_id: int, monkeypatch: pytest.MonkeyPatch) -> Iterator[object]:
+    """A private rclpy Context on this worker's domain + 10 that discovers other processes on this
+    host: for tests that start nodes in a subprocess (it inherits the domain through the environment)."""
+    yield from _private_context(ros_domain_id + 10, "LOCALHOST", monkeypatch)

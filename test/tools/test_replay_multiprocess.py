@@ -8,26 +8,9 @@ import time
 from pathlib import Path
 
 import pytest
-import rclpy
-from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.signals import SignalHandlerOptions
 
 from replay_helpers import CAMERAS, Receiver, make_bag
-
-
-@pytest.fixture
-def localhost_context(ros_domain_id: int, monkeypatch: pytest.MonkeyPatch):
-    """A private context on this worker's domain + 10, discovering other processes on this host."""
-    domain = ros_domain_id + 10
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
-    try:
-        yield ctx
-    finally:
-        ctx.try_shutdown()
 
 
 @pytest.mark.parametrize("mode", ["lockstep", "rate"])

@@ -79,15 +79,12 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     assert "absolute" in capsys.readouterr().out
 
 
-def test_track_with_nodes_in_two_processes(synth_bag: Path, ros_domain_id: int, monkeypatch, tmp_path: Path):
+def test_track_with_nodes_in_two_processes(synth_bag: Path, localhost_context, tmp_path: Path):
     """Replay in a subprocess; features, tracker and pose publisher here (as users would split them)."""
-    import rclpy
-    from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.parameter import Parameter
     from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import JointState
 
     from awalker_msgs.msg import PosteriorSummary
@@ -95,11 +92,7 @@ def test_track_with_nodes_in_two_processes(synth_bag: Path, ros_domain_id: int, 
     from awalker_tracker.nodes.pose_publisher import PosePublisherNode
     from awalker_tracker.nodes.tracker import TrackerNode
 
-    domain = ros_domain_id + 20
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
-    ctx = Context()
-    rclpy.init(context=ctx, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+    ctx = localhost_context
     nodes = []
     proc = None
     try:
@@ -132,7 +125,6 @@ def test_track_with_nodes_in_two_processes(synth_bag: Path, ros_domain_id: int, 
             proc.communicate()
         for n in nodes:
             n.destroy_node()
-        ctx.try_shutdown()
     from awalker_tools.bagio import SequenceReader
 
     with SequenceReader(synth_bag) as reader:
