@@ -74,7 +74,12 @@ def test_simulate_stochastic_json_is_seeded(tmp_path, capsys) -> None:
     assert outs[0]["rows"] != outs[2]["rows"]
     assert outs[0]["params"]["leg_length"] == 0.9
     stiffness = [r["stiffness"] for r in outs[0]["rows"][1:]]
-    assert np.std(stiffness) > 0.1                      # kappa_t resampled every frame
+    assert np.std(np.diff(stiffness)) > 0.005           # kappa_t resampled every frame
+    assert main(args + ["--paper-prior", "--out", str(tmp_path / "p.json")]) == 0
+    paper = json.loads((tmp_path / "p.json").read_text())["rows"]
+    assert np.std([r["stiffness"] for r in paper[1:]]) > 0.3  # the paper's sigma_kappa = 1 per frame
+    assert main(["simulate", "--speed", "1.2", "--step-length", "0.65", "--paper-prior",
+                 "--out", str(tmp_path / "q.json")]) == 2
 
 
 def test_simulate_explicit_start(tmp_path, capsys) -> None:

@@ -2,7 +2,8 @@
 
 Start from a cyclic gait (``--speed``/``--step-length`` looked up in the gait table) or from an
 explicit state and controls (``--angle --stance-rate --swing-rate --stiffness --impulse``);
-``--stochastic`` samples the control prior of Sec. 4.2 instead of holding kappa/iota fixed.
+``--stochastic`` samples the control prior of Sec. 4.2 instead of holding kappa/iota fixed (our default
+prior; add ``--paper-prior`` for the paper's variances and bilinear toe-off, see model/control.py).
 One row per output sample (``--rate`` Hz, the first row is the start state):
 
 time (s), stance_leg (left|right), stance_angle, swing_angle (rad), stance_rate, swing_rate (rad/s),
@@ -104,7 +105,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"awalker simulate: note: gait table solved for L = {table.params.leg_length} m, "
               f"simulating L = {params.leg_length} m", file=sys.stderr)
     state, kappa, iota = _start(args, params, table)
-    prior = control.ControlPrior.from_gait_table(table) if args.stochastic else None
+    if args.paper_prior and not args.stochastic:
+        raise InputError("--paper-prior: only with --stochastic")
+    prior = None
+    if args.stochastic:
+        prior = control.ControlPrior.paper(table) if args.paper_prior else control.ControlPrior.from_gait_table(table)
     rows = simulate(params, state, kappa, iota, args.steps, args.rate, prior, args.seed)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -137,6 +142,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--steps", type=int, default=10, help="number of heel strikes to simulate")
     parser.add_argument("--rate", type=float, default=30.0, help="output samples per second (frame rate)")
     parser.add_argument("--stochastic", action="store_true", help="sample kappa/iota from the control prior")
+    parser.add_argument("--paper-prior", action="store_true",
+                        help="with --stochastic: the paper's variances and bilinear toe-off (walkers soon fall)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--leg-length", type=float, default=WalkerParams().leg_length, help="L in m")
     parser.add_argument("--table", default=None, help="gait table JSON (default: the packaged table)")

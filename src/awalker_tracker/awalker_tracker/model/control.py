@@ -5,37 +5,54 @@
   kappa_bar is never sampled (Rao-Blackwellised): each particle keeps the mean and variance of its
   Gaussian belief over kappa_bar; kappa_t is drawn from the predictive N(mean, variance + sigma_kappa^2),
   then the belief is conditioned on the drawn kappa_t (a scalar Kalman update); at a heel strike the
-  belief is pushed through the AR(1) of eq. (5).
-- The toe-off impulse iota ~ Gamma(mean mu_iota(q'-), variance sigma_iota^2), mu_iota bilinear in
-  the pre-collision rates q'- = (phi1'-, phi2'-) (Fig. 4). Because its mean needs q'-, iota is drawn
-  AT the heel strike, inside :func:`dynamics.advance`, from the rates located at the impact: one draw
-  per stride, used for the toe-off that starts the new stride (the paper's "at the beginning of each
-  stride"). ``ControlState.toe_off_impulse`` keeps the last value used.
+  belief is pushed through the AR(1) of eq. (5) and the new stride's first kappa_t is drawn there
+  (the toe-off below is aimed with it).
+- The toe-off impulse iota ~ Gamma(mean mu_iota, variance sigma_iota^2) is drawn AT the heel strike,
+  inside :func:`dynamics.advance`, from the walker's pre-impact state: one draw per stride, used for
+  the toe-off that starts the new stride (the paper's "at the beginning of each stride"). Two rules
+  for its mean (``ControlPrior.toe_off_rule``):
+
+  * ``"bilinear"`` (the paper, Fig. 4): mu_iota(q'-) bilinear in the pre-collision rates, fitted over
+    the solved cyclic gaits.
+  * ``"cyclic_gait"`` (default): the iota that puts the new stance leg's rate on the cyclic gait
+    with the new stride's stiffness and the step length just taken (:meth:`GaitTable.gait_for_stiffness`,
+    :func:`dynamics.impulse_for_stance_rate`): a one-step (deadbeat) correction towards the gait family.
 
 Units (checked against the solved cyclic gaits, see test_control.py): kappa in N m/rad per kg, so
 mu_kappa = 0.7 sits inside the solved range (0.74 at 5 km/h, 0.7 m with L = 0.9 m); iota in m/s.
 
-Stability (measured with :func:`prior_walk_statistics`; defaults are the paper's values): the
-walker is far less forgiving than the paper suggests. Open-loop (fixed kappa, iota) the step-to-step
-map of the cyclic gaits has largest Floquet multiplier 0.88 at 4 km/h / 0.6 m but 1.08 at
-5 km/h / 0.7 m and 1.35 at 6 km/h / 0.75 m; the bilinear feedback iota = mu_iota(q'-) raises it to
-3-4, and the swing foot clears the ground by only ~0.16 rad of phi1 + phi2, so perturbed walkers
-scuff (the swing foot never rises above the ground, no heel strike) and fall forward. With the
-paper's noise nearly all sampled walkers fall within a few steps; in tracking, the likelihood and
-resampling must carry the particles (give fallen particles zero weight).
+Why the defaults are not the paper's (measured with :func:`prior_walk_statistics`, 1000 walkers, 20
+steps; figures in README "The walker's prior"): the paper calls its walker "very stable" and says
+other controllers may work as well. This walker, checked by its invariants, is not:
+
+- Open loop (fixed kappa, iota) the step-to-step map of the cyclic gaits has largest Floquet
+  multiplier 0.88 at 4 km/h / 0.6 m but 1.08 at 5 km/h / 0.7 m and 1.35 at 6 km/h / 0.75 m.
+- The bilinear rule feeds speed back positively (a faster walker gets a bigger push): the multiplier
+  becomes 3-4 at every gait, and with the paper's variances every walker falls within a few steps.
+- The knee-less swing leg must overtake the mirror angle of the stance leg before the strike; a
+  stiffness off by ~0.1-0.2 N m/rad per kg for part of a stride is enough to trip it (the stance
+  leg falls forward before the swing leg arrives). sigma_kappa^2 = 1.0 per frame and
+  sigma_kappa_bar^2 = 0.5 per stride (standard deviations larger than mu_kappa itself) trip it
+  at once, whatever the toe-off rule.
+
+The default keeps the paper's structure, beta, mu_kappa and sigma_iota^2, uses the cyclic-gait toe-off
+and sigma_kappa^2 = 1e-4 per frame, sigma_kappa_bar^2 = 0.01 per stride. :meth:`ControlPrior.paper`
+gives the paper's values for comparison.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from .dynamics import StepEvents, advance
+from .dynamics import StepEvents, advance, impulse_for_stance_rate
 from .gaits import GaitTable, fit_impulse_mean, gait_initial_state
 from .walker import WalkerParams, WalkerState
 
-#: Smallest Gamma mean (m/s) used for iota where the bilinear fit would give <= 0.
+#: Smallest Gamma mean (m/s) used for iota where a rule would give <= 0.
 MIN_IMPULSE_MEAN = 1e-3
+#: Toe-off rules for the Gamma mean of iota (see the module docstring).
+TOE_OFF_RULES = ("cyclic_gait", "bilinear")
 
 
 @dataclass(frozen=True)
@@ -44,11 +61,13 @@ class ControlPrior:
 
     beta: float = 0.85                        # pull of kappa_bar towards mu_kappa per stride
     mu_kappa: float = 0.7                     # N m/rad per kg
-    kappa_bar_variance: float = 0.5           # sigma_kappa_bar^2, per stride
-    kappa_noise_variance: float = 1.0         # sigma_kappa^2, per frame around kappa_bar
+    kappa_bar_variance: float = 0.01          # sigma_kappa_bar^2, per stride (paper: 0.5)
+    kappa_noise_variance: float = 1.0e-4      # sigma_kappa^2, per frame around kappa_bar (paper: 1.0)
     impulse_variance: float = 0.05**2         # sigma_iota^2 (m/s)^2
-    # mu_iota(q'-) = c0 + c1 phi1'- + c2 phi2'- + c3 phi1'- phi2'- (m/s, rates in rad/s)
+    # mu_iota(q'-) = c0 + c1 phi1'- + c2 phi2'- + c3 phi1'- phi2'- (m/s, rates in rad/s); "bilinear" rule
     impulse_mean_coefficients: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    toe_off_rule: str = "cyclic_gait"
+    gait_table: GaitTable | None = field(default=None, compare=False, repr=False)  # "cyclic_gait" rule
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.beta <= 1.0:
@@ -58,23 +77,42 @@ class ControlPrior:
                 raise ValueError(f"ControlPrior.{name} must be > 0")
         if len(self.impulse_mean_coefficients) != 4:
             raise ValueError("ControlPrior.impulse_mean_coefficients needs 4 values (bilinear fit)")
+        if self.toe_off_rule not in TOE_OFF_RULES:
+            raise ValueError(f"ControlPrior.toe_off_rule must be one of {TOE_OFF_RULES}, got {self.toe_off_rule!r}")
+        if self.toe_off_rule == "cyclic_gait" and self.gait_table is None:
+            raise ValueError("ControlPrior: the 'cyclic_gait' toe-off rule needs gait_table")
 
     @classmethod
     def from_gait_table(cls, table: GaitTable, **overrides) -> "ControlPrior":
-        """Prior whose mu_iota is the least-squares bilinear fit over the table's converged gaits."""
+        """The default prior on ``table``, with mu_iota's bilinear fit over its converged gaits (unless overridden)."""
         coef, _ = fit_impulse_mean(table)
-        return cls(impulse_mean_coefficients=tuple(float(c) for c in coef), **overrides)
+        settings = dict(impulse_mean_coefficients=tuple(float(c) for c in coef), gait_table=table)
+        return cls(**{**settings, **overrides})
 
-    def impulse_mean(self, pre_stance_rate: np.ndarray, pre_swing_rate: np.ndarray) -> np.ndarray:
-        """mu_iota(q'-) in m/s, floored at MIN_IMPULSE_MEAN."""
-        c0, c1, c2, c3 = self.impulse_mean_coefficients
-        w1, w2 = np.asarray(pre_stance_rate, float), np.asarray(pre_swing_rate, float)
-        return np.maximum(c0 + c1 * w1 + c2 * w2 + c3 * w1 * w2, MIN_IMPULSE_MEAN)
+    @classmethod
+    def paper(cls, table: GaitTable, **overrides) -> "ControlPrior":
+        """The paper's prior: bilinear toe-off, sigma_kappa^2 = 1.0, sigma_kappa_bar^2 = 0.5."""
+        settings = dict(kappa_noise_variance=1.0, kappa_bar_variance=0.5, toe_off_rule="bilinear")
+        return cls.from_gait_table(table, **{**settings, **overrides})
 
-    def sample_impulse(self, rng: np.random.Generator, pre_stance_rate: np.ndarray,
-                       pre_swing_rate: np.ndarray) -> np.ndarray:
-        """iota ~ Gamma with mean mu_iota(q'-) and variance sigma_iota^2 (shape mean^2/var, scale var/mean)."""
-        mean = self.impulse_mean(pre_stance_rate, pre_swing_rate)
+    def impulse_mean(self, params: WalkerParams, pre_state: WalkerState, stride_stiffness: np.ndarray) -> np.ndarray:
+        """Gamma mean of iota (m/s) for walkers just before their heel strike, floored at MIN_IMPULSE_MEAN.
+
+        ``stride_stiffness``: kappa (N m/rad per kg) of the stride the strike starts (used by "cyclic_gait").
+        """
+        if self.toe_off_rule == "bilinear":
+            c0, c1, c2, c3 = self.impulse_mean_coefficients
+            w1, w2 = pre_state.stance_rate, pre_state.swing_rate
+            mean = c0 + c1 * w1 + c2 * w2 + c3 * w1 * w2
+        else:
+            step = params.step_length(-pre_state.stance_angle)
+            _, stance_rate, _, _ = self.gait_table.gait_for_stiffness(stride_stiffness, step)
+            mean = impulse_for_stance_rate(params, pre_state, stance_rate)
+        return np.maximum(np.nan_to_num(mean, nan=MIN_IMPULSE_MEAN), MIN_IMPULSE_MEAN)
+
+    def sample_impulse(self, rng: np.random.Generator, mean: np.ndarray) -> np.ndarray:
+        """iota ~ Gamma with the given mean (m/s) and variance sigma_iota^2 (shape mean^2/var, scale var/mean)."""
+        mean = np.asarray(mean, float)
         return rng.gamma(mean * mean / self.impulse_variance, self.impulse_variance / mean)
 
 
@@ -139,20 +177,31 @@ def sample_transition(
     m_post = m + gain * (kappa - m)
     v_post = v * noise / (v + noise)
 
-    def impulse_at_strike(indices: np.ndarray, pre_stance_rate: np.ndarray, pre_swing_rate: np.ndarray):
-        return prior.sample_impulse(rng, pre_stance_rate, pre_swing_rate)
+    keep = 1.0 - prior.beta
+    # where a stride starts: kappa_bar(i+1) ~ N(beta mu + (1 - beta) kappa_bar(i), sigma_bar^2) (eq. 5)
+    m_next = prior.beta * prior.mu_kappa + keep * m_post
+    v_next = keep * keep * v_post + prior.kappa_bar_variance
+    stride_kappa = np.full(m.shape, np.nan)
+
+    def impulse_at_strike(indices: np.ndarray, pre_state: WalkerState) -> np.ndarray:
+        # the new stride's first kappa_t, from the predictive law of its kappa_bar; the toe-off aims at it
+        drawn = m_next[indices] + np.sqrt(v_next[indices] + noise) * rng.standard_normal(indices.size)
+        stride_kappa[indices] = drawn
+        return prior.sample_impulse(rng, prior.impulse_mean(params, pre_state, drawn))
 
     new_walker, events = advance(params, walker, kappa, impulse_at_strike, dt, substeps=substeps,
                                  time_since_strike=control.time_since_strike)
     strike = events.heel_strike
-    # a new stride starts: kappa_bar(i+1) ~ N(beta mu + (1 - beta) kappa_bar(i), sigma_bar^2)
-    keep = 1.0 - prior.beta
-    m_new = np.where(strike, prior.beta * prior.mu_kappa + keep * m_post, m_post)
-    v_new = np.where(strike, keep * keep * v_post + prior.kappa_bar_variance, v_post)
+    with np.errstate(invalid="ignore"):
+        gain_next = v_next / (v_next + noise)
+        m_strike = m_next + gain_next * (stride_kappa - m_next)
+        v_strike = v_next * noise / (v_next + noise)
+    m_new = np.where(strike, m_strike, m_post)
+    v_new = np.where(strike, v_strike, v_post)
     iota = np.where(strike, events.toe_off_impulse, control.toe_off_impulse)
     fallen = events.fallen
     new_control = ControlState(
-        stiffness=np.where(fallen, control.stiffness, kappa),
+        stiffness=np.where(fallen, control.stiffness, np.where(strike, stride_kappa, kappa)),
         stiffness_mean_mean=np.where(fallen, m, m_new),
         stiffness_mean_variance=np.where(fallen, v, v_new),
         toe_off_impulse=iota,

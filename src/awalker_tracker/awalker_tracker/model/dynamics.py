@@ -240,6 +240,20 @@ def heel_strike(params: WalkerParams, state: WalkerState, toe_off_impulse: np.nd
     )
 
 
+def impulse_for_stance_rate(params: WalkerParams, pre_state: WalkerState,
+                            stance_rate: np.ndarray | float) -> np.ndarray:
+    """Toe-off iota (m/s) that gives the new stance leg the rate ``stance_rate`` (rad/s) after the impact.
+
+    ``pre_state``: walkers just before their heel strike. The post-impact rates are affine in iota
+    (the impulse enters the momentum balance linearly), so two impacts (iota = 0 and 1) give it.
+    May be negative when even iota = 0 leaves the new stance leg faster than asked.
+    """
+    p1, p2, w1, w2 = pre_state.stance_angle, pre_state.swing_angle, pre_state.stance_rate, pre_state.swing_rate
+    zero, _ = _impact_rates(params, p1, p2, w1, w2, np.zeros_like(p1))
+    one, _ = _impact_rates(params, p1, p2, w1, w2, np.ones_like(p1))
+    return (np.asarray(stance_rate, float) - zero) / (one - zero)
+
+
 @dataclass
 class StepEvents:
     """What happened to each of N walkers during one :func:`advance` call."""
@@ -253,8 +267,8 @@ class StepEvents:
     pre_strike_rates: np.ndarray   # (N, 2) (phi1', phi2') just before the strike (NaN if none)
 
 
-#: iota given as a function of (walker indices, pre-impact phi1', pre-impact phi2') -> iota (m/s)
-ImpulseSampler = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+#: iota given as a function of (walker indices, pre-impact states of those walkers) -> iota (m/s)
+ImpulseSampler = Callable[[np.ndarray, WalkerState], np.ndarray]
 
 
 def _rk4(k: _Consts, p1, p2, w1, w2, kappa, h):
@@ -318,12 +332,10 @@ def _impact_at_root(params: WalkerParams, k: _Consts, walker_idx: np.ndarray, p1
     theta = _locate_strike(k, p1, p2, w1, w2, kappa, h, s0, s1)
     q1, q2, v1, v2 = _rk4(k, p1, p2, w1, w2, kappa, theta * h)
     valid = (q1 < 0.0) & (v1 + v2 < 0.0)
-    if callable(iota):
-        used = np.asarray(iota(walker_idx, v1, v2), float)
-    else:
-        used = iota
+    pre = WalkerState(q1, q2, v1, v2, origin, leg)
+    used = np.asarray(iota(walker_idx, pre), float) if callable(iota) else iota
     used = np.broadcast_to(used, walker_idx.shape)
-    post = heel_strike(params, WalkerState(q1, q2, v1, v2, origin, leg), used)
+    post = heel_strike(params, pre, used)
     strike_x = post.contact_origin - k.R * post.stance_angle
     return valid, theta, post, strike_x, (v1, v2), used
 
@@ -360,7 +372,7 @@ def advance(
 
     ``stiffness`` kappa (N m/rad per kg) and ``toe_off_impulse`` iota (m/s) are scalars or (N,)
     and held constant over the frame; iota is used if the walker strikes in this frame. iota may
-    also be an :data:`ImpulseSampler`, called once per frame with the striking walkers' pre-impact rates.
+    also be an :data:`ImpulseSampler`, called once per frame with the striking walkers' pre-impact states.
     ``substeps`` defaults to :func:`substeps_for` (4 per 1/30 s). ``time_since_strike`` (s, (N,))
     carries the no-strike fall criterion between calls; it is returned updated in the events.
     Fallen walkers keep their input state (frozen, never NaN) and are flagged in the events.

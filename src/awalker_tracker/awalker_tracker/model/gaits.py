@@ -315,6 +315,25 @@ class GaitTable:
                              f"step length {np.ravel(s)[0]:.3f} m")
         return tuple(out / weight_sum for out in outputs)  # type: ignore[return-value]
 
+    def gait_for_stiffness(self, stiffness: np.ndarray | float, step_length: np.ndarray | float
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The cyclic gait with a given stiffness kappa (N m/rad per kg) and step length (m).
+
+        Returns (speed m/s, stance_rate, swing_rate, toe_off_impulse) of that gait: at each step
+        length the table's kappa rises with speed (checked in test_gaits.py), so the speed is found
+        by inverting kappa along the speed axis; queries are clamped to the grid.
+        """
+        kappa = np.asarray(stiffness, float)
+        step = np.broadcast_to(np.asarray(step_length, float), kappa.shape)
+        along_speed = np.stack([self.lookup(np.full(step.shape, v), step)[2] for v in self.speeds], -1)
+        below = np.clip((along_speed < kappa[..., None]).sum(-1) - 1, 0, self.speeds.size - 2)
+        low = np.take_along_axis(along_speed, below[..., None], -1)[..., 0]
+        high = np.take_along_axis(along_speed, below[..., None] + 1, -1)[..., 0]
+        fraction = np.clip((kappa - low) / (high - low), 0.0, 1.0)
+        speed = self.speeds[below] + fraction * (self.speeds[below + 1] - self.speeds[below])
+        stance_rate, swing_rate, _, iota = self.lookup(speed, step)
+        return speed, stance_rate, swing_rate, iota
+
     def converged_points(self) -> dict[str, np.ndarray]:
         """Flattened arrays of the converged grid points (for fits and plots)."""
         mask = self.converged
