@@ -25,12 +25,13 @@ def test_double_support_angle_inverts_step_length() -> None:
 
 
 def test_packaged_table_covers_the_grid_with_small_residuals(table: gaits.GaitTable) -> None:
-    assert table.speeds.size >= 11 and table.step_lengths.size >= 15
+    assert table.speeds.size >= 11 and np.sum((table.step_lengths >= 0.5 - 1e-9)) >= 15
     assert table.speeds[0] == pytest.approx(2 / 3.6) and table.speeds[-1] == pytest.approx(7 / 3.6)
-    assert table.step_lengths[0] == pytest.approx(0.5) and table.step_lengths[-1] == pytest.approx(1.2)
+    # 0.5-1.2 m asked for; down to 0.3 m so that sampled walkers drifting to short steps stay on the table
+    assert table.step_lengths[0] <= 0.5 and table.step_lengths[-1] == pytest.approx(1.2)
     assert table.params == PARAMS
     # the human part of the grid (step ~ 0.65-0.75 m at 5 km/h, growing with speed) is all solved
-    human = np.array([[0.5 <= s <= 0.9 for s in table.step_lengths] for _ in table.speeds])
+    human = np.array([[0.4 <= s <= 0.9 for s in table.step_lengths] for _ in table.speeds])
     assert table.converged[human].all()
     assert np.all(table.residual[table.converged] < 1e-8)
     assert len(table.reason) == table.speeds.size and all(len(r) == table.step_lengths.size for r in table.reason)

@@ -100,7 +100,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     solve = sub.add_parser("solve", help="solve eq. (3) over a speed x step-length grid (progress on stderr)")
     solve.add_argument("--out", default=str(PACKAGED_TABLE), help="output JSON (default: the packaged table)")
     solve.add_argument("--speeds", default="2:7:11", help="km/h LOW:HIGH:COUNT (default 2:7:11)")
-    solve.add_argument("--step-lengths", default="0.5:1.2:15", help="m LOW:HIGH:COUNT (default 0.5:1.2:15)")
+    solve.add_argument("--step-lengths", default="0.3:1.2:19", help="m LOW:HIGH:COUNT (default 0.3:1.2:19)")
     solve.add_argument("--leg-length", type=float, default=WalkerParams().leg_length, help="L in m")
     solve.add_argument("--gravity", type=float, default=WalkerParams().gravity, help="g in m/s^2")
     solve.add_argument("--family", choices=("symmetric", "stable"), default="symmetric",

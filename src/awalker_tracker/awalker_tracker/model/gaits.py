@@ -36,7 +36,7 @@ from ..errors import InputError
 from .dynamics import _consts, _rk4, heel_strike, simulate_to_strike  # _rk4: the same fixed-step integrator
 from .walker import LEFT, WalkerParams, WalkerState
 
-TABLE_VERSION = 1
+TABLE_VERSION = 2
 #: RK4 step (s) of the simulations inside the gait solver.
 SOLVER_STEP = 1.0 / 480.0
 #: Converged when max |residual| is below this (s, rad, rad/s).
@@ -201,8 +201,8 @@ def default_guesses(params: WalkerParams, speed: float, step_length: float) -> l
 
 
 def grid_axes(speeds_kmh: tuple[float, float, int] = (2.0, 7.0, 11),
-              step_lengths: tuple[float, float, int] = (0.5, 1.2, 15)) -> tuple[np.ndarray, np.ndarray]:
-    """Speeds (m/s) and step lengths (m) of the default grid: 2-7 km/h x 0.5-1.2 m."""
+              step_lengths: tuple[float, float, int] = (0.3, 1.2, 19)) -> tuple[np.ndarray, np.ndarray]:
+    """Speeds (m/s) and step lengths (m) of the default grid: 2-7 km/h x 0.3-1.2 m."""
     return np.linspace(*speeds_kmh[:2], speeds_kmh[2]) * KMH, np.linspace(*step_lengths[:2], step_lengths[2])
 
 
