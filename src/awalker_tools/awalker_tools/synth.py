@@ -300,8 +300,8 @@ def walker_motion(config: SynthConfig, start_xy: np.ndarray, heading: float, rng
     speed (gait table stiffness and toe-off impulse, plus a little stiffness noise), and the
     conditional kinematics prior (eq. 6) for everything else; the heading is scripted.
 
-    The walker is steered along the gait table rather than sampled from the control prior,
-    whose kappa noise (variance 1 per frame) makes most walkers fall within ~1 s on their own.
+    The walker is steered along the gait table rather than sampled from the control prior, so
+    that it follows the requested speed profile (and the tracker is not tested on its own prior).
     """
     from awalker_tracker.model import dynamics, gaits
     from awalker_tracker.model.kinematics import KinematicConfig, initial_kinematics, pose_body, sample_kinematics
