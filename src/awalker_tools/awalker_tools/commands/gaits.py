@@ -61,8 +61,12 @@ def run_plot(args: argparse.Namespace) -> int:
     for ax, name, label in zip(axes, ("stiffness", "toe_off_impulse"),
                                ("stiffness kappa (N m/rad per kg)", "toe-off impulse iota (m/s)")):
         values = np.where(table.converged, getattr(table, name), np.nan)
-        mesh = ax.pcolormesh(speeds_kmh, table.step_lengths, values.T, shading="nearest", cmap="viridis")
-        ax.contour(speeds_kmh, table.step_lengths, values.T, colors="w", linewidths=0.6)
+        # kappa spans two orders of magnitude (and dips below 0): a symmetric-log colour scale
+        norm = matplotlib.colors.SymLogNorm(linthresh=0.1) if name == "stiffness" else None
+        mesh = ax.pcolormesh(speeds_kmh, table.step_lengths, values.T, shading="nearest", cmap="viridis", norm=norm)
+        levels = np.array([-0.2, 0.0, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0]) if name == "stiffness" else 8
+        contours = ax.contour(speeds_kmh, table.step_lengths, values.T, levels=levels, colors="w", linewidths=0.6)
+        ax.clabel(contours, fontsize=7, fmt="%.2g")
         fig.colorbar(mesh, ax=ax, label=label)
         ax.set_xlabel("speed (km/h)")
         ax.set_ylabel("step length (m)")
