@@ -64,10 +64,11 @@ def test_foreground_learned_without_labels_discriminates_parts(use_labels):
     assert llr.max(axis=0)[body].mean() > 5.0
     far = cv2.dilate(body.astype(np.uint8), np.ones((5, 5), np.uint8)) == 0   # away from mixed border pixels
     assert np.percentile(llr.max(axis=0)[far], 99) < 0.0
-    # Each body pixel's best class is its own class (interior pixels, away from part borders).
+    # Each body pixel's best class is its own class (interior pixels, away from part borders:
+    # a border pixel mixes the part with its neighbour or the background).
     best = np.argmax(llr, axis=0)
     for c in ("head", "torso", "legs"):
-        own = truth == PART_CLASSES.index(c)
+        own = cv2.erode((truth == PART_CLASSES.index(c)).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
         assert np.mean(best[own] == PART_CLASSES.index(c)) > 0.8, c
 
 

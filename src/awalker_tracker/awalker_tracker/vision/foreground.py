@@ -174,22 +174,39 @@ def band_labels(foreground: np.ndarray, body: BodyDescription | None = None) -> 
 def learn_foreground(m: np.ndarray, background: BackgroundModel, class_labels: np.ndarray | None = None,
                      body: BodyDescription | None = None, classes: tuple[str, ...] = PART_CLASSES,
                      min_pixels: int = 8, seed: int = 0, fill_with_bands: bool = False) -> ForegroundModel:
-    """Fit one mixture per class to pixels that differ from the background (``class_labels``
+    """Fit one mixture per class to the interior pixels of the foreground (``class_labels``
     (h, w) int: class index or -1; None -> ``band_labels``; ``fill_with_bands``: foreground
-    pixels the label image leaves at -1 take their band label). A class with too few labelled
-    foreground pixels uses all its labelled pixels, or failing that all foreground pixels."""
+    pixels the label image leaves at -1 take their band label).
+
+    Interior: pixels that differ from the background and whose 8 neighbours do too. The
+    gradient part of a map pixel's measurement is a central difference over its neighbours
+    (``background.measurements``), so the background pixels bordering the person differ from
+    the background as well: the foreground mask is the silhouette plus a one-pixel ring of
+    background. Fitted as foreground (the bands label it), that ring teaches the mixtures that
+    background next to the person is foreground, and the likelihood then prefers silhouettes
+    drawn too large — bodies too close to the camera (issue 6: ~10 cm on a monocular walk,
+    where the ring was 38 % of the training pixels). Eroding the mask by one pixel removes it.
+    A class with too few interior pixels falls back to its labelled foreground pixels, then to
+    all its labelled pixels, then to all foreground pixels."""
     moving = background.foreground_mask(m)
     labels = band_labels(moving, body) if class_labels is None else np.asarray(class_labels)
     if labels.shape != m.shape[:2]:
         raise ValueError(f"label image shape {labels.shape} does not match the measurement map {m.shape[:2]}")
     if class_labels is not None and fill_with_bands:
         labels = np.where(labels >= 0, labels, band_labels(moving, body))
-    fallback = m[moving] if moving.sum() >= min_pixels else m.reshape(-1, MEASUREMENT_DIM)
+    interior = cv2.erode(moving.astype(np.uint8), np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT,
+                         borderValue=0).astype(bool)
+    fallback = (m[interior] if interior.sum() >= min_pixels else m[moving] if moving.sum() >= min_pixels
+                else m.reshape(-1, MEASUREMENT_DIM))
     mixtures = []
     for c in range(len(classes)):
-        chosen = m[(labels == c) & moving]
-        if len(chosen) < min_pixels:
-            chosen = m[labels == c] if np.count_nonzero(labels == c) >= min_pixels else fallback
+        labelled = labels == c
+        for pool in (labelled & interior, labelled & moving, labelled):
+            if np.count_nonzero(pool) >= min_pixels:
+                chosen = m[pool]
+                break
+        else:
+            chosen = fallback
         mixtures.append(fit_mixture(chosen, seed=seed + c))
     return ForegroundModel(tuple(classes), tuple(mixtures))
 
