@@ -9,8 +9,9 @@ distortion). ``points_along`` rows x ``points_across`` columns of sample points 
 silhouette uniformly.
 
 Appearance (eq. 10-11, footnote 1): the sum of foreground/background log-likelihood ratios
-over the pixels of part i is approximated by (area_i / K) * sum_k llr(point k) (nearest map
-pixel of the part's class in ``FrameFeatures.llr``); eq. 11's weight w_i is 1 / (expected area
+over the pixels of part i is approximated by (area_i / K) * sum_k llr(point k) (the map pixel
+of the part's class in ``FrameFeatures.llr`` that contains the point; pixel centres at integer
+image coordinates); eq. 11's weight w_i is 1 / (expected area
 of part i): its side-on area (length x mean diameter) at the part's median depth over the N
 states. So each part contributes about its mean ratio, scaled by how large it appears.
 
@@ -297,8 +298,11 @@ def _chunk_log_likelihood(parts: tuple[PartShape, ...], sil: "_Silhouettes", pre
     # ---- appearance: sample points (J, A, P, n) --------------------------------------------
     tab = appearance
     # Map coordinates (+1 for the zero border) of the row centres and of the across-axis step.
-    base_col = cx * tab.inv_ds + np.float32(1)
-    base_row = cy * tab.inv_ds + np.float32(1)
+    # Pixel centres are at integer image coordinates (``Camera.project``, ``render``), so map
+    # pixel j averages image pixels d j .. d j + d - 1 and spans [d j - 0.5, d j + d - 0.5):
+    # floor((u + 0.5) / d). (floor(u / d) read every point half an image pixel up and left.)
+    base_col = (cx + np.float32(0.5)) * tab.inv_ds + np.float32(1)
+    base_row = (cy + np.float32(0.5)) * tab.inv_ds + np.float32(1)
     step_col = half * nx * tab.inv_ds
     step_row = half * ny * tab.inv_ds
     flat = np.empty((J,) + cx.shape, np.int32)
@@ -323,7 +327,8 @@ def _chunk_log_likelihood(parts: tuple[PartShape, ...], sil: "_Silhouettes", pre
         tp, fx_, fy_, ok = t[pick], cx[pick], cy[pick], row_ok[pick]
         mu = fx_ - (prev.ax + tp * (prev.bx - prev.ax))                    # predicted motion (px/frame)
         mv = fy_ - (prev.ay + tp * (prev.by - prev.ay))
-        fcol, frow = fx_ * flow.inv_cell, fy_ * flow.inv_cell
+        fcol = (fx_ + np.float32(0.5)) * flow.inv_cell      # cell k spans [k s - 0.5, k s + s - 0.5) px
+        frow = (fy_ + np.float32(0.5)) * flow.inv_cell
         inside = (fcol >= 0) & (fcol < flow.cols) & (frow >= 0) & (frow < flow.rows) & ok
         inside &= (prev.da > 1e-6) & (prev.db > 1e-6)
         cell = np.where(inside, frow.astype(np.int32) * flow.cols + fcol.astype(np.int32), flow.valid.size - 1)
