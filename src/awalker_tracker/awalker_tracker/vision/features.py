@@ -13,7 +13,7 @@ Learning, in order of preference (all automatic, no hand labels needed):
    is their robust temporal median (``fit_background_robust``); until then the maps are
    zero (no appearance information).
 2. Foreground: at the first frame after the background is known, the mixtures are fitted to
-   the pixels that differ from the background, labelled by (a) a class-label image passed
+   the interior pixels of the foreground (``learn_foreground``), labelled by (a) a class-label image passed
    with that frame: a user's label mask, or the body projected at the start description's
    pose (``foreground.start_pose_labels``) with the foreground pixels it misses (the start's
    leg phase is unknown) filled by (b); else (b) horizontal bands of the largest foreground

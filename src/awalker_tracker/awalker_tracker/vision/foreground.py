@@ -3,7 +3,8 @@
 Each part class (head, torso, legs, feet) has a mixture over the same 5-D measurement as the
 background (``background.measurements``), pixels IID within a part. The paper fitted them to
 hand-labelled regions; here they are fitted automatically (``learn_foreground``) to the pixels
-of one frame that (a) differ from the background model and (b) carry a part-class label. The
+of one frame that (a) differ from the background model, as do their 8 neighbours (interior
+pixels; edge pixels mix in the background), and (b) carry a part-class label. The
 label image comes from projecting the body at the start pose (``render_labels`` mapped to
 classes), from a user's label mask, or, when neither exists, from ``band_labels``: the largest
 foreground blob is cut into horizontal bands at the body's proportions (head at the top, then
