@@ -118,6 +118,13 @@ class TrackerConfig:
     spread: InitialSpread = InitialSpread()
     speed_time_constant_s: float = 0.5   # speed = hip velocity averaged over about one step
     fallen_log_penalty: float = 1.0e3    # log-likelihood removed from fallen walkers
+    # sigma_kappa_bar^2 of the control prior while tracking (N m/rad per kg)^2. The prior's default (0.01)
+    # keeps > 95 % of sampled walkers on their feet for 20 steps (0.02: ~95 % at 5 km/h); real gaits change
+    # more from stride to stride (CMU 07_01, bench_accuracy --quick, tracker seeds 0-2: relative error
+    # 70/60/52 mm at 0.01, 57/52/47 at 0.02, 53/50/48 at 0.05), and walkers that trip are dropped by the
+    # filter (fallen_log_penalty). At 0.05 the filter lost a 600-particle marker track
+    # (test_tracker_model.py), so 0.02.
+    kappa_bar_variance: float = 0.02
     # Exponent on the likelihood (tempering). The per-part image log-likelihoods are sums over
     # strongly correlated pixels, so differences between particles of tens of log units are not
     # independent evidence; at 1.0 the weights collapse onto a few particles every frame (ESS 4-9
@@ -131,6 +138,8 @@ class TrackerConfig:
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"TrackerConfig.dt must be > 0 s, got {self.dt}")
+        if not (np.isfinite(self.kappa_bar_variance) and self.kappa_bar_variance > 0):
+            raise ValueError(f"TrackerConfig.kappa_bar_variance must be > 0, got {self.kappa_bar_variance}")
         if not (np.isfinite(self.likelihood_scale) and self.likelihood_scale > 0):
             raise ValueError(f"TrackerConfig.likelihood_scale must be > 0, got {self.likelihood_scale}")
 
@@ -185,7 +194,8 @@ class TrackerModel:
         self.likelihood = likelihood
         self.params = params or body.walker_params()
         self.gaits = gait_table if gait_table is not None else gaits.GaitTable.load()
-        self.prior = prior if prior is not None else control.ControlPrior.from_gait_table(self.gaits)
+        self.prior = prior if prior is not None else control.ControlPrior.from_gait_table(
+            self.gaits, kappa_bar_variance=config.kappa_bar_variance)
         self.kin_config = kinematics if kinematics is not None else kin_mod.KinematicConfig(dt=config.dt)
         self._control = control
         self._gaits = gaits
