@@ -247,3 +247,59 @@ def test_features_for_every_frame_of_a_replayed_bag(ros_context, tmp_path):
         executor.shutdown()
         for n in (node, driver, acker):
             n.destroy_node()
+
+
+def test_occlusion_mask_published_after_its_image_is_applied(ros_context):
+    """Replay publishes a frame's mask just after its image: the node holds the image for it. A frame
+    whose mask never comes is processed after mask_wait_s, counted, and still published."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import Image
+
+    from awalker_msgs.msg import ImageFeatures
+    from awalker_tracker.nodes.convert import header, stamp_to_ns
+    from awalker_tracker.nodes.features import FeatureNode, features_from_msg
+
+    frames = scene_frames()
+    node = FeatureNode(context=ros_context, parameter_overrides=[
+        Parameter("camera_name", value="cam"), Parameter("downsample", value=2), Parameter("flow_cell_size", value=8),
+        Parameter("background_frames", value=3), Parameter("mask_wait_s", value=0.3)])
+    probe = Node("probe", context=ros_context)
+    received: list = []
+    probe.create_subscription(ImageFeatures, "/cam/features", received.append, QoSProfile(depth=50))
+    image_pub = probe.create_publisher(Image, "/cam/image_raw", QoSProfile(depth=50))
+    mask_pub = probe.create_publisher(Image, "/cam/occlusion_mask", QoSProfile(depth=50))
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(probe)
+    h, w = frames[0].shape[:2]
+    occluded = np.zeros((h, w), np.uint8)
+    occluded[:, w // 2:] = 255                       # the right half of every frame is hidden
+    try:
+        deadline = time.monotonic() + 10
+        while (image_pub.get_subscription_count() == 0 or mask_pub.get_subscription_count() == 0
+               or node.count_publishers("/cam/occlusion_mask") == 0) and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        stamps = [3_000_000_000 + k * 33_333_333 for k in range(len(frames))]
+        for k, (stamp, rgb) in enumerate(zip(stamps, frames)):
+            image_pub.publish(image_msg(rgb, stamp))
+            if k != len(frames) - 1:                 # the last frame's mask never comes
+                mask = Image(header=header(stamp, "cam_optical_frame"), height=h, width=w, encoding="mono8", step=w)
+                mask.data = occluded.tobytes()
+                mask_pub.publish(mask)
+            while len(received) < k + 1 and time.monotonic() < deadline + 10:
+                executor.spin_once(timeout_sec=0.05)
+        assert [stamp_to_ns(m.header.stamp) for m in received] == stamps
+        assert node.stats.frames == len(frames) and node.stats.frames_without_mask == 1
+        half = features_from_msg(received[0]).map_shape[1] // 2
+        masked = features_from_msg(received[-2])
+        assert not np.any(masked.llr[:, :, half:]) and np.abs(masked.llr[:, :, :half - 1]).max() > 1
+        assert not masked.flow.valid[:, masked.flow.valid.shape[1] // 2 + 1:].any()
+        unmasked = features_from_msg(received[-1])  # processed after mask_wait_s without its mask
+        assert np.abs(unmasked.llr[:, :, half + 1:]).max() > 1
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        probe.destroy_node()

@@ -4,9 +4,12 @@ Subscribes (camera ``<cam>`` from the ``camera_name`` parameter):
 - ``/<cam>/image_raw`` (sensor_msgs/Image: rgb8, bgr8, mono8, rgba8, bgra8) and
   ``/<cam>/image_raw/compressed`` (sensor_msgs/CompressedImage: jpeg/png), sensor-data QoS
   (a best-effort reader also receives the replay's reliable publications);
-- optional ``/<cam>/occlusion_mask`` (mono8, 255 = occluded; used for the frame with the same
-  stamp when it arrives before the image — the node never holds an image back, so a mask
-  arriving later is not applied to the maps; the likelihood honours masks separately) and ``/<cam>/foreground_labels`` (mono8 class label
+- optional ``/<cam>/occlusion_mask`` (mono8, 255 = occluded; applied to the frame with the same
+  stamp: its pixels get ratio 0 and its flow cells are invalid). When the camera has masks (a
+  publisher on the topic, or a mask seen before), an image whose mask has not arrived yet is
+  held until it does (replay publishes a frame's mask just after its image), for at most
+  ``mask_wait_s``; an image that gets no mask is processed without one, logged and counted
+  (``stats.frames_without_mask``). And ``/<cam>/foreground_labels`` (mono8 class label
   image for learning the foreground: 0 = none, k = 1 + index into PART_CLASSES);
 - ``/awalker/start_description`` (latched std_msgs/String): the frames before its ``frame``
   are background-only (``background_frames`` = -1, the default);
@@ -141,6 +144,7 @@ class FeatureNodeStats:
     skipped: int = 0
     seconds: float = 0.0
     foreground_from: str = ""     # "start pose", "label image" or "height bands" once learned
+    frames_without_mask: int = 0  # images processed without their occlusion mask on a camera that has masks
 
 
 class FeatureNode(Node):
@@ -171,6 +175,8 @@ class FeatureNode(Node):
         threads = int(declare("opencv_threads", 1, "OpenCV worker threads (process-wide; 1 is fastest when "
                                                    "cores are shared, e.g. one features node per camera; 0 = OpenCV default)"))
         self.verbose = bool(declare("verbose", False, "log model learning to stderr"))
+        self.mask_wait_s = float(declare("mask_wait_s", 0.25, "s an image waits for its occlusion mask when the "
+                                                               "camera has masks"))
         if not self.camera_name:
             raise InputError("parameter 'camera_name' is required (e.g. --ros-args -p camera_name:=cam0)")
         try:
@@ -187,6 +193,9 @@ class FeatureNode(Node):
         self.stats = FeatureNodeStats()
         self._last_stamp = -1
         self._masks: dict[int, np.ndarray] = {}
+        self._masks_seen = False
+        self._held: tuple[Image | CompressedImage, str, int] | None = None  # image waiting for its mask
+        self._hold_timer: Any = None
         self._labels: np.ndarray | None = None
         self._start: Any = None
         self._info: CameraInfo | None = None
@@ -252,12 +261,16 @@ class FeatureNode(Node):
 
     def _on_mask(self, msg: Image) -> None:
         topic = f"/{self.camera_name}/occlusion_mask"
+        stamp = stamp_to_ns(msg.header.stamp)
+        self._masks_seen = True
         try:
-            self._masks[stamp_to_ns(msg.header.stamp)] = mono_from_msg(msg, topic)
+            self._masks[stamp] = mono_from_msg(msg, topic)
         except InputError as exc:
             self.get_logger().error(str(exc))
         while len(self._masks) > 30:
             self._masks.pop(min(self._masks))
+        if self._held is not None and self._held[2] == stamp:
+            self._release_held()
 
     def _on_labels(self, msg: Image) -> None:
         try:
@@ -271,7 +284,36 @@ class FeatureNode(Node):
         self._labels = labels
 
     # -- images -----------------------------------------------------------------------------
+    def _expects_masks(self) -> bool:
+        return self._masks_seen or self.count_publishers(f"/{self.camera_name}/occlusion_mask") > 0
+
     def _on_image(self, msg: Image | CompressedImage, topic: str) -> None:
+        """Process the image now, or hold it until its occlusion mask arrives (see the module docstring)."""
+        stamp = stamp_to_ns(msg.header.stamp)
+        if self._held is not None:
+            self._release_held()
+        if stamp in self._masks or self.mask_wait_s <= 0 or not self._expects_masks():
+            self._process(msg, topic)
+            return
+        self._held = (msg, topic, stamp)
+        self._hold_timer = self.create_timer(self.mask_wait_s, self._release_held)
+
+    def _release_held(self) -> None:
+        """Process the held image, with its mask if it has come."""
+        if self._hold_timer is not None:
+            self.destroy_timer(self._hold_timer)
+            self._hold_timer = None
+        if self._held is None:
+            return
+        msg, topic, stamp = self._held
+        self._held = None
+        if stamp not in self._masks:
+            self.stats.frames_without_mask += 1
+            self.get_logger().warning(f"/{self.camera_name}/occlusion_mask: no mask for the image at {stamp} ns "
+                                      f"within {self.mask_wait_s} s; its features ignore occlusion")
+        self._process(msg, topic)
+
+    def _process(self, msg: Image | CompressedImage, topic: str) -> None:
         stamp = stamp_to_ns(msg.header.stamp)
         started = time.perf_counter()
         if stamp <= self._last_stamp:
