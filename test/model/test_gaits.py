@@ -152,3 +152,22 @@ def test_step_map_radius_predicts_growth_of_perturbations(table: gaits.GaitTable
                                      - nominal).max())
         growth = deviations[-1] / deviations[1]
         assert (growth < 1.0) == (radius < 1.0), (radius, deviations)
+
+
+def test_table_scaled_to_another_leg_length_is_cyclic(table: gaits.GaitTable) -> None:
+    """Dimensional analysis: the rescaled entries solve eq. (3) for the new walker, re-simulated."""
+    child = WalkerParams(leg_length=0.62, gravity=9.8)
+    scaled = table.scaled_to(child)
+    assert scaled.params == child and table.scaled_to(PARAMS) is table
+    assert scaled.step_lengths[-1] == pytest.approx(1.2 * 0.62 / 0.9)
+    for i, j in ((2, 4), (5, 8), (9, 14)):
+        x = np.array([scaled.stance_rate[i, j], scaled.swing_rate[i, j], scaled.stiffness[i, j],
+                      scaled.toe_off_impulse[i, j]])
+        residual = gaits.cyclic_residual(child, scaled.speeds[i], scaled.step_lengths[j], x)
+        assert np.max(np.abs(residual)) < 1e-6
+        # and the unscaled entry is not cyclic for the child (the test can tell)
+        wrong = np.array([table.stance_rate[i, j], table.swing_rate[i, j], table.stiffness[i, j],
+                          table.toe_off_impulse[i, j]])
+        assert np.max(np.abs(gaits.cyclic_residual(child, scaled.speeds[i], scaled.step_lengths[j], wrong))) > 1e-3
+    with pytest.raises(ValueError, match="only leg_length and gravity"):
+        table.scaled_to(WalkerParams(foot_radius_ratio=0.2))

@@ -118,3 +118,18 @@ def test_gaits_solve_and_plot(tmp_path, capsys) -> None:
     for name in ("gait_parameters.png", "impulse_fit.png"):
         assert (tmp_path / "plots" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert main(["gaits", "solve", "--speeds", "5:4", "--out", str(table)]) == 2
+
+
+def test_simulate_another_leg_length_walks_the_rescaled_gait(tmp_path, capsys) -> None:
+    """--leg-length 0.7: the table (solved for 0.9 m) is rescaled, so the gait is cyclic at the asked speed/step."""
+    out = tmp_path / "short.csv"
+    assert main(["simulate", "--leg-length", "0.7", "--speed", "1.0", "--step-length", "0.55", "--steps", "6",
+                 "--rate", "120", "--out", str(out)]) == 0
+    capsys.readouterr()
+    rows = read_rows(out)
+    strikes = [r for r in rows if r["heel_strike"] == "1"]
+    x = np.array([float(r["contact_x"]) for r in strikes])
+    t = np.array([float(r["time"]) for r in strikes])
+    assert len(strikes) == 6 and rows[-1]["fallen"] == "0"
+    np.testing.assert_allclose(np.diff(x), 0.55, atol=0.01)        # steps of the asked length
+    np.testing.assert_allclose(np.diff(t), 0.55 / 1.0, atol=1 / 120)  # at the asked speed

@@ -310,7 +310,7 @@ def walker_motion(config: SynthConfig, start_xy: np.ndarray, heading: float, rng
     body = BodyDescription.default()
     params = body.walker_params()
     dt = 1.0 / config.rate
-    table = gaits.GaitTable.load()
+    table = gaits.GaitTable.load().scaled_to(params)
     speeds = _speed_schedule(config)
     steps = config.step_length * (speeds / config.speed) ** 0.42  # preferred step length ~ speed^0.42
     walker = gaits.gait_initial_state(params, config.speed, config.step_length, contact_origin=0.0,

@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -100,10 +99,12 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--leg-length {args.leg_length}: expected a positive length in metres")
     params = WalkerParams(leg_length=args.leg_length)
     needs_table = args.stochastic or args.speed is not None or args.step_length is not None
-    table = gaits.GaitTable.load(args.table) if needs_table else None
-    if table is not None and abs(table.params.leg_length - params.leg_length) > 1e-9:
-        print(f"awalker simulate: note: gait table solved for L = {table.params.leg_length} m, "
-              f"simulating L = {params.leg_length} m", file=sys.stderr)
+    table = None
+    if needs_table:
+        try:
+            table = gaits.GaitTable.load(args.table).scaled_to(params)  # solved for L = 0.9 m: rescaled exactly
+        except ValueError as exc:
+            raise InputError(f"{args.table or 'packaged gait table'}: {exc}") from None
     state, kappa, iota = _start(args, params, table)
     if args.paper_prior and not args.stochastic:
         raise InputError("--paper-prior: only with --stochastic")

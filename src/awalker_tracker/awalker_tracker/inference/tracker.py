@@ -193,7 +193,8 @@ class TrackerModel:
         self.config = config
         self.likelihood = likelihood
         self.params = params or body.walker_params()
-        self.gaits = gait_table if gait_table is not None else gaits.GaitTable.load()
+        # the packaged table is solved for L = 0.9 m: rescaled (exactly) to this body's leg length
+        self.gaits = (gait_table if gait_table is not None else gaits.GaitTable.load()).scaled_to(self.params)
         self.prior = prior if prior is not None else control.ControlPrior.from_gait_table(
             self.gaits, kappa_bar_variance=config.kappa_bar_variance)
         self.kin_config = kinematics if kinematics is not None else kin_mod.KinematicConfig(dt=config.dt)

@@ -286,6 +286,30 @@ class GaitTable:
             raise InputError(f"{path}: not JSON ({exc})") from exc
         return cls.from_json(data, str(path))
 
+    def scaled_to(self, params: WalkerParams) -> "GaitTable":
+        """The same gaits for a walker of another leg length and gravity (exact: dimensional analysis).
+
+        The equations of motion are the same in Kuo's dimensionless units, so a table solved for
+        (L, g) holds for (L', g') with lengths x L'/L, times x sqrt(L'/L g/g'), speeds and iota x
+        sqrt(L' g' / L g), rates x sqrt(L g' / L' g), kappa (per kg) x L' g' / L g. The other
+        parameters (ratios and mass fractions) must match; raises ValueError if they do not.
+        """
+        ours = dataclasses.replace(self.params, leg_length=params.leg_length, gravity=params.gravity)
+        if ours != params:
+            raise ValueError(f"gait table solved for {self.params}; only leg_length and gravity can be rescaled, "
+                             f"not to {params}")
+        if params == self.params:
+            return self
+        length = params.leg_length / self.params.leg_length
+        gravity = params.gravity / self.params.gravity
+        speed, rate, time_ = np.sqrt(length * gravity), np.sqrt(gravity / length), np.sqrt(length / gravity)
+        return dataclasses.replace(
+            self, params=params, speeds=self.speeds * speed, step_lengths=self.step_lengths * length,
+            stance_rate=self.stance_rate * rate, swing_rate=self.swing_rate * rate,
+            pre_stance_rate=self.pre_stance_rate * rate, pre_swing_rate=self.pre_swing_rate * rate,
+            stiffness=self.stiffness * length * gravity, toe_off_impulse=self.toe_off_impulse * speed,
+            solver_step=self.solver_step * time_)
+
     # ---- queries -----------------------------------------------------------------------
     def lookup(self, speed: np.ndarray | float, step_length: np.ndarray | float
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
