@@ -392,7 +392,10 @@ class ImageObservation:
 
 
 def image_likelihood(body: BodyDescription, cameras: list[Any]) -> LikelihoodFn:
-    """The image likelihood of paper Sec. 5.1 (eq. 9-12) over ``cameras`` (vision.likelihood)."""
+    """The image likelihood of paper Sec. 5.1 (eq. 9-12) over ``cameras`` (vision.likelihood), divided by the
+    number of cameras: with the tempering (``TrackerConfig.likelihood_scale``) this keeps the weight of the
+    evidence the same for any number of cameras. Summed as in eq. (12), two cameras at scale 0.1 lost the
+    walker in 1 of 6 tracker seeds (205 mm); averaged, 17-51 mm (mean 30) over the same seeds."""
     from awalker_tracker.vision.likelihood import SilhouetteMemo, log_likelihood
 
     parts = body.parts
@@ -402,6 +405,6 @@ def image_likelihood(body: BodyDescription, cameras: list[Any]) -> LikelihoodFn:
         prev_segments = states.pose.segments if prev is None else prev.pose.segments
         masks = list(obs.occlusion_masks) or [None] * len(cameras)
         return log_likelihood(parts, states.pose.segments, prev_segments, cameras, list(obs.features), masks,
-                              memo=memo)
+                              memo=memo) / len(cameras)
 
     return loglik
