@@ -182,24 +182,27 @@ def _steps_before_falling(prior: control.ControlPrior, table: gaits.GaitTable, s
     return np.where(fallen, steps, -1)  # -1: still walking
 
 
+def _noise_free_prior(table: gaits.GaitTable, speed: float, step: float, fixed_toe_off: bool) -> control.ControlPrior:
+    """A prior without noise holding the stiffness of the gait (speed, step); its toe-off is the gait's own iota
+    (``fixed_toe_off``, a constant "bilinear" mean) or the default cyclic-gait rule."""
+    _, _, kappa, iota = table.lookup(speed, step)
+    quiet = dict(mu_kappa=float(kappa), kappa_noise_variance=1e-12, kappa_bar_variance=1e-12, impulse_variance=1e-12)
+    if fixed_toe_off:
+        quiet.update(toe_off_rule="bilinear", impulse_mean_coefficients=(float(iota), 0.0, 0.0, 0.0))
+    return control.ControlPrior.from_gait_table(table, **quiet)
+
+
 def test_noise_free_prior_keeps_walking_at_the_gait(table: gaits.GaitTable) -> None:
     """Without noise, walkers from the 4 km/h, 0.6 m gait (open-loop stable) take 20 regular steps."""
-    _, _, kappa, iota = table.lookup(4 / 3.6, 0.6)
-    still = control.ControlPrior.from_gait_table(table, mu_kappa=float(kappa), kappa_noise_variance=1e-12,
-                                                 kappa_bar_variance=1e-12, impulse_variance=1e-12,
-                                                 toe_off_rule="bilinear",
-                                                 impulse_mean_coefficients=(float(iota), 0.0, 0.0, 0.0))
+    still = _noise_free_prior(table, 4 / 3.6, 0.6, fixed_toe_off=True)
     assert np.all(_steps_before_falling(still, table, 4 / 3.6, 0.6, 20, 330, 4) == -1)
 
 
 def test_cyclic_gait_toe_off_stabilises_an_unstable_gait(table: gaits.GaitTable) -> None:
     """5 km/h, 0.7 m has Floquet multiplier 1.08: pushed by 0.02 rad/s it falls with its fixed iota, and
     keeps walking with the cyclic-gait toe-off."""
-    _, _, kappa, iota = table.lookup(5 / 3.6, 0.7)
-    quiet = dict(mu_kappa=float(kappa), kappa_noise_variance=1e-12, kappa_bar_variance=1e-12, impulse_variance=1e-12)
-    fixed = control.ControlPrior.from_gait_table(table, toe_off_rule="bilinear",
-                                                 impulse_mean_coefficients=(float(iota), 0.0, 0.0, 0.0), **quiet)
-    steered = control.ControlPrior.from_gait_table(table, **quiet)
+    fixed = _noise_free_prior(table, 5 / 3.6, 0.7, fixed_toe_off=True)
+    steered = _noise_free_prior(table, 5 / 3.6, 0.7, fixed_toe_off=False)
     pushes = np.array([-0.02, 0.02])
     assert all(_steps_before_falling(fixed, table, 5 / 3.6, 0.7, 1, 600, 4, push)[0] >= 0 for push in pushes)
     assert all(_steps_before_falling(steered, table, 5 / 3.6, 0.7, 1, 600, 4, push)[0] == -1 for push in pushes)
@@ -223,11 +226,7 @@ def test_paper_prior_falls_and_ours_walks(prior: control.ControlPrior, table: ga
 
 
 def test_prior_walk_statistics_on_a_still_prior(table: gaits.GaitTable) -> None:
-    _, _, kappa, iota = table.lookup(4 / 3.6, 0.6)
-    still = control.ControlPrior.from_gait_table(table, mu_kappa=float(kappa), kappa_noise_variance=1e-12,
-                                                 kappa_bar_variance=1e-12, impulse_variance=1e-12,
-                                                 toe_off_rule="bilinear",
-                                                 impulse_mean_coefficients=(float(iota), 0.0, 0.0, 0.0))
+    still = _noise_free_prior(table, 4 / 3.6, 0.6, fixed_toe_off=True)
     quiet = control.prior_walk_statistics(PARAMS, still, table, 4 / 3.6, 0.6, n=20, steps=8)
     assert quiet["fraction_fallen"] == 0.0 and quiet["median_strikes_before_fall"] is None
     assert quiet["step_length_percentiles_m"]["50"] == pytest.approx(0.6, abs=2e-3)
