@@ -315,8 +315,9 @@ class GaitTable:
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(stance_rate, swing_rate, stiffness, toe_off_impulse) bilinearly interpolated.
 
-        Only converged grid cells are used; queries are clamped to the grid. Raises InputError
-        when the enclosing cell has no converged corner.
+        Speed and step length broadcast against each other. Only converged grid cells are used;
+        queries are clamped to the grid. Raises InputError when the enclosing cell has no converged
+        corner.
         """
         v = np.clip(np.asarray(speed, float), self.speeds[0], self.speeds[-1])
         s = np.clip(np.asarray(step_length, float), self.step_lengths[0], self.step_lengths[-1])
@@ -326,8 +327,9 @@ class GaitTable:
         ts = (s - self.step_lengths[j]) / (self.step_lengths[j + 1] - self.step_lengths[j])
         corners = [(i, j, (1 - tv) * (1 - ts)), (i + 1, j, tv * (1 - ts)), (i, j + 1, (1 - tv) * ts),
                    (i + 1, j + 1, tv * ts)]
-        weight_sum = np.zeros(np.shape(v))
-        outputs = [np.zeros(np.shape(v)) for _ in range(4)]
+        shape = np.broadcast_shapes(np.shape(v), np.shape(s))
+        weight_sum = np.zeros(shape)
+        outputs = [np.zeros(shape) for _ in range(4)]
         for ci, cj, w in corners:
             ok = self.converged[ci, cj]
             w = np.where(ok, w, 0.0)
@@ -349,7 +351,7 @@ class GaitTable:
         """
         kappa = np.asarray(stiffness, float)
         step = np.broadcast_to(np.asarray(step_length, float), kappa.shape)
-        along_speed = np.stack([self.lookup(np.full(step.shape, v), step)[2] for v in self.speeds], -1)
+        along_speed = self.lookup(self.speeds, step[..., None])[2]   # (..., S): kappa at each grid speed
         below = np.clip((along_speed < kappa[..., None]).sum(-1) - 1, 0, self.speeds.size - 2)
         low = np.take_along_axis(along_speed, below[..., None], -1)[..., 0]
         high = np.take_along_axis(along_speed, below[..., None] + 1, -1)[..., 0]
