@@ -117,3 +117,24 @@ def test_initial_particles_spread_around_the_start():
     assert np.median(states.speed) == pytest.approx(1.4, rel=0.05)
     # phases spread within the step: the stance angle takes many values
     assert np.ptp(states.walker.stance_angle) > 0.2
+
+
+def test_start_outside_the_solved_gaits_is_refused_and_the_spread_redrawn():
+    import dataclasses
+
+    from awalker_tracker.model import gaits
+
+    table = gaits.GaitTable.load()
+    holed = dataclasses.replace(table, converged=table.converged.copy())
+    holed.converged[:3, :4] = False                       # no gaits below ~3 km/h with steps below ~0.45 m
+    body = BodyDescription.default()
+    config = TrackerConfig(smc=SMCConfig(num_particles=300, seed=0), dt=1 / 30)
+    slow = StartDescription(0, (0.0, 0.0), 0.0, float(holed.speeds[1]), float(holed.step_lengths[1]), LEFT)
+    model = TrackerModel(body, slow, marker_likelihood(0.03), config, gait_table=holed)
+    with pytest.raises(InputError, match="start description: no cyclic gait for speed"):
+        model.initial(300, np.random.default_rng(0))
+    # a start next to the hole: its spread of speeds and step lengths never lands in the hole
+    near = StartDescription(0, (0.0, 0.0), 0.0, float(holed.speeds[3]), float(holed.step_lengths[4]), LEFT)
+    speed, step = TrackerModel(body, near, marker_likelihood(0.03), config, gait_table=holed)._sample_gaits(
+        2000, np.random.default_rng(0))
+    assert np.all(holed.covers(speed, step, min_weight=1e-6))

@@ -171,3 +171,19 @@ def test_table_scaled_to_another_leg_length_is_cyclic(table: gaits.GaitTable) ->
         assert np.max(np.abs(gaits.cyclic_residual(child, scaled.speeds[i], scaled.step_lengths[j], wrong))) > 1e-3
     with pytest.raises(ValueError, match="only leg_length and gravity"):
         table.scaled_to(WalkerParams(foot_radius_ratio=0.2))
+
+
+def test_covers_and_lookup_agree_on_unconverged_cells(table: gaits.GaitTable) -> None:
+    import dataclasses
+
+    holed = dataclasses.replace(table, converged=table.converged.copy())
+    holed.converged[:3, :4] = False                       # slow, short-step corner without gaits
+    inside, edge, outside = (table.speeds[1], table.step_lengths[1]), (table.speeds[3], table.step_lengths[3]), \
+        (table.speeds[6], table.step_lengths[8])
+    covered = holed.covers(np.array([inside[0], edge[0], outside[0]]), np.array([inside[1], edge[1], outside[1]]))
+    assert covered.tolist() == [False, True, True]
+    with pytest.raises(InputError, match="no converged gait near speed"):
+        holed.lookup(*inside)
+    np.testing.assert_allclose(holed.lookup(*outside), table.lookup(*outside))
+    # broadcasting: speeds (S,) against step lengths (K, 1)
+    assert holed.covers(table.speeds, table.step_lengths[:, None]).shape == (table.step_lengths.size, table.speeds.size)

@@ -223,17 +223,8 @@ class TrackerModel:
         return TrackerStates(walker, control, kin, pose, speed.copy(), np.zeros(n, bool))
 
     def _gait_known(self, speed: np.ndarray, step: np.ndarray) -> np.ndarray:
-        """True where the gait table's bilinear lookup has converged corners with weight (as lookup needs)."""
-        t = self.gaits
-        v = np.clip(speed, t.speeds[0], t.speeds[-1])
-        s = np.clip(step, t.step_lengths[0], t.step_lengths[-1])
-        i = np.clip(np.searchsorted(t.speeds, v, side="right") - 1, 0, t.speeds.size - 2)
-        j = np.clip(np.searchsorted(t.step_lengths, s, side="right") - 1, 0, t.step_lengths.size - 2)
-        tv = (v - t.speeds[i]) / (t.speeds[i + 1] - t.speeds[i])
-        ts = (s - t.step_lengths[j]) / (t.step_lengths[j + 1] - t.step_lengths[j])
-        weight = (t.converged[i, j] * (1 - tv) * (1 - ts) + t.converged[i + 1, j] * tv * (1 - ts)
-                  + t.converged[i, j + 1] * (1 - tv) * ts + t.converged[i + 1, j + 1] * tv * ts)
-        return weight > 1e-6
+        """True where the gait table's lookup has converged corners with weight (a margin above what lookup needs)."""
+        return self.gaits.covers(speed, step, min_weight=1e-6)
 
     def _sample_gaits(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """Speeds and step lengths around the start's, redrawn where the gait table has no gait."""

@@ -311,14 +311,8 @@ class GaitTable:
             solver_step=self.solver_step * time_)
 
     # ---- queries -----------------------------------------------------------------------
-    def lookup(self, speed: np.ndarray | float, step_length: np.ndarray | float
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(stance_rate, swing_rate, stiffness, toe_off_impulse) bilinearly interpolated.
-
-        Speed and step length broadcast against each other. Only converged grid cells are used;
-        queries are clamped to the grid. Raises InputError when the enclosing cell has no converged
-        corner.
-        """
+    def _corners(self, speed: np.ndarray | float, step_length: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, list]:
+        """Clamped (speed, step length) and the four grid corners (i, j, bilinear weight, 0 where not converged)."""
         v = np.clip(np.asarray(speed, float), self.speeds[0], self.speeds[-1])
         s = np.clip(np.asarray(step_length, float), self.step_lengths[0], self.step_lengths[-1])
         i = np.clip(np.searchsorted(self.speeds, v, side="right") - 1, 0, self.speeds.size - 2)
@@ -327,12 +321,27 @@ class GaitTable:
         ts = (s - self.step_lengths[j]) / (self.step_lengths[j + 1] - self.step_lengths[j])
         corners = [(i, j, (1 - tv) * (1 - ts)), (i + 1, j, tv * (1 - ts)), (i, j + 1, (1 - tv) * ts),
                    (i + 1, j + 1, tv * ts)]
+        return v, s, [(ci, cj, np.where(self.converged[ci, cj], w, 0.0)) for ci, cj, w in corners]
+
+    def covers(self, speed: np.ndarray | float, step_length: np.ndarray | float,
+               min_weight: float = 1e-12) -> np.ndarray:
+        """True where :meth:`lookup` has converged corners carrying more than ``min_weight`` (broadcast shape)."""
+        _, _, corners = self._corners(speed, step_length)
+        return sum(w for _, _, w in corners) > min_weight
+
+    def lookup(self, speed: np.ndarray | float, step_length: np.ndarray | float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(stance_rate, swing_rate, stiffness, toe_off_impulse) bilinearly interpolated.
+
+        Speed and step length broadcast against each other. Only converged grid cells are used;
+        queries are clamped to the grid. Raises InputError when the enclosing cell has no converged
+        corner.
+        """
+        v, s, corners = self._corners(speed, step_length)
         shape = np.broadcast_shapes(np.shape(v), np.shape(s))
         weight_sum = np.zeros(shape)
         outputs = [np.zeros(shape) for _ in range(4)]
         for ci, cj, w in corners:
-            ok = self.converged[ci, cj]
-            w = np.where(ok, w, 0.0)
             weight_sum = weight_sum + w
             for out, name in zip(outputs, ("stance_rate", "swing_rate", "stiffness", "toe_off_impulse")):
                 out += w * np.nan_to_num(getattr(self, name)[ci, cj])
