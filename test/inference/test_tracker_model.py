@@ -10,7 +10,7 @@ from awalker_tracker.inference.smc import SMCConfig
 from awalker_tracker.inference.tracker import (
     InitialSpread, StartDescription, Tracker, TrackerConfig, TrackerModel, marker_likelihood, where_arrays)
 from awalker_tracker.model.body import MARKER_NAMES, BodyDescription
-from awalker_tracker.model.walker import LEFT, WalkerState
+from awalker_tracker.model.walker import LEFT, WalkerParams, WalkerState
 
 EVAL = [MARKER_NAMES.index(n) for n in ("pelvis", "thorax", "left_hip", "right_hip", "left_knee", "right_knee",
                                         "left_ankle", "right_ankle")]
@@ -96,6 +96,25 @@ def test_start_description_yaml():
                                         "start.yaml")
     with pytest.raises(InputError, match="top-level 'start:'"):
         StartDescription.from_yaml_text("[1, 2]", "start.yaml")
+
+
+def test_start_step_length_is_optional_and_follows_speed_and_leg_length():
+    text = "start: {frame: 15, position: [0, 0], heading: 0, speed: 1.389, stance_leg: right}"
+    s = StartDescription.from_yaml_text(text, "start.yaml")
+    assert s.step_length is None and s.frame == 15 and s.stance_leg == 1
+    assert "step_length" not in s.to_yaml_text()
+    assert StartDescription.from_yaml_text(s.to_yaml_text()) == s
+    # 0.7 m at 5 km/h for a 0.9 m leg (MODEL.md: 0.65-0.75 m), growing as speed^0.42, longer legs longer steps
+    assert s.step_length_for(WalkerParams(leg_length=0.9)) == pytest.approx(0.7, abs=0.002)
+    faster = StartDescription(0, (0.0, 0.0), 0.0, 2 * 1.389, None, LEFT).step_length_for(WalkerParams(leg_length=0.9))
+    assert faster == pytest.approx(0.7 * 2 ** 0.42, rel=0.01)
+    assert s.step_length_for(WalkerParams(leg_length=1.0)) > s.step_length_for(WalkerParams(leg_length=0.8))
+    # a given step length wins
+    assert StartDescription(0, (0.0, 0.0), 0.0, 1.389, 0.55, LEFT).step_length_for(WalkerParams()) == 0.55
+    # the tracker starts from such a description
+    model = TrackerModel(BodyDescription.default(), s, marker_likelihood(), TrackerConfig())
+    states = model.initial(200, np.random.default_rng(0))
+    assert np.all(states.walker.stance_leg == 1) and np.all(np.isfinite(states.pose.markers))
 
 
 def test_where_arrays_mixes_particles():

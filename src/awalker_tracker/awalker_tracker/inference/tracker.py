@@ -38,14 +38,26 @@ from awalker_tracker.model.walker import LEFT, RIGHT, WalkerParams, WalkerState
 @dataclass(frozen=True)
 class StartDescription:
     """Coarse initial state (YAML ``start:`` mapping): frame index, ground xy under the pelvis (m),
-    heading (rad, walking direction from world +x about +z), speed (m/s), step length (m), stance leg."""
+    heading (rad, walking direction from world +x about +z), speed (m/s), optional step length (m;
+    None: the usual step length at that speed, ``step_length_for``), stance leg.
+
+    ``frame`` is the index, counted from 0 at the bag's first frame, of the first frame the
+    tracker uses (the person is in view); the frames before it are background-only and teach the
+    background model."""
 
     frame: int = 0
     position: tuple[float, float] = (0.0, 0.0)
     heading: float = 0.0
     speed: float = 1.3
-    step_length: float = 0.7
+    step_length: float | None = None
     stance_leg: int = LEFT
+
+    def step_length_for(self, params: WalkerParams) -> float:
+        """The given step length, else a person's usual one at ``speed`` for this leg length (m)."""
+        from awalker_tracker.model.gaits import preferred_step_length
+
+        return float(self.step_length) if self.step_length is not None else float(
+            preferred_step_length(params, self.speed))
 
     @classmethod
     def from_yaml_text(cls, text: str, where: str = "start description") -> "StartDescription":
@@ -55,24 +67,25 @@ class StartDescription:
             raise InputError(f"{where}: not valid YAML ({exc})") from None
         if not isinstance(data, dict) or not isinstance(data.get("start"), dict):
             raise InputError(f"{where}: expected a top-level 'start:' mapping with frame, position [x, y], "
-                             "heading (rad), speed (m/s), step_length (m), stance_leg (left|right)")
+                             "heading (rad), speed (m/s), stance_leg (left|right) and optionally step_length (m)")
         s = data["start"]
         known = {"frame", "position", "heading", "speed", "step_length", "stance_leg"}
         unknown = sorted(set(s) - known)
         if unknown:
             raise InputError(f"{where}: unknown start field(s) {', '.join(unknown)}; expected {sorted(known)}")
-        missing = sorted({"position", "heading", "speed", "step_length", "stance_leg"} - set(s))
+        missing = sorted({"position", "heading", "speed", "stance_leg"} - set(s))
         if missing:
             raise InputError(f"{where}: start is missing {', '.join(missing)}")
         try:
             position = tuple(float(v) for v in s["position"])
-            frame, heading = int(s.get("frame", 0)), float(s["heading"])
-            speed, step_length = float(s["speed"]), float(s["step_length"])
+            frame, heading, speed = int(s.get("frame", 0)), float(s["heading"]), float(s["speed"])
+            step_length = None if s.get("step_length") is None else float(s["step_length"])
         except (TypeError, ValueError):
             raise InputError(f"{where}: start values must be numbers (position a list of two), got {s}") from None
-        if len(position) != 2 or not np.all(np.isfinite([*position, heading, speed, step_length])):
+        values = [*position, heading, speed] + ([] if step_length is None else [step_length])
+        if len(position) != 2 or not np.all(np.isfinite(values)):
             raise InputError(f"{where}: start.position must be [x, y] and all values finite, got {s}")
-        if frame < 0 or speed <= 0 or step_length <= 0:
+        if frame < 0 or speed <= 0 or (step_length is not None and step_length <= 0):
             raise InputError(f"{where}: start.frame must be >= 0, speed and step_length > 0, got {s}")
         leg = str(s["stance_leg"]).lower()
         if leg not in ("left", "right"):
@@ -88,10 +101,12 @@ class StartDescription:
             raise InputError(f"{path}: cannot read start description ({exc.strerror})") from None
 
     def to_yaml_text(self) -> str:
-        return yaml.safe_dump({"start": {
-            "frame": self.frame, "position": [float(v) for v in self.position], "heading": float(self.heading),
-            "speed": float(self.speed), "step_length": float(self.step_length),
-            "stance_leg": "left" if self.stance_leg == LEFT else "right"}}, sort_keys=False)
+        start = {"frame": self.frame, "position": [float(v) for v in self.position], "heading": float(self.heading),
+                 "speed": float(self.speed)}
+        if self.step_length is not None:
+            start["step_length"] = float(self.step_length)
+        start["stance_leg"] = "left" if self.stance_leg == LEFT else "right"
+        return yaml.safe_dump({"start": start}, sort_keys=False)
 
 
 # ----------------------------------------------------------------------------- configuration
@@ -229,21 +244,22 @@ class TrackerModel:
     def _sample_gaits(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """Speeds and step lengths around the start's, redrawn where the gait table has no gait."""
         s, sp = self.start, self.config.spread
-        if not self._gait_known(np.array([s.speed]), np.array([s.step_length]))[0]:
+        step_length = s.step_length_for(self.params)
+        if not self._gait_known(np.array([s.speed]), np.array([step_length]))[0]:
             raise InputError(f"start description: no cyclic gait for speed {s.speed} m/s and step length "
-                             f"{s.step_length} m in the gait table; give values inside "
+                             f"{step_length:.3f} m in the gait table; give values inside "
                              f"{self.gaits.speeds[0]:.2f}-{self.gaits.speeds[-1]:.2f} m/s, "
                              f"{self.gaits.step_lengths[0]:.2f}-{self.gaits.step_lengths[-1]:.2f} m")
-        speed, step = np.full(n, s.speed), np.full(n, s.step_length)
+        speed, step = np.full(n, s.speed), np.full(n, step_length)
         todo = np.ones(n, bool)
         for _ in range(20):
             k = int(todo.sum())
             speed[todo] = s.speed * np.exp(sp.speed_fraction * rng.standard_normal(k))
-            step[todo] = s.step_length * np.exp(sp.step_length_fraction * rng.standard_normal(k))
+            step[todo] = step_length * np.exp(sp.step_length_fraction * rng.standard_normal(k))
             todo &= ~self._gait_known(speed, step)
             if not todo.any():
                 break
-        speed[todo], step[todo] = s.speed, s.step_length
+        speed[todo], step[todo] = s.speed, step_length
         return speed, step
 
     def _random_phase(self, walker: WalkerState, control: Any, speed: np.ndarray, step: np.ndarray,

@@ -55,6 +55,21 @@ def double_support_angle(params: WalkerParams, step_length: np.ndarray | float) 
     return a
 
 
+#: Preferred human step length at 5 km/h for L = 0.9 m (m), and its growth with speed: step ~ speed^0.42
+#: (MODEL.md Sec. 4: about 0.65-0.75 m at 5 km/h). Scaled to other leg lengths by Froude similarity.
+PREFERRED_STEP_AT_5KMH = 0.7
+PREFERRED_STEP_EXPONENT = 0.42
+
+
+def preferred_step_length(params: WalkerParams, speed: np.ndarray | float) -> np.ndarray | float:
+    """A person's usual step length (m) at ``speed`` (m/s): 0.7 m at 5 km/h for a 0.9 m leg, growing as
+    speed^0.42, at equal Froude number v / sqrt(g L) for other legs (step length scales with L)."""
+    reference = WalkerParams(leg_length=0.9, gravity=params.gravity)
+    froude_ratio = np.asarray(speed, float) / (5.0 * KMH) * np.sqrt(reference.leg_length / params.leg_length)
+    out = PREFERRED_STEP_AT_5KMH * params.leg_length / reference.leg_length * froude_ratio ** PREFERRED_STEP_EXPONENT
+    return float(out) if np.ndim(out) == 0 else out
+
+
 def cyclic_residual(params: WalkerParams, speed: float, step_length: float, unknowns: np.ndarray,
                     step: float = SOLVER_STEP) -> np.ndarray:
     """Residuals of eq. (3) for one or several unknown vectors x = (phi1'_0, phi2'_0, kappa, iota).

@@ -247,7 +247,8 @@ class FeatureNode(Node):
                                     f"{rgb.shape[1]}x{rgb.shape[0]}; learning the foreground from height bands")
             return None
         s = self._start
-        labels = start_pose_labels(self.extractor.body, camera, s.position, s.heading, s.step_length, s.stance_leg)
+        labels = start_pose_labels(self.extractor.body, camera, s.position, s.heading,
+                                   s.step_length_for(self.extractor.body.walker_params()), s.stance_leg)
         if self.verbose:
             print(f"features {self.camera_name}: start pose covers {np.count_nonzero(labels >= 0)} px",
                   file=sys.stderr, flush=True)
