@@ -192,6 +192,29 @@ def test_node_requires_a_camera_name(ros_context):
         FeatureNode(context=ros_context)
 
 
+def test_start_and_body_file_parameters(ros_context, tmp_path):
+    """The start file sets the background-only frames at once; bad files are named in the error."""
+    from rclpy.parameter import Parameter
+
+    from awalker_tracker.nodes.features import FeatureNode
+
+    start = tmp_path / "start.yaml"
+    start.write_text("start: {frame: 7, position: [0, 0], heading: 0, speed: 1.3, stance_leg: left}\n")
+    node = FeatureNode(context=ros_context, parameter_overrides=[
+        Parameter("camera_name", value="cam0"), Parameter("start_description", value=str(start))])
+    try:
+        assert node.extractor.background_frames == 7 and node._start.frame == 7
+    finally:
+        node.destroy_node()
+    with pytest.raises(InputError, match=r"missing\.yaml: cannot read start description"):
+        FeatureNode(context=ros_context, parameter_overrides=[
+            Parameter("camera_name", value="cam0"), Parameter("start_description", value=str(tmp_path / "missing.yaml"))])
+    (tmp_path / "body.yaml").write_text("body: {upper_leg_length: -1}\n")
+    with pytest.raises(InputError, match=r"body\.yaml"):
+        FeatureNode(context=ros_context, parameter_overrides=[
+            Parameter("camera_name", value="cam0"), Parameter("body_description", value=str(tmp_path / "body.yaml"))])
+
+
 def test_features_for_every_frame_of_a_replayed_bag(ros_context, tmp_path):
     """A written sequence bag (compressed png, start description, camera pose) replayed in lockstep
     into the node: one ImageFeatures per frame, in order, start-pose foreground learning."""

@@ -199,3 +199,28 @@ def test_track_is_isolated_from_other_publishers(synth_bag: Path, tmp_path: Path
         stamps = reader.frame_stamps.tolist()
     result = read_result_bag(out / "result.bag")
     assert [_stamp(m) for m in result["/cam0/features"]] == stamps
+
+
+def test_start_and_body_files_act_like_the_bag_topics(synth_bag: Path, tmp_path: Path):
+    """`awalker track --start S --body B` on a bag without description topics gives the features nodes the
+    same start (background-only frames, start-pose labels) and body as the topics do: the same results."""
+    import yaml
+
+    from awalker_tools.bagio import SequenceReader, SequenceWriter
+
+    bare = tmp_path / "bare" / "walk.bag"            # the same frames, losslessly, no start/body topics or files
+    bare.parent.mkdir()
+    with SequenceReader(synth_bag) as reader, SequenceWriter(bare, reader.cameras, compressed=True,
+                                                             image_format="png") as writer:
+        for stamp, images in reader.frames():
+            writer.write_frame(int(stamp), images)
+    assert main(["track", str(synth_bag), "--out", str(tmp_path / "topics"), "--particles", "100",
+                 "--no-overlay"]) == 0
+    assert main(["track", str(bare), "--out", str(tmp_path / "files"), "--particles", "100", "--no-overlay",
+                 "--start", str(synth_bag.parent / "start.yaml"), "--body", str(synth_bag.parent / "body.yaml")]) == 0
+    runs = {k: yaml.safe_load((tmp_path / k / "run.yaml").read_text()) for k in ("topics", "files")}
+    for run in runs.values():
+        assert run["features"]["cam0"] == {"background": f"{BACKGROUND} background-only frames (start description)",
+                                           "foreground_labels": "start pose"}
+    poses = {k: evaluation.read_poses_csv(tmp_path / k / "poses.csv") for k in runs}
+    assert np.array_equal(poses["topics"].markers, poses["files"].markers)

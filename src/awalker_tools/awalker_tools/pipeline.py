@@ -63,6 +63,7 @@ class TrackResult:
     seconds_in_filter: float = 0.0
     sync_issues: list[str] = field(default_factory=list)
     recorded: dict[str, int] = field(default_factory=dict)
+    features: dict[str, dict[str, str]] = field(default_factory=dict)   # per camera: how its models were learned
 
     @property
     def frames_per_second(self) -> float:
@@ -175,8 +176,10 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     try:
         driver = Node("awalker_track_replay", context=context)
         nodes.append(driver)
-        features = [FeatureNode(context=context, parameter_overrides=[Parameter("camera_name", value=c)])
-                    for c in names]
+        # the features nodes get the same start and body as the tracker (files or bag topics alike)
+        features = [FeatureNode(context=context, parameter_overrides=[
+            Parameter("camera_name", value=c), Parameter("start_description", value=str(out / START_FILE)),
+            Parameter("body_description", value=str(out / BODY_FILE))]) for c in names]
         nodes += features
         tracker = TrackerNode(context=context, parameter_overrides=[
             Parameter("cameras", value=names), Parameter("calibration", value=str(out / CALIBRATION_FILE)),
@@ -239,6 +242,8 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         result.seconds_in_filter = tracker.stats.seconds_in_filter
         result.sync_issues = list(tracker.stats.sync_issues)
         result.recorded = dict(recorder.counts)
+        result.features = {node.camera_name: {"background": node.stats.background_from,
+                                              "foreground_labels": node.stats.foreground_from} for node in features}
         if tracker.tracker is None or not tracker.summaries:
             raise InputError(f"{bag}: no frame was tracked (frames received: {result.frames}; "
                              f"start frame {start.frame}); check that the bag has images for every camera")
@@ -258,7 +263,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         "likelihood_scale": options.likelihood_scale,
         "frames": result.frames, "posteriors": result.summaries, "seconds": round(result.seconds, 3),
         "seconds_in_filter": round(result.seconds_in_filter, 3), "sync_issues": result.sync_issues,
-        "recorded": result.recorded}, sort_keys=False))
+        "features": result.features, "recorded": result.recorded}, sort_keys=False))
     _progress(options, f"awalker track: {result.summaries} frames tracked in {result.seconds:.1f} s "
                        f"({result.frames_per_second:.2f} frames/s end to end, filter "
                        f"{result.summaries / max(result.seconds_in_filter, 1e-9):.2f} frames/s); outputs in {out}")

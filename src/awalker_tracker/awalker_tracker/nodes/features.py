@@ -11,9 +11,11 @@ Subscribes (camera ``<cam>`` from the ``camera_name`` parameter):
   ``mask_wait_s``; an image that gets no mask is processed without one, logged and counted
   (``stats.frames_without_mask``). And ``/<cam>/foreground_labels`` (mono8 class label
   image for learning the foreground: 0 = none, k = 1 + index into PART_CLASSES);
-- ``/awalker/start_description`` (latched std_msgs/String): the frames before its ``frame``
-  are background-only (``background_frames`` = -1, the default);
-- ``/awalker/body_description`` (latched): body sizes (start-pose projection, bands);
+- ``/awalker/start_description`` (latched std_msgs/String), or the ``start_description`` YAML
+  file parameter: the frames before its ``frame`` are background-only (``background_frames`` =
+  -1, the default);
+- ``/awalker/body_description`` (latched), or the ``body_description`` file parameter: body
+  sizes (start-pose projection, bands);
 - ``/<cam>/camera_info`` and ``/<cam>/camera_pose`` (latched geometry_msgs/PoseStamped, as the
   replay publishes it): with the start description, the foreground mixtures are learned from
   the body projected at the start pose (``start_pose_labels`` parameter), foreground pixels it
@@ -144,6 +146,7 @@ class FeatureNodeStats:
     skipped: int = 0
     seconds: float = 0.0
     foreground_from: str = ""     # "start pose", "label image" or "height bands" once learned
+    background_from: str = ""     # how the background model was learned, once it was
     frames_without_mask: int = 0  # images processed without their occlusion mask on a camera that has masks
 
 
@@ -177,6 +180,10 @@ class FeatureNode(Node):
         self.verbose = bool(declare("verbose", False, "log model learning to stderr"))
         self.mask_wait_s = float(declare("mask_wait_s", 0.25, "s an image waits for its occlusion mask when the "
                                                                "camera has masks"))
+        start_path = str(declare("start_description", "", "start YAML (background-only frames, start pose); "
+                                                          "empty: the /awalker/start_description topic"))
+        body_path = str(declare("body_description", "", "body YAML; empty: the /awalker/body_description topic "
+                                                        "or the default body"))
         if not self.camera_name:
             raise InputError("parameter 'camera_name' is required (e.g. --ros-args -p camera_name:=cam0)")
         try:
@@ -189,7 +196,10 @@ class FeatureNode(Node):
             raise InputError(f"awalker_features ({self.camera_name}): {exc}") from None
         if threads > 0:
             cv2.setNumThreads(threads)
-        self.extractor = FeatureExtractor(self.config, verbose=self.verbose)
+        from awalker_tracker.inference.tracker import StartDescription
+
+        self.extractor = FeatureExtractor(self.config, body=BodyDescription.from_yaml(body_path) if body_path else None,
+                                          verbose=self.verbose)
         self.stats = FeatureNodeStats()
         self._last_stamp = -1
         self._masks: dict[int, np.ndarray] = {}
@@ -210,10 +220,14 @@ class FeatureNode(Node):
                                  lambda m: self._on_image(m, f"{self.image_topic}/compressed"), qos_profile_sensor_data)
         self.create_subscription(Image, f"/{cam}/occlusion_mask", self._on_mask, QoSProfile(depth=30))
         self.create_subscription(Image, f"/{cam}/foreground_labels", self._on_labels, latched)
-        self.create_subscription(String, START_TOPIC, self._on_start, latched)
+        if start_path:
+            self._use_start(StartDescription.from_yaml(start_path))
+        else:
+            self.create_subscription(String, START_TOPIC, self._on_start, latched)
         self.create_subscription(CameraInfo, f"/{cam}/camera_info", self._on_info, reliable)
         self.create_subscription(PoseStamped, f"/{cam}/camera_pose", self._on_pose, latched)
-        self.create_subscription(String, BODY_TOPIC, self._on_body, latched)
+        if not body_path:
+            self.create_subscription(String, BODY_TOPIC, self._on_body, latched)
         self.publisher = self.create_publisher(ImageFeatures, f"/{cam}/features", reliable)
 
     # -- side inputs ------------------------------------------------------------------------
@@ -225,6 +239,10 @@ class FeatureNode(Node):
         except InputError as exc:
             self.get_logger().error(f"{exc}; background frames unknown")
             return
+        self._use_start(start)
+
+    def _use_start(self, start: Any) -> None:
+        """The start description: its frame counts the background-only frames; its pose labels the foreground."""
         self._start = start
         if self.background_param < 0:
             self.extractor.set_background_frames(start.frame)
@@ -325,15 +343,22 @@ class FeatureNode(Node):
             mask = self._masks.pop(stamp, None)
             start_labels = self._start_labels(rgb)
             learned = self.extractor.foreground is not None
+            had_background = self.extractor.background is not None
             if start_labels is not None:
                 features = self.extractor.process(rgb, mask, start_labels, fill_with_bands=True)
             else:
                 features = self.extractor.process(rgb, mask, self._labels)
+            if not had_background and self.extractor.background is not None:
+                frames = self.extractor.frame_index - 1
+                self.stats.background_from = (
+                    f"{frames} background-only frames (start description)" if self.extractor.background_frames > 0
+                    else f"robust temporal median of frames 0-{frames}")
             if not learned and self.extractor.foreground is not None:
                 self.stats.foreground_from = ("start pose" if start_labels is not None else
                                               "label image" if self._labels is not None else "height bands")
-                self.get_logger().info(f"{self.camera_name}: background and foreground learned at frame "
-                                       f"{self.extractor.frame_index - 1} (foreground labels: {self.stats.foreground_from})")
+                self.get_logger().info(f"{self.camera_name}: background from {self.stats.background_from}, "
+                                       f"foreground learned at frame {self.extractor.frame_index - 1} "
+                                       f"(foreground labels: {self.stats.foreground_from})")
         except (InputError, ValueError) as exc:
             self._skip(f"{topic} at {stamp} ns: {exc}")
             return
