@@ -10,6 +10,7 @@ from awalker_tracker.model.kinematics import (
     DOF_NAMES,
     JointPrior,
     KinematicConfig,
+    TurnPrior,
     initial_kinematics,
     leg_angles,
     pose_body,
@@ -173,8 +174,9 @@ def test_body_follows_walker_legs_and_speed():
 
 def test_turning_rotates_about_the_stance_foot():
     rate = np.radians(2.0)  # per frame
-    # A steady turn: heading velocity kept (alpha = 1), no heading noise.
-    config = KinematicConfig(table={**KinematicConfig().table, "torso_up": JointPrior(1.0, 0.0, 0.0, 0.0)})
+    # A steady turn: heading velocity kept (alpha = 1), no heading noise, no turn rates drawn at strikes.
+    config = KinematicConfig(table={**KinematicConfig().table, "torso_up": JointPrior(1.0, 0.0, 0.0, 0.0)},
+                             turning=TurnPrior(small_sigma=0.0, large_sigma=0.0))
     walkers, states, poses = run(48, 20, seed=6, config=config, heading_rate=rate)
     heading_change = states[-1].heading - states[0].heading
     assert np.all(np.abs(heading_change) > np.radians(20))  # it does turn
@@ -195,6 +197,27 @@ def test_turning_rotates_about_the_stance_foot():
     along = np.stack([np.cos(kin.heading), np.sin(kin.heading)], axis=1)
     contact_x = walker.contact_origin - PARAMS.foot_radius * walker.stance_angle
     assert np.allclose(kin.plane_origin + contact_x[:, None] * along, kin.contact_point)
+
+
+def test_turn_rate_is_drawn_per_step_and_turns_the_walk():
+    """Turning per step: the rate drawn at a heel strike is kept through the step (no within-step
+    noise here), the heading integrates it, eq. (6)'s velocity term does not amplify it, and most
+    steps of a straight walk stay nearly straight while some turn sharply (the mixture)."""
+    quiet = {**KinematicConfig().table, "torso_up": JointPrior(0.75, 0.0, 0.0, 0.0)}
+    config = KinematicConfig(table=quiet)
+    walkers, states, _ = run(64, 2000, seed=3, config=config)
+    dt = config.dt
+    for f in range(1, len(states)):
+        turned = states[f].heading - states[f - 1].heading
+        assert np.allclose(turned, states[f].turn_rate * dt, atol=1e-9)
+        same_step = states[f].contact_leg == states[f - 1].contact_leg
+        assert np.array_equal(states[f].turn_rate[same_step], states[f - 1].turn_rate[same_step])
+    first_step = np.degrees(np.abs(states[20].turn_rate))            # after the first strike (frame 16)
+    assert 0.5 < np.mean(first_step < 10) < 0.95 and np.mean(first_step > 45) > 0.03
+    assert np.all(first_step <= 150 + 1e-6)
+    # persistence: regressed on this step's rate, the next step's has slope rho = 0.9
+    this, following = states[20].turn_rate, states[36].turn_rate
+    assert np.cov(this, following)[0, 1] / np.var(this, ddof=1) == pytest.approx(0.9, abs=0.08)
 
 
 def test_pose_body_is_vectorised_consistently():
