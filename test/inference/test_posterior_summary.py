@@ -16,7 +16,7 @@ def outputs(n: int, rng) -> ParticleOutputs:
         torso_position=rng.normal(size=(n, 3)), torso_orientation=np.tile([0, 0, 0, 1.0], (n, 1)),
         speed=rng.uniform(1, 2, n), stance_leg=rng.integers(0, 2, n).astype(np.int8),
         contact_point=rng.normal(size=(n, 3)), heel_strike=np.zeros(n, bool), strike_point=np.zeros((n, 3)),
-        walker={k: rng.normal(size=n) for k in WALKER_FIELDS})
+        walker={k: rng.normal(size=n) for k in WALKER_FIELDS}, reseeded=np.zeros(n, np.int8))
 
 
 def test_summary_statistics_match_hand_computation():
@@ -26,8 +26,10 @@ def test_summary_statistics_match_hand_computation():
     out.speed[:] = [1.0, 2.0, 3.0, 4.0]
     out.heel_strike[:] = [False, False, True, True]
     w = np.array([0.1, 0.2, 0.3, 0.4])
+    out.reseeded[:] = [0, 1, 2, 2]
     s = summarize(7, 123, np.log(w) + 50.0, out, NAMES, tuple("abcde"), resampled=True, cloud_size=2)
     assert s.frame_index == 7 and s.stamp_ns == 123 and s.resampled and s.num_particles == 4
+    assert s.reseeded_fallen == 1 and s.reacquired == 2
     assert np.allclose(s.map_markers, out.markers[3])
     assert np.allclose(s.mean_markers, np.einsum("n,nmk->mk", w, out.markers))
     assert s.speed == pytest.approx(3.0)

@@ -154,6 +154,7 @@ def test_start_outside_the_solved_gaits_is_refused_and_the_spread_redrawn():
         model.initial(300, np.random.default_rng(0))
     # a start next to the hole: its spread of speeds and step lengths never lands in the hole
     near = StartDescription(0, (0.0, 0.0), 0.0, float(holed.speeds[3]), float(holed.step_lengths[4]), LEFT)
-    speed, step = TrackerModel(body, near, marker_likelihood(0.03), config, gait_table=holed)._sample_gaits(
-        2000, np.random.default_rng(0))
+    model = TrackerModel(body, near, marker_likelihood(0.03), config, gait_table=holed)
+    speed, step = model._sample_gaits(np.full(2000, near.speed), np.full(2000, near.step_length),
+                                      config.spread, np.random.default_rng(0))
     assert np.all(holed.covers(speed, step, min_weight=1e-6))

@@ -3,7 +3,8 @@
 Files (one row per frame and marker, metres, world frame z up):
     poses.csv / ground_truth.csv: ``frame,stamp_ns,marker,x,y,z``
     summary.csv: ``frame,stamp_ns,speed,speed_std,stance_left_probability,effective_sample_size,
-                  resampled,heel_strike,stance_leg``
+                  resampled,heel_strike,stance_leg,reseeded_fallen,reacquired`` (the last two:
+                  particles re-seeded at that frame after a fall / at the detected person)
 Metrics:
 - absolute error: per frame, mean 3D distance (mm) over pelvis, thorax, hips, knees, ankles;
 - relative error: the same after translating the estimated pelvis onto the true one;
@@ -29,7 +30,9 @@ EVAL_MARKERS = ("pelvis", "thorax", "left_hip", "right_hip", "left_knee", "right
 FOOT_MARKERS = {"left": ("left_heel", "left_toe"), "right": ("right_heel", "right_toe")}
 POSE_COLUMNS = ("frame", "stamp_ns", "marker", "x", "y", "z")
 SUMMARY_COLUMNS = ("frame", "stamp_ns", "speed", "speed_std", "stance_left_probability",
-                   "effective_sample_size", "resampled", "heel_strike", "stance_leg")
+                   "effective_sample_size", "resampled", "heel_strike", "stance_leg", "reseeded_fallen", "reacquired")
+# columns later versions added, read as 0 from older files
+OPTIONAL_SUMMARY_COLUMNS = {"reseeded_fallen": "0", "reacquired": "0"}
 
 
 @dataclass(frozen=True)
@@ -109,20 +112,21 @@ def write_summary_csv(path: Path, rows: Sequence[dict]) -> None:
         writer = csv.DictWriter(fh, fieldnames=SUMMARY_COLUMNS)
         writer.writeheader()
         for row in rows:
-            writer.writerow({k: row[k] for k in SUMMARY_COLUMNS})
+            writer.writerow({k: row[k] if k in row else OPTIONAL_SUMMARY_COLUMNS[k] for k in SUMMARY_COLUMNS})
 
 
 def read_summary_csv(path: Path) -> dict[str, np.ndarray]:
     """Columns of summary.csv as arrays (heel_strike and stance_leg as strings)."""
     path = Path(path)
-    rows = _read_csv_rows(path, SUMMARY_COLUMNS, "no such summary file (written by `awalker track`)")
+    required = [c for c in SUMMARY_COLUMNS if c not in OPTIONAL_SUMMARY_COLUMNS]
+    rows = _read_csv_rows(path, required, "no such summary file (written by `awalker track`)")
     out: dict[str, np.ndarray] = {}
     try:
         for key in SUMMARY_COLUMNS:
-            col = [r[key] for r in rows]
+            col = [r.get(key) or OPTIONAL_SUMMARY_COLUMNS.get(key, "") for r in rows]
             if key in ("heel_strike", "stance_leg"):
                 out[key] = np.array(col, dtype=object)
-            elif key in ("frame", "stamp_ns"):
+            elif key in ("frame", "stamp_ns", "reseeded_fallen", "reacquired"):
                 out[key] = np.array(col, np.int64)
             elif key == "resampled":
                 out[key] = np.array([c.strip().lower() in ("1", "true") for c in col])
@@ -260,6 +264,9 @@ def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarra
         rate = 1e9 / float(np.median(np.diff(truth.stamps_ns)))
         result["truth_speed_m_s"] = float(np.nanmedian(pelvis_speed(truth, rate)))
     if summary is not None:
+        result["recovery"] = {"reseeded_fallen_particles": int(np.sum(summary["reseeded_fallen"])),
+                              "frames_with_fallen_reseeds": int(np.sum(summary["reseeded_fallen"] > 0)),
+                              "reacquisitions": int(np.sum(summary["reacquired"] > 0))}
         result["estimated_speed_m_s"] = float(np.median(summary["speed"]))
         left = planted_stance_left(truth)
         if left is not None:
@@ -312,6 +319,11 @@ def format_table(result: dict[str, object], label: str = "") -> str:
     if "stance_correct_fraction" in result:
         lines.append(f"stance leg right on {100 * result['stance_correct_fraction']:.1f}% of "
                      f"{result['stance_scored_frames']} frames with one foot planted")
+    if "recovery" in result:
+        rec = result["recovery"]
+        lines.append(f"recovery: {rec['reacquisitions']} re-acquisitions of a lost track, "
+                     f"{rec['reseeded_fallen_particles']} fallen particles re-seeded over "
+                     f"{rec['frames_with_fallen_reseeds']} frames")
     if "estimated_speed_m_s" in result and "truth_speed_m_s" in result:
         lines.append(f"speed: estimated {result['estimated_speed_m_s']:.2f} m/s, true {result['truth_speed_m_s']:.2f} m/s")
     return "\n".join(lines)

@@ -46,6 +46,7 @@ class TrackOptions:
     trust: float = 0.9
     seed: int = 0
     likelihood_scale: float = 0.1
+    recovery: bool = True           # re-seed fallen walkers and re-acquire a lost track (inference/recovery.py)
     overlays: bool = True
     storage: str = "mcap"
     quiet: bool = False
@@ -188,6 +189,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
             Parameter("num_particles", value=int(options.particles)), Parameter("lookahead", value=int(options.lookahead)),
             Parameter("trust", value=float(options.trust)), Parameter("seed", value=int(options.seed)),
             Parameter("likelihood_scale", value=float(options.likelihood_scale)),
+            Parameter("reseed_fallen", value=bool(options.recovery)), Parameter("reacquire", value=bool(options.recovery)),
             Parameter("idle_flush_s", value=1.0e9)])
         tracker.keep_summaries = True
         nodes.append(tracker)
@@ -260,7 +262,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     (out / RUN_FILE).write_text(yaml.safe_dump({
         "input": str(bag.resolve()), "start_source": start_src, "body_source": body_src,
         "particles": options.particles, "lookahead": options.lookahead, "trust": options.trust, "seed": options.seed,
-        "likelihood_scale": options.likelihood_scale,
+        "likelihood_scale": options.likelihood_scale, "recovery": options.recovery,
         "frames": result.frames, "posteriors": result.summaries, "seconds": round(result.seconds, 3),
         "seconds_in_filter": round(result.seconds_in_filter, 3), "sync_issues": result.sync_issues,
         "features": result.features, "recorded": result.recorded}, sort_keys=False))
@@ -280,7 +282,8 @@ def write_outputs(out: Path, trajectory: Any, summaries: list[Any]) -> None:
              "speed_std": f"{s.speed_std:.4f}", "stance_left_probability": f"{s.stance_left_probability:.4f}",
              "effective_sample_size": f"{s.effective_sample_size:.1f}", "resampled": int(s.resampled),
              "heel_strike": s.heel_strike_foot,
-             "stance_leg": "left" if map_leg.get(s.stamp_ns, s.map_stance_leg) == 0 else "right"}
+             "stance_leg": "left" if map_leg.get(s.stamp_ns, s.map_stance_leg) == 0 else "right",
+             "reseeded_fallen": s.reseeded_fallen, "reacquired": s.reacquired}
             for s in summaries]
     evaluation.write_summary_csv(out / "summary.csv", rows)
 

@@ -22,7 +22,7 @@ def run(args: argparse.Namespace) -> int:
         bag=Path(args.bag), out=Path(args.out), start=Path(args.start) if args.start else None,
         body=Path(args.body) if args.body else None, particles=args.particles, lookahead=args.lookahead,
         trust=args.trust,
-        seed=args.seed, likelihood_scale=args.likelihood_scale, overlays=not args.no_overlay, storage=args.storage,
+        seed=args.seed, likelihood_scale=args.likelihood_scale, recovery=not args.no_recovery, overlays=not args.no_overlay, storage=args.storage,
         share_topics=args.share_topics))
     return 0
 
@@ -46,6 +46,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--likelihood-scale", type=float, default=0.1,
                         help="exponent on the image likelihood (tempering, default 0.1)")
+    parser.add_argument("--no-recovery", action="store_true",
+                        help="never re-seed fallen walkers or re-acquire a lost track (the exact filter of the paper)")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="result bag storage")
     parser.add_argument("--no-overlay", action="store_true", help="skip overlay images and video")
     parser.add_argument("--share-topics", action="store_true",

@@ -31,6 +31,7 @@ class ParticleOutputs:
     heel_strike: np.ndarray        # (N,) bool: the swing foot struck the ground during this frame
     strike_point: np.ndarray       # (N, 3) where it struck (valid where heel_strike), world (m)
     walker: dict[str, np.ndarray]  # WALKER_FIELDS -> (N,) walker and control state
+    reseeded: np.ndarray           # (N,) int8: 0, or re-seeded this frame: 1 after a fall, 2 at the detected person
 
     def take(self, indices: np.ndarray) -> "ParticleOutputs":
         values = {}
@@ -78,6 +79,8 @@ class PosteriorSummary:
     resampled: bool
     contacts: tuple[FootContactEstimate, ...]
     clouds: tuple[MarkerCloud, ...]
+    reseeded_fallen: int = 0        # particles re-seeded at this frame after their walker fell
+    reacquired: int = 0             # particles re-seeded at this frame at the person seen in the images
 
     @property
     def heel_strike_foot(self) -> str:
@@ -123,4 +126,5 @@ def summarize(frame_index: int, stamp_ns: int, log_weights: np.ndarray, outputs:
         map_walker={k: float(v[best]) for k, v in outputs.walker.items()},
         speed=speed, speed_std=speed_std, stance_left_probability=float(np.sum(w[left])),
         effective_sample_size=float(1.0 / np.sum(w * w)), num_particles=n, resampled=bool(resampled),
-        contacts=tuple(contacts), clouds=clouds)
+        contacts=tuple(contacts), clouds=clouds, reseeded_fallen=int(np.sum(outputs.reseeded == 1)),
+        reacquired=int(np.sum(outputs.reseeded == 2)))

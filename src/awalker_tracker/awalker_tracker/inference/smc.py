@@ -6,7 +6,11 @@ A model provides, for N particles held as arrays (a "states" object with ``take(
 - ``transition(states, rng) -> (states, info)``: one frame of the dynamics, s_t ~ p(s_t | s_{t-1});
   ``info`` is anything the model wants reported with the new states (e.g. heel strikes);
 - ``log_likelihood(prev_states, states, obs) -> (N,)``: log p(z_t | s_t) (``prev_states`` is
-  None at the first frame; models with optical flow use it).
+  None at the first frame; models with optical flow use it);
+- optionally ``rejuvenate(frame, log_weights, states, obs, rng) -> states``: a data-driven move
+  made after the transition and before the likelihood of frame ``frame`` (e.g. re-seeding particles
+  at a person detected in ``obs``); ``log_weights`` are the particles' weights before this frame.
+  Its proposals are not weight-corrected: a robustness device outside the exact filter.
 
 The filter keeps S_{t-1} = {s_{t-1}, w_{t-1}} and a window of simulated futures
 s_t .. s_{t+tau} (one per particle) with their likelihoods. Before moving to frame t it forms
@@ -184,6 +188,12 @@ class ParticleFilter(Generic[States]):
             states, info = self._initial, None
         else:
             states, info = self.model.transition(parent, self.rng)
+        rejuvenate = getattr(self.model, "rejuvenate", None)
+        if rejuvenate is not None:
+            # the particles' weights as they stand before this frame: w_{t-1} times the window's likelihoods
+            log_weights = self._prev_log_weights + sum((f.log_likelihood for f in self._window),
+                                                       np.zeros(self.num_particles))
+            states = rejuvenate(self._next_frame + len(self._window), log_weights, states, obs, self.rng)
         loglik = self._checked_loglik(parent, states, obs)
         self._window.append(_Future(states, info, obs, loglik))
 

@@ -18,7 +18,7 @@ start position and heading.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, fields, is_dataclass
+from dataclasses import dataclass, fields, is_dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +28,8 @@ from scipy.spatial.transform import Rotation
 
 from awalker_tracker.errors import InputError
 from awalker_tracker.inference.posterior import ParticleOutputs, PosteriorSummary, summarize
+from awalker_tracker.inference.recovery import (
+    REACQUIRED, RESEEDED_FALLEN, LostTrackMonitor, RecoveryConfig, put_rows)
 from awalker_tracker.inference.smc import AncestryHistory, FilterStep, ParticleFilter, SMCConfig
 from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription, BodyPoseBatch
 from awalker_tracker.model.walker import LEFT, RIGHT, WalkerParams, WalkerState
@@ -147,6 +149,7 @@ class TrackerConfig:
     # relative error 200-250 mm at 1.0, 25-60 mm at 0.03-0.1; with the stable control prior and 5000
     # particles (bench_accuracy): two cameras 382 mm absolute at 1.0, 38-40 mm at 0.1-0.3.
     likelihood_scale: float = 0.1
+    recovery: RecoveryConfig = RecoveryConfig()
     cloud_size: int = 200
     history_payload: tuple[str, ...] = ("markers", "joint_angles", "stance_leg", "heel_strike")
 
@@ -180,7 +183,8 @@ class TrackerStates:
     kin: Any                      # model.kinematics.KinematicState
     pose: BodyPoseBatch
     speed: np.ndarray             # (N,) walking speed (m/s): pelvis ground speed averaged over ~one step
-    fallen: np.ndarray            # (N,) bool, the walker fell at some point
+    fallen: np.ndarray            # (N,) bool, the walker fell at some point (and was not re-seeded)
+    reseeded: np.ndarray          # (N,) int8: re-seeded this frame: 0 no, 1 after a fall, 2 at the detected person
 
     def __len__(self) -> int:
         return len(self.walker)
@@ -189,7 +193,7 @@ class TrackerStates:
         pose = BodyPoseBatch(self.pose.markers[indices], self.pose.joint_angles[indices],
                              self.pose.segments.take(indices))
         return TrackerStates(self.walker.take(indices), self.control.take(indices), self.kin.take(indices),
-                             pose, self.speed[indices], self.fallen[indices])
+                             pose, self.speed[indices], self.fallen[indices], self.reseeded[indices])
 
 
 LikelihoodFn = Callable[[TrackerStates | None, TrackerStates, Any], np.ndarray]
@@ -200,7 +204,9 @@ class TrackerModel:
 
     def __init__(self, body: BodyDescription, start: StartDescription, likelihood: LikelihoodFn,
                  config: TrackerConfig = TrackerConfig(), params: WalkerParams | None = None,
-                 gait_table: Any = None, prior: Any = None, kinematics: Any = None) -> None:
+                 gait_table: Any = None, prior: Any = None, kinematics: Any = None,
+                 cameras: list[Any] | None = None) -> None:
+        """``cameras``: the image likelihood's cameras, for re-acquiring a lost track (None: no re-acquisition)."""
         from awalker_tracker.model import control, gaits, kinematics as kin_mod
 
         self.body = body
@@ -216,51 +222,74 @@ class TrackerModel:
         self._control = control
         self._gaits = gaits
         self._kin = kin_mod
+        self.monitor = (LostTrackMonitor(cameras, config.recovery, config.dt)
+                        if cameras and config.recovery.reacquire else None)
+        self.reseeded_fallen = 0     # particles re-seeded after a fall, over the run
 
     # -- SMC protocol ---------------------------------------------------------------------
     def initial(self, n: int, rng: np.random.Generator) -> TrackerStates:
-        s, sp = self.start, self.config.spread
-        speed, step = self._sample_gaits(n, rng)
-        walker = self._gaits.gait_initial_state(self.params, speed, step, contact_origin=0.0,
-                                               stance_leg=s.stance_leg, table=self.gaits)
-        if len(walker) == 1 and n > 1:
-            walker = walker.take(np.zeros(n, np.intp))
-        _, _, stiffness, impulse = self.gaits.lookup(speed, step)
-        control = self._control.initial_control(self.prior, n, rng, stiffness=np.asarray(stiffness, float),
-                                                toe_off_impulse=np.asarray(impulse, float))
-        if sp.random_phase:
-            walker, control = self._random_phase(walker, control, speed, step, rng)
-        kin = self._kin.initial_kinematics(
-            self.kin_config, walker, np.asarray(s.position, float), s.heading, n, rng, body=self.body,
-            params=self.params, position_spread=sp.position_m, heading_spread=sp.heading_rad,
-            joint_spread=sp.joint_rad)
-        pose = self._kin.pose_body(self.body, self.params, walker, kin)
-        return TrackerStates(walker, control, kin, pose, speed.copy(), np.zeros(n, bool))
-
-    def _gait_known(self, speed: np.ndarray, step: np.ndarray) -> np.ndarray:
-        """True where the gait table's lookup has converged corners with weight (a margin above what lookup needs)."""
-        return self.gaits.covers(speed, step, min_weight=1e-6)
-
-    def _sample_gaits(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """Speeds and step lengths around the start's, redrawn where the gait table has no gait."""
-        s, sp = self.start, self.config.spread
+        s = self.start
         step_length = s.step_length_for(self.params)
         if not self._gait_known(np.array([s.speed]), np.array([step_length]))[0]:
             raise InputError(f"start description: no cyclic gait for speed {s.speed} m/s and step length "
                              f"{step_length:.3f} m in the gait table; give values inside "
                              f"{self.gaits.speeds[0]:.2f}-{self.gaits.speeds[-1]:.2f} m/s, "
                              f"{self.gaits.step_lengths[0]:.2f}-{self.gaits.step_lengths[-1]:.2f} m")
-        speed, step = np.full(n, s.speed), np.full(n, step_length)
-        todo = np.ones(n, bool)
+        return self._fresh(n, np.asarray(s.position, float), np.full(n, s.heading), np.full(n, s.speed),
+                           np.full(n, step_length), np.full(n, s.stance_leg, np.int8), rng, self.config.spread)
+
+    def _fresh(self, n: int, pelvis_xy: np.ndarray, heading: np.ndarray, speed: np.ndarray, step: np.ndarray,
+               stance_leg: np.ndarray, rng: np.random.Generator, spread: InitialSpread) -> TrackerStates:
+        """N new particles on cyclic gaits around the given speeds and step lengths (per particle),
+        pelvis above ``pelvis_xy`` ((2,) or (N, 2), m), walking along ``heading`` (rad), with ``spread``."""
+        speed, step = self._sample_gaits(speed, step, spread, rng)
+        walker = self._gaits.gait_initial_state(self.params, speed, step, contact_origin=0.0,
+                                               stance_leg=stance_leg, table=self.gaits)
+        _, _, stiffness, impulse = self.gaits.lookup(speed, step)
+        control = self._control.initial_control(self.prior, n, rng, stiffness=np.asarray(stiffness, float),
+                                                toe_off_impulse=np.asarray(impulse, float))
+        if spread.random_phase:
+            walker, control = self._random_phase(walker, control, speed, step, rng)
+        kin = self._kin.initial_kinematics(
+            self.kin_config, walker, pelvis_xy, heading, n, rng, body=self.body,
+            params=self.params, position_spread=spread.position_m, heading_spread=spread.heading_rad,
+            joint_spread=spread.joint_rad)
+        pose = self._kin.pose_body(self.body, self.params, walker, kin)
+        return TrackerStates(walker, control, kin, pose, speed.copy(), np.zeros(n, bool), np.zeros(n, np.int8))
+
+    def _gait_known(self, speed: np.ndarray, step: np.ndarray) -> np.ndarray:
+        """True where the gait table's lookup has converged corners with weight (a margin above what lookup needs)."""
+        return self.gaits.covers(speed, step, min_weight=1e-6)
+
+    def _sample_gaits(self, speed: np.ndarray, step: np.ndarray, spread: InitialSpread,
+                      rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Speeds and step lengths drawn around the given ones (per particle, log-normal with the spread's
+        fractions), redrawn where the gait table has no gait; where none is found, the given ones (moved
+        into the table where they lie outside it)."""
+        base_speed, base_step = self._known_gait(np.asarray(speed, float), np.asarray(step, float))
+        speed, step = base_speed.copy(), base_step.copy()
+        todo = np.ones(speed.size, bool)
         for _ in range(20):
             k = int(todo.sum())
-            speed[todo] = s.speed * np.exp(sp.speed_fraction * rng.standard_normal(k))
-            step[todo] = step_length * np.exp(sp.step_length_fraction * rng.standard_normal(k))
+            speed[todo] = base_speed[todo] * np.exp(spread.speed_fraction * rng.standard_normal(k))
+            step[todo] = base_step[todo] * np.exp(spread.step_length_fraction * rng.standard_normal(k))
             todo &= ~self._gait_known(speed, step)
             if not todo.any():
                 break
-        speed[todo], step[todo] = s.speed, step_length
+        speed[todo], step[todo] = base_speed[todo], base_step[todo]
         return speed, step
+
+    def _known_gait(self, speed: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The given gaits where the table knows them; elsewhere the speed clamped into the table and the
+        usual step length at that speed (``preferred_step_length``)."""
+        known = self._gait_known(speed, step)
+        if known.all():
+            return speed, step
+        speeds = self.gaits.speeds
+        clamped = np.clip(speed, speeds[1], speeds[-2])
+        usual = np.clip(self._gaits.preferred_step_length(self.params, clamped), self.gaits.step_lengths[1],
+                        self.gaits.step_lengths[-2])
+        return np.where(known, speed, clamped), np.where(known, step, usual)
 
     def _random_phase(self, walker: WalkerState, control: Any, speed: np.ndarray, step: np.ndarray,
                       rng: np.random.Generator) -> tuple[WalkerState, Any]:
@@ -289,7 +318,64 @@ class TrackerModel:
         gain = min(1.0, self.config.dt / self.config.speed_time_constant_s)
         speed = states.speed + gain * (moved / self.config.dt - states.speed)
         fallen = states.fallen | np.asarray(events.fallen, bool)
-        return TrackerStates(walker, control, kin, pose, speed, fallen), events
+        new = TrackerStates(walker, control, kin, pose, speed, fallen, np.zeros(len(states), np.int8))
+        if self.config.recovery.reseed_fallen and fallen.any():
+            new = self._reseed_fallen(new, np.flatnonzero(fallen), rng)
+        return new, events
+
+    def _reseed_fallen(self, states: TrackerStates, rows: np.ndarray, rng: np.random.Generator) -> TrackerStates:
+        """Replace fallen walkers by walkers on the cyclic gait of their recent speed, standing where their
+        stance foot is, walking along their heading (a new step, no phase spread)."""
+        still = InitialSpread(position_m=0.0, heading_rad=0.0, speed_fraction=0.05, step_length_fraction=0.05,
+                              joint_rad=0.02, random_phase=False)
+        speed = states.speed[rows]
+        fresh = self._fresh(rows.size, states.kin.contact_point[rows], states.kin.heading[rows], speed,
+                            self._gaits.preferred_step_length(self.params, speed), states.walker.stance_leg[rows],
+                            rng, still)
+        fresh.reseeded[:] = RESEEDED_FALLEN
+        self.reseeded_fallen += rows.size
+        return put_rows(states, rows, fresh)
+
+    def rejuvenate(self, frame: int, log_weights: np.ndarray, states: TrackerStates, obs: Any,
+                   rng: np.random.Generator) -> TrackerStates:
+        """Re-acquire a lost track from the image (``inference.recovery``): called by the filter with the
+        particles' current log weights before the likelihood of ``obs`` is computed."""
+        if self.monitor is None or not isinstance(obs, ImageObservation):
+            return states
+        w = np.exp(log_weights - np.max(log_weights))
+        w /= w.sum()
+        pelvis = w @ states.pose.markers[:, MARKER_NAMES.index("pelvis")]
+        order = self.monitor.update(frame, obs.features, pelvis)
+        if order is None:
+            return states
+        n = len(states)
+        rows = np.argsort(log_weights, kind="stable")[: max(1, int(self.config.recovery.reacquire_fraction * n))]
+        r = self.config.recovery
+        # half: copies of the current particles (drawn by weight) moved onto the person, keeping their gait
+        # phase, stance leg and joints (often still right: a turn or a depth error lost the body, not the
+        # step); half: fresh walkers there at any phase
+        half = rows.size // 2
+        copies = states.take(rng.choice(n, size=half, p=w))
+        pelvis_xy = copies.pose.markers[:, MARKER_NAMES.index("pelvis"), :2]
+        target = order.position + r.position_spread_m * rng.standard_normal((half, 2))
+        turn = (np.angle(np.exp(1j * (order.heading - copies.kin.heading))) if order.heading is not None
+                else np.zeros(half)) + r.heading_spread_rad * rng.standard_normal(half)
+        kin = self._kin.moved_on_ground(copies.kin, pelvis_xy, target, turn)
+        moved = replace(copies, kin=kin, pose=self._kin.pose_body(self.body, self.params, copies.walker, kin),
+                        reseeded=np.full(half, REACQUIRED, np.int8))
+        k = rows.size - half
+        # without a ground track long enough: the particles' heading, the start's speed, both spread wide
+        heading = order.heading if order.heading is not None else float(np.angle(np.sum(w * np.exp(1j * states.kin.heading))))
+        speed = order.speed if order.speed is not None else self.start.speed
+        spread = replace(self.config.spread, position_m=r.position_spread_m, heading_rad=r.heading_spread_rad,
+                         speed_fraction=max(self.config.spread.speed_fraction, 0.25))
+        left = np.sum(w[states.walker.stance_leg == LEFT])
+        fresh = self._fresh(k, order.position, np.full(k, heading), np.full(k, speed),
+                            self._gaits.preferred_step_length(self.params, np.full(k, speed)),
+                            np.where(rng.random(k) < left, LEFT, RIGHT).astype(np.int8), rng, spread)
+        fresh.reseeded[:] = REACQUIRED
+        states = put_rows(states, rows[:half], moved)
+        return put_rows(states, rows[half:], fresh)
 
     def log_likelihood(self, prev: TrackerStates | None, states: TrackerStates, obs: Any) -> np.ndarray:
         loglik = self.config.likelihood_scale * np.asarray(self.likelihood(prev, states, obs), float)
@@ -310,7 +396,7 @@ class TrackerModel:
             torso_position=states.pose.markers[:, MARKER_NAMES.index("pelvis")],
             torso_orientation=Rotation.from_matrix(states.pose.segments.rotation[:, 0]).as_quat(),
             speed=states.speed, stance_leg=states.walker.stance_leg, contact_point=contact,
-            heel_strike=struck, strike_point=contact, walker=walker_fields)
+            heel_strike=struck, strike_point=contact, walker=walker_fields, reseeded=states.reseeded)
 
 
 # ----------------------------------------------------------------------------- online tracker

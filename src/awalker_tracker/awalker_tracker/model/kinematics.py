@@ -478,6 +478,25 @@ def _keep_swing_foot_above_ground(body: BodyDescription, local: _LocalPose, dofs
     dofs[low, knee_col[low]] = above
 
 
+def moved_on_ground(kin: KinematicState, centre_xy: np.ndarray, new_centre_xy: np.ndarray,
+                    turn: np.ndarray) -> KinematicState:
+    """The bodies of ``kin`` moved rigidly on the ground: turned by ``turn`` (N,) rad about the vertical
+    through ``centre_xy`` (N, 2) and carried to ``new_centre_xy`` (N, 2) (m). Joint angles, the rolling
+    contact and the turn rate are kept; the heading (and its previous value) turns with the body."""
+    c, s = np.cos(turn), np.sin(turn)
+
+    def carried(point: np.ndarray) -> np.ndarray:
+        d = point - centre_xy
+        return new_centre_xy + np.stack([c * d[:, 0] - s * d[:, 1], s * d[:, 0] + c * d[:, 1]], axis=1)
+
+    moved = kin.copy()
+    moved.heading = kin.heading + turn
+    moved.previous[:, DOF_NAMES.index("heading")] += turn
+    moved.contact_point = carried(kin.contact_point)
+    moved.plane_origin = carried(kin.plane_origin)
+    return moved
+
+
 def initial_kinematics(
     config: KinematicConfig,
     walker: WalkerState,
@@ -493,8 +512,8 @@ def initial_kinematics(
     joint_spread: float = 0.0,
     turn_rate_spread: float = 0.0,
 ) -> KinematicState:
-    """N kinematic states near a rest pose: pelvis above ``start_position_xy`` (m), torso yaw
-    ``heading`` (rad); Gaussian spreads (m, rad, rad; joints truncated to their limits; turn rate rad/s).
+    """N kinematic states near a rest pose: pelvis above ``start_position_xy`` ((2,) or (N, 2), m),
+    torso yaw ``heading`` (rad); Gaussian spreads (m, rad, rad; joints truncated to their limits; turn rate rad/s).
 
     ``walker`` has N or 1 entries (broadcast). Zero joint velocities. The swing knee starts at
     min(its rest angle 5 psi_hip, 0.6 rad) so the swing foot clears the ground.
@@ -522,7 +541,8 @@ def initial_kinematics(
     local = _local_pose(body, legs, dofs)
     leg = walker.stance_leg.astype(np.int8)
     beta = _lowest_roll(body, _pick(local.foot, leg))
-    pelvis_xy = np.asarray(start_position_xy, float)[None, :] + position_spread * rng.standard_normal((n, 2))
+    pelvis_xy = np.broadcast_to(np.asarray(start_position_xy, float).reshape(-1, 2), (n, 2)) \
+        + position_spread * rng.standard_normal((n, 2))
     point = _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), beta)
     contact_point = pelvis_xy + point[:, :2]
     named = KinematicState.unpack(dofs)

@@ -31,6 +31,7 @@ from std_msgs.msg import Header, String
 
 from awalker_tracker.errors import InputError
 from awalker_tracker.inference.posterior import PosteriorSummary as CoreSummary
+from awalker_tracker.inference.recovery import RecoveryConfig
 from awalker_tracker.inference.smc import SMCConfig
 from awalker_tracker.inference.sync import StampSynchronizer
 from awalker_tracker.inference.tracker import (
@@ -82,6 +83,9 @@ class TrackerNode(Node):
         seed = declare("seed", 0, "random seed")
         self.likelihood_scale = float(declare("likelihood_scale", TrackerConfig.likelihood_scale,
                                               "exponent (tempering) of the image likelihood"))
+        self.recovery = RecoveryConfig(
+            reseed_fallen=bool(declare("reseed_fallen", True, "re-seed walkers that fall (inference/recovery.py)")),
+            reacquire=bool(declare("reacquire", True, "re-acquire a lost track at the person seen in the images")))
         self.frame_rate = float(declare("frame_rate", 0.0, "frames/s; 0: from the first two frame stamps"))
         self.world_frame = declare("world_frame", "world", "world frame id of the outputs")
         ack_topic = declare("ack_topic", "/awalker/ack", "std_msgs/Header acks of processed frames")
@@ -231,8 +235,9 @@ class TrackerNode(Node):
             return False
         body = self.body or BodyDescription.default()
         cameras = [self.cameras[c] for c in self.camera_names]
-        config = TrackerConfig(smc=self.smc_config, dt=dt, likelihood_scale=self.likelihood_scale)
-        model = TrackerModel(body, self.start, image_likelihood(body, cameras), config)
+        config = TrackerConfig(smc=self.smc_config, dt=dt, likelihood_scale=self.likelihood_scale,
+                               recovery=self.recovery)
+        model = TrackerModel(body, self.start, image_likelihood(body, cameras), config, cameras=cameras)
         self.tracker = Tracker(model)
         self.get_logger().info(f"tracking with {self.smc_config.num_particles} particles, dt {dt * 1e3:.1f} ms, "
                                f"cameras {', '.join(self.camera_names)}, start frame {self.start.frame}")
@@ -262,6 +267,9 @@ class TrackerNode(Node):
         for s in summaries:
             self.posterior_pub.publish(summary_to_msg(s, self.world_frame))
             self.stats.summaries += 1
+            if s.reacquired:
+                self.get_logger().info(f"frame {s.frame_index}: track lost, {s.reacquired} particles re-seeded "
+                                       "at the person seen in the images")
             if self.keep_summaries:
                 self.summaries.append(s)
 

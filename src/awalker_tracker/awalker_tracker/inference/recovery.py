@@ -1,0 +1,146 @@
+"""Recovery of a lost or fallen track: settings, the lost-track monitor and row replacement.
+
+Two failure modes of the physics-based filter are not repaired by the likelihood alone:
+
+- **Falls.** A walker that falls (hip on the ground, a leg past horizontal, no heel strike for 2 s)
+  never gets up: without recovery it keeps a large log-likelihood penalty and, when every particle
+  has fallen, the posterior is a body lying on the floor. With ``reseed_fallen`` each particle whose
+  walker falls is replaced, in the frame it falls, by a walker on the cyclic gait of its recent
+  speed (clamped to the gait table), standing on its current stance foot, with its heading.
+- **Lost tracks.** When the particles' weighted-mean pelvis projects outside the person's
+  foreground blob (``vision.detection``) in every camera that sees the person, for ``lost_after_s``,
+  the track is lost: a fraction of the particles (the lowest weights) are re-seeded around the
+  detected ground position, with the heading and speed of the detections' recent ground track
+  (when it moves), then the image likelihood decides. At most once per ``cooldown_s``.
+
+Both are proposals the prior does not make, and their weights are not corrected for it: recovery
+trades the filter's exactness for not staying lost. The summaries count the re-seeded particles.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, is_dataclass
+from typing import Any
+
+import numpy as np
+
+from awalker_tracker.vision.camera import Camera
+from awalker_tracker.vision.detection import PersonDetection, detect_person
+
+NOT_RESEEDED, RESEEDED_FALLEN, REACQUIRED = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class RecoveryConfig:
+    """When and how the tracker re-seeds particles (see the module docstring)."""
+
+    reseed_fallen: bool = True
+    reacquire: bool = True
+    lost_after_s: float = 0.2          # off the person this long before re-acquiring
+    cooldown_s: float = 0.5            # at most one re-acquisition per this time
+    reacquire_fraction: float = 0.5    # share of the particles (lowest weights) re-seeded at the person
+    position_spread_m: float = 0.15    # re-seeded pelvis ground positions around the detection
+    heading_spread_rad: float = 0.25
+    box_margin: float = 0.25           # the blob box is widened by this fraction of its size on each side
+    track_window_s: float = 0.5        # detections over this time give the person's ground velocity
+    moving_m_s: float = 0.3            # slower ground tracks give no heading
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.reacquire_fraction <= 1.0:
+            raise ValueError(f"RecoveryConfig.reacquire_fraction must lie in (0, 1], got {self.reacquire_fraction}")
+        if min(self.lost_after_s, self.cooldown_s, self.position_spread_m, self.heading_spread_rad,
+               self.box_margin, self.track_window_s, self.moving_m_s) < 0:
+            raise ValueError("RecoveryConfig: times, spreads and margins must be >= 0")
+
+
+def put_rows(target: Any, indices: np.ndarray, source: Any) -> Any:
+    """A copy of ``target`` (dataclass of per-particle arrays, nested) with rows ``indices`` taken
+    from ``source`` (same type, len(indices) rows)."""
+    if is_dataclass(target):
+        return type(target)(**{f.name: put_rows(getattr(target, f.name), indices, getattr(source, f.name))
+                               for f in fields(target)})
+    out = np.array(target, copy=True)
+    out[indices] = source
+    return out
+
+
+@dataclass(frozen=True)
+class Reacquisition:
+    """Where to re-seed: the person's ground position (m), and heading (rad) / speed (m/s) when known."""
+
+    position: np.ndarray
+    heading: float | None
+    speed: float | None
+
+
+class LostTrackMonitor:
+    """Per frame: detect the person, decide whether the particles are off it, order re-acquisitions.
+
+    Frames are identified by their index; a frame seen again (the filter re-simulates its
+    look-ahead window after resampling) gets the decision made the first time."""
+
+    def __init__(self, cameras: list[Camera], config: RecoveryConfig, dt: float) -> None:
+        self.cameras = list(cameras)
+        self.config = config
+        self.dt = float(dt)
+        self._positions: dict[int, np.ndarray | None] = {}
+        self._run: dict[int, int] = {}
+        self._orders: dict[int, Reacquisition | None] = {}
+        self._quiet_until = -1
+        self.reacquisitions = 0
+
+    def _off_person(self, detection: PersonDetection, pelvis: np.ndarray) -> bool:
+        """True when the pelvis projects outside every widened blob box."""
+        by_name = {c.name: c for c in self.cameras}
+        margin = self.config.box_margin
+        for blob in detection.blobs:
+            uv, depth = by_name[blob.camera].project(pelvis[None])
+            u0, v0, u1, v1 = blob.box
+            du, dv = margin * (u1 - u0), margin * (v1 - v0)
+            if depth[0] > 0 and u0 - du <= uv[0, 0] <= u1 + du and v0 - dv <= uv[0, 1] <= v1 + dv:
+                return False
+        return True
+
+    def _reliable(self, detection: PersonDetection) -> bool:
+        """The person is wholly in view of some camera (a blob touching the image border misplaces the feet)."""
+        by_name = {c.name: c for c in self.cameras}
+        for blob in detection.blobs:
+            camera = by_name[blob.camera]
+            u0, v0, u1, v1 = blob.box
+            if u0 > 2 and v0 > 2 and u1 < camera.width - 3 and v1 < camera.height - 3:
+                return True
+        return False
+
+    def _ground_velocity(self, frame: int) -> np.ndarray | None:
+        """Least-squares ground velocity (m/s) of the detections over the track window, or None."""
+        span = max(2, int(round(self.config.track_window_s / self.dt)))
+        points = [(f, p) for f in range(frame - span, frame + 1) if (p := self._positions.get(f)) is not None]
+        if len(points) < max(3, int(0.8 * span)):
+            return None
+        t = np.array([f for f, _ in points], float) * self.dt
+        xy = np.array([p for _, p in points])
+        t -= t.mean()
+        return (t @ (xy - xy.mean(axis=0))) / max(float(t @ t), 1e-12)
+
+    def update(self, frame: int, features: list[Any], pelvis: np.ndarray) -> Reacquisition | None:
+        """The re-acquisition to make at ``frame`` (None: none), given the particles' mean pelvis (3,)."""
+        if frame in self._orders:
+            return self._orders[frame]
+        detection = detect_person(list(features), self.cameras)
+        reliable = detection is not None and self._reliable(detection)
+        self._positions[frame] = detection.position if reliable else None
+        off = reliable and self._off_person(detection, pelvis)
+        self._run[frame] = self._run.get(frame - 1, 0) + 1 if off else 0
+        order = None
+        if off and self._run[frame] * self.dt >= self.config.lost_after_s and frame >= self._quiet_until:
+            velocity = self._ground_velocity(frame)
+            moving = velocity is not None and np.linalg.norm(velocity) >= self.config.moving_m_s
+            order = Reacquisition(detection.position.copy(),
+                                  float(np.arctan2(velocity[1], velocity[0])) if moving else None,
+                                  float(np.linalg.norm(velocity)) if moving else None)
+            self._quiet_until = frame + max(1, int(round(self.config.cooldown_s / self.dt)))
+            self.reacquisitions += 1
+        self._orders[frame] = order
+        for store in (self._positions, self._run, self._orders):     # keep a few seconds of history
+            for old in [f for f in store if f < frame - 300]:
+                del store[old]
+        return order

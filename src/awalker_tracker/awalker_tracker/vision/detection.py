@@ -1,0 +1,129 @@
+"""Where is the person? Foreground blobs in the appearance maps, placed on the ground plane.
+
+The features of every camera carry per-class log-likelihood ratios (foreground vs background,
+``FrameFeatures.llr``). A pixel whose best class beats the background by ``threshold`` nats is
+foreground; the largest connected blob of at least ``min_area_px`` image pixels is the person
+(``person_blob``). Its image is placed in the world with the calibrated camera and the ground
+plane z = 0 (``detect_person``):
+
+- one camera: the ray through the blob's mean column at its lowest row (the feet) meets the ground;
+- several cameras: each blob's middle column, seen from its camera, is a vertical plane; the
+  person stands on the line where these planes meet (least squares over the cameras), which
+  does not depend on where the feet end in the image. With two cameras looking nearly along the
+  same line the planes are close to parallel; then the feet rows decide, as with one camera.
+
+The height is where the ray through the middle of the blob's top row passes over the ground
+point (median over cameras). Used to re-acquire a lost track (``inference.tracker``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from awalker_tracker.vision.camera import Camera
+from awalker_tracker.vision.features import FrameFeatures
+
+
+@dataclass(frozen=True)
+class PersonBlob:
+    """The person's blob in one camera's image (pixels of the full image)."""
+
+    camera: str
+    box: tuple[float, float, float, float]   # u0, v0, u1, v1 (px)
+    area_px: float
+    feet_uv: tuple[float, float]             # the blob's mean column, lowest row
+    head_uv: tuple[float, float]             # the blob's mean column, highest row
+
+
+@dataclass(frozen=True)
+class PersonDetection:
+    """A person seen in the images: ground position (m, world xy), height (m) and the blobs."""
+
+    position: np.ndarray
+    height: float
+    blobs: tuple[PersonBlob, ...]
+
+
+def person_blob(features: FrameFeatures, camera_name: str = "", threshold: float = 2.0,
+                min_area_px: float = 400.0) -> PersonBlob | None:
+    """The largest foreground blob (``threshold`` nats, ``min_area_px`` image pixels), or None."""
+    mask = (np.max(features.llr, axis=0) > threshold).astype(np.uint8)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    if count <= 1:
+        return None
+    best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    d = float(features.downsample)
+    area = float(stats[best, cv2.CC_STAT_AREA]) * d * d
+    if area < min_area_px:
+        return None
+    rows, cols = np.nonzero(labels == best)
+    top, bottom = rows.min(), rows.max()
+    # map pixel j covers image pixels d j .. d j + d - 1 (centre d j + (d - 1) / 2)
+    centre = lambda j: d * j + 0.5 * (d - 1)  # noqa: E731
+    # the blob's mean column (steadier than the lowest row's, which follows the planted foot)
+    middle = centre(float(np.mean(cols)))
+    feet, head = (middle, centre(bottom)), (middle, centre(top))
+    box = (d * cols.min() - 0.5, d * top - 0.5, d * (cols.max() + 1) - 0.5, d * (bottom + 1) - 0.5)
+    return PersonBlob(camera_name, box, area, feet, head)
+
+
+def _ray(camera: Camera, uv: tuple[float, float]) -> np.ndarray:
+    """World direction (3,) of the ray through pixel ``uv``."""
+    xy = camera.pixels_to_normalised(np.asarray([uv], float))[0]
+    return camera.rotation @ np.array([xy[0], xy[1], 1.0])
+
+
+def ground_point(camera: Camera, uv: tuple[float, float]) -> np.ndarray | None:
+    """World xy (m) where the ray through ``uv`` meets the ground z = 0; None if it does not."""
+    d = _ray(camera, uv)
+    if d[2] >= -1e-9:
+        return None
+    t = -camera.position[2] / d[2]
+    return camera.position[:2] + t * d[:2]
+
+
+def _height_over(camera: Camera, uv: tuple[float, float], xy: np.ndarray) -> float:
+    """Height (m) at which the ray through ``uv`` passes over the ground point ``xy``."""
+    d = _ray(camera, uv)
+    horizontal = np.linalg.norm(d[:2])
+    if horizontal < 1e-9:
+        return float("nan")
+    t = np.linalg.norm(xy - camera.position[:2]) / horizontal
+    return float(camera.position[2] + t * d[2])
+
+
+def detect_person(features: list[FrameFeatures], cameras: list[Camera], threshold: float = 2.0,
+                  min_area_px: float = 400.0, min_plane_angle_deg: float = 20.0) -> PersonDetection | None:
+    """The person's ground position and height from every camera's largest blob (module docstring)."""
+    blobs, planes = [], []
+    for feats, camera in zip(features, cameras):
+        blob = person_blob(feats, camera.name, threshold, min_area_px)
+        if blob is None:
+            continue
+        blobs.append(blob)
+        # vertical plane through the camera and the blob's middle column: normal n, n . x = n . c
+        middle = (0.5 * (blob.box[0] + blob.box[2]), 0.5 * (blob.box[1] + blob.box[3]))
+        d = _ray(camera, middle)[:2]
+        if np.linalg.norm(d) > 1e-9:
+            normal = np.array([-d[1], d[0]]) / np.linalg.norm(d)
+            planes.append((normal, float(normal @ camera.position[:2]), camera, blob))
+    if not blobs:
+        return None
+    position = None
+    if len(planes) >= 2:
+        normals = np.array([p[0] for p in planes])
+        cosines = np.abs(normals @ normals.T)           # planes meet at the angle between their normals
+        spread = np.degrees(np.arccos(np.clip(cosines.min(), 0.0, 1.0)))
+        if spread >= min_plane_angle_deg:
+            position = np.linalg.lstsq(normals, np.array([p[1] for p in planes]), rcond=None)[0]
+    if position is None:
+        by_camera = {c.name: c for c in cameras}
+        points = [p for b in blobs if (p := ground_point(by_camera[b.camera], b.feet_uv)) is not None]
+        if not points:
+            return None
+        position = np.mean(points, axis=0)
+    by_camera = {c.name: c for c in cameras}
+    heights = [_height_over(by_camera[b.camera], b.head_uv, position) for b in blobs]
+    return PersonDetection(np.asarray(position, float), float(np.nanmedian(heights)), tuple(blobs))

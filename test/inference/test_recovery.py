@@ -1,0 +1,120 @@
+"""Recovery (inference/recovery.py): row replacement, re-seeding fallen walkers, the lost-track monitor."""
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from awalker_tracker.inference.recovery import (
+    NOT_RESEEDED, RESEEDED_FALLEN, LostTrackMonitor, RecoveryConfig, put_rows)
+from awalker_tracker.inference.tracker import StartDescription, TrackerConfig, TrackerModel, marker_likelihood
+from awalker_tracker.model.body import MARKER_NAMES, BodyDescription
+from awalker_tracker.model.walker import LEFT
+
+from awalker_tracker.model.kinematics import pose_body
+from awalker_tracker.vision.camera import Camera
+from awalker_tracker.vision.detection import person_blob
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "vision"))
+from test_detection import features_of  # noqa: E402
+from vision_scene import BODY, PARAMS, side_camera, walking_poses  # noqa: E402
+
+PELVIS = MARKER_NAMES.index("pelvis")
+
+
+@dataclass(frozen=True)
+class _Inner:
+    a: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Outer:
+    inner: _Inner
+    b: np.ndarray
+
+
+def test_put_rows_replaces_rows_of_nested_arrays_and_leaves_the_target_alone():
+    target = _Outer(_Inner(np.zeros((4, 2))), np.arange(4))
+    source = _Outer(_Inner(np.ones((2, 2))), np.array([10, 20]))
+    out = put_rows(target, np.array([3, 1]), source)
+    assert out.inner.a[:, 0].tolist() == [0, 1, 0, 1] and out.b.tolist() == [0, 20, 2, 10]
+    assert target.inner.a.sum() == 0 and target.b.tolist() == [0, 1, 2, 3]
+
+
+def _model(reseed: bool) -> TrackerModel:
+    body = BodyDescription.default()
+    config = TrackerConfig(dt=1 / 30, recovery=RecoveryConfig(reseed_fallen=reseed, reacquire=False))
+    start = StartDescription(0, (0.5, -0.3), 0.3, 1.3, 0.7, LEFT)
+    return TrackerModel(body, start, marker_likelihood(0.03), config)
+
+
+@pytest.mark.parametrize("reseed", [True, False])
+def test_fallen_walkers_are_reseeded_standing_where_they_fell(reseed: bool):
+    model = _model(reseed)
+    rng = np.random.default_rng(3)
+    states = model.initial(8, rng)
+    down = np.arange(8) < 3
+    # a stance leg past horizontal: the walker has fallen
+    walker = replace(states.walker, stance_angle=np.where(down, -1.8, states.walker.stance_angle))
+    states = replace(states, walker=walker)
+    contact, heading = states.kin.contact_point.copy(), states.kin.heading.copy()
+    new, events = model.transition(states, rng)
+    assert np.asarray(events.fallen)[down].all() and not np.asarray(events.fallen)[~down].any()
+    if not reseed:
+        assert new.fallen[down].all() and (new.reseeded == NOT_RESEEDED).all()
+        return
+    assert not new.fallen.any()
+    assert (new.reseeded[down] == RESEEDED_FALLEN).all() and (new.reseeded[~down] == NOT_RESEEDED).all()
+    assert model.reseeded_fallen == 3
+    pelvis = new.pose.markers[down, PELVIS]
+    leg = model.params.leg_length
+    assert (pelvis[:, 2] > 0.85 * leg).all()                    # upright again, hips at walking height
+    assert np.linalg.norm(pelvis[:, :2] - contact[down], axis=1).max() < 0.5 * leg   # where it stood
+    assert np.allclose(new.kin.heading[down], heading[down], atol=0.05)
+    # the others keep walking as the dynamics move them
+    assert np.isfinite(new.pose.markers).all() and np.allclose(new.kin.heading[~down], heading[~down], atol=0.2)
+
+
+@pytest.fixture(scope="module")
+def seen():
+    """The side camera's features of a person (last of 3 rendered frames) and their true ground position."""
+    camera = side_camera()
+    poses = walking_poses(3, x0=0.4)
+    features, _ = features_of(camera, poses, 0)
+    markers = pose_body(BODY, PARAMS, poses[-1].walker, poses[-1].kin).markers[0]
+    return camera, features[-1], markers
+
+
+def test_monitor_orders_reacquisition_after_the_lost_time_then_waits_the_cooldown(seen):
+    camera, features, markers = seen
+    config = RecoveryConfig(lost_after_s=0.09, cooldown_s=0.5)
+    monitor = LostTrackMonitor([camera], config, dt=1 / 30)
+    away = markers[PELVIS] + np.array([2.0, 0.0, 0.0])          # the particles walk 2 m beside the person
+    orders = {f: monitor.update(f, [features], away) for f in range(30)}
+    fired = [f for f, o in orders.items() if o is not None]
+    assert fired == [2, 17]                                      # 3 frames off, then 15 frames of cooldown
+    assert monitor.reacquisitions == 2
+    truth = 0.5 * (markers[MARKER_NAMES.index("left_ankle"), :2] + markers[MARKER_NAMES.index("right_ankle"), :2])
+    assert np.linalg.norm(orders[2].position - truth) < 0.25
+    assert orders[2].heading is None and orders[17].heading is None      # a person standing still: no heading
+    assert monitor.update(17, [features], away) is orders[17] and monitor.reacquisitions == 2   # re-asked: same answer
+
+
+def test_monitor_keeps_a_track_on_the_person(seen):
+    camera, features, markers = seen
+    monitor = LostTrackMonitor([camera], RecoveryConfig(lost_after_s=0.0), dt=1 / 30)
+    assert all(monitor.update(f, [features], markers[PELVIS]) is None for f in range(10))
+
+
+def test_monitor_does_not_trust_a_person_cut_by_the_image_border():
+    # the camera looks 2.1 m to the side: the person straddles the left image border
+    camera = Camera.look_at("edge", 320, 240, 300.0, np.array([2.5, -4.0, 1.1]), np.array([2.5, 0.0, 0.9]))
+    features, _ = features_of(camera, walking_poses(3, x0=0.4), 0)
+    blob = person_blob(features[-1], "edge")
+    assert blob is not None and blob.box[0] <= 2 < blob.box[2]     # seen, but cut by the border
+    monitor = LostTrackMonitor([camera], RecoveryConfig(lost_after_s=0.0), dt=1 / 30)
+    far = np.array([5.0, 0.0, 0.9])
+    assert all(monitor.update(f, [features[-1]], far) is None for f in range(5))
