@@ -179,3 +179,32 @@ def test_skate_counts_only_the_stance_foot_when_known():
     assert evaluation.foot_plausibility(track)["skate_mm"]["max"] > 20     # ... and counts as slip by height
     stance_left = np.arange(FRAMES) < 15                  # but the left foot is the stance foot then
     assert evaluation.foot_plausibility(track, stance_left=stance_left)["skate_mm"]["max"] == pytest.approx(0.0)
+
+
+def test_walk_quality_heading_swaps_falls_and_the_last_frame():
+    truth = walking_truth()
+    assert np.allclose(evaluation.facing(truth, np.arange(FRAMES)), 0.0)      # walks and faces along +x
+    same = evaluation.walk_quality(truth, truth)
+    assert same["heading_error_deg"]["max"] < 1e-9 and same["swap_fraction"] == 0.0
+    assert same["fallen_frames"] == 0 and same["off_person_frames"] == 0 and not same["end"]["off_person"]
+    markers = truth.markers.copy()
+    # frames 20-29: legs swapped (left knee/ankle where the right ones are and vice versa)
+    for joint in ("knee", "ankle"):
+        left, right = NAMES.index(f"left_{joint}"), NAMES.index(f"right_{joint}")
+        markers[20:, [left, right]] = truth.markers[20:, [right, left]]
+    # frames 10-14: the body faces 30 degrees left (hips turned about the pelvis)
+    c, s = np.cos(np.radians(30)), np.sin(np.radians(30))
+    for hip in ("left_hip", "right_hip"):
+        h, p = NAMES.index(hip), NAMES.index("pelvis")
+        d = truth.markers[10:15, h, :2] - truth.markers[10:15, p, :2]
+        markers[10:15, h, :2] = truth.markers[10:15, p, :2] + d @ np.array([[c, s], [-s, c]])
+    # the last 3 frames: lying 0.8 m beside the person
+    pelvis = NAMES.index("pelvis")
+    markers[27:, pelvis] = truth.markers[27:, pelvis] + np.array([0.0, 0.8, -0.7])
+    quality = evaluation.walk_quality(PoseTrack(truth.frames, truth.stamps_ns, NAMES, markers), truth)
+    assert quality["swap_fraction"] == pytest.approx(10 / FRAMES)
+    heading = np.array(quality["per_frame_heading_error_deg"])
+    assert np.allclose(heading[10:15], 30.0) and np.allclose(np.delete(heading, range(10, 15)), 0.0, atol=1e-6)
+    assert quality["fallen_frames"] == 3 and quality["off_person_frames"] == 3
+    assert quality["end"]["fallen"] and quality["end"]["off_person"]
+    assert quality["end"]["pelvis_ground_error_m"] == pytest.approx(0.8)

@@ -12,7 +12,9 @@ Metrics:
 - foot skate: horizontal slip (mm) of a heel/toe marker that touches the ground in two
   consecutive frames; ground penetration (mm below z = 0) and float (mm of the lowest foot
   marker above the ground), computed for estimate and truth alike (the truth's values show
-  the marker offset of the body model).
+  the marker offset of the body model);
+- walk quality (``walk_quality``): facing-direction error, left/right leg swaps, frames fallen or
+  off the person, and the state at the last frame (did the track end on the person, upright?).
 """
 from __future__ import annotations
 
@@ -256,6 +258,7 @@ def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarra
         "per_marker_absolute_mm": errors["per_marker_mm"],
         "estimate_feet": foot_plausibility(estimate, stance_left=stance_left),
         "truth_feet": foot_plausibility(truth),
+        "walk": walk_quality(estimate, truth),
         "per_frame": {"frame": errors["frames"].tolist(), "stamp_ns": errors["stamps_ns"].tolist(),
                       "absolute_mm": errors["absolute_mm"].round(3).tolist(),
                       "relative_mm": errors["relative_mm"].round(3).tolist()},
@@ -278,6 +281,47 @@ def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarra
                 result["stance_correct_fraction"] = float(np.mean((p > 0.5) == l))
                 result["stance_scored_frames"] = len(known)
     return result
+
+
+def facing(track: PoseTrack, rows: np.ndarray) -> np.ndarray:
+    """(F,) heading (rad) the body faces: the hip line (left hip to right hip, pointing to the body's right)
+    turned by +90 degrees about the vertical."""
+    hips = _select(track, ["left_hip", "right_hip"], rows, "pose track")
+    across = hips[:, 1, :2] - hips[:, 0, :2]
+    return np.arctan2(across[:, 0], -across[:, 1])
+
+
+def walk_quality(estimate: PoseTrack, truth: PoseTrack, fallen_fraction: float = 0.6,
+                 off_person_m: float = 0.5) -> dict[str, object]:
+    """How the estimate follows a walk, beyond marker errors:
+
+    - ``heading_error_deg``: |facing direction of the estimate - the truth's| per frame (``facing``);
+    - ``swap_fraction``: frames whose knees and ankles lie nearer the truth with left and right swapped;
+    - ``fallen_frames``: frames where the estimated pelvis is below ``fallen_fraction`` of the true pelvis height;
+    - ``off_person_frames``: frames where the estimated pelvis is more than ``off_person_m`` from the true one
+      over the ground;
+    - ``end``: the last frame's pelvis ground error (m), heading error (deg), fallen and off-person flags."""
+    est_rows, true_rows = align_tracks(estimate, truth)
+    heading = np.degrees(np.abs(np.angle(np.exp(1j * (facing(estimate, est_rows) - facing(truth, true_rows))))))
+    legs = [f"{side}_{joint}" for side in ("left", "right") for joint in ("knee", "ankle")]
+    mirrored = [f"{'right' if n.startswith('left') else 'left'}_{n.split('_', 1)[1]}" for n in legs]
+    est = _select(estimate, legs, est_rows, "estimate")
+    same = np.linalg.norm(est - _select(truth, legs, true_rows, "ground truth"), axis=2).sum(axis=1)
+    swapped = np.linalg.norm(est - _select(truth, mirrored, true_rows, "ground truth"), axis=2).sum(axis=1)
+    est_p = _select(estimate, ["pelvis"], est_rows, "estimate")[:, 0]
+    tru_p = _select(truth, ["pelvis"], true_rows, "ground truth")[:, 0]
+    fallen = est_p[:, 2] < fallen_fraction * tru_p[:, 2]
+    ground_error = np.linalg.norm(est_p[:, :2] - tru_p[:, :2], axis=1)
+    off = ground_error > off_person_m
+    return {
+        "heading_error_deg": statistics(heading),
+        "swap_fraction": float(np.mean(swapped < same)),
+        "fallen_frames": int(fallen.sum()),
+        "off_person_frames": int(off.sum()),
+        "end": {"pelvis_ground_error_m": float(ground_error[-1]), "heading_error_deg": float(heading[-1]),
+                "fallen": bool(fallen[-1]), "off_person": bool(off[-1])},
+        "per_frame_heading_error_deg": heading.round(2).tolist(),
+    }
 
 
 def foot_speed(track: PoseTrack, side: str) -> np.ndarray:
@@ -316,6 +360,16 @@ def format_table(result: dict[str, object], label: str = "") -> str:
         f"foot skate {feet['skate_mm']['mean']:.1f} mm mean ({feet['skate_mm']['max']:.1f} max), "
         f"penetration {feet['penetration_mm']['max']:.1f} mm max, float {feet['float_mm']['mean']:.1f} mm mean",
     ]
+    if "walk" in result:
+        walk, frames = result["walk"], a["frames"]
+        end = walk["end"]
+        lines.append(f"heading error {walk['heading_error_deg']['median']:.1f} deg median "
+                     f"({walk['heading_error_deg']['max']:.1f} max); legs swapped on "
+                     f"{100 * walk['swap_fraction']:.0f}% of frames; fallen on {walk['fallen_frames']}, off the "
+                     f"person on {walk['off_person_frames']} of {frames} frames")
+        lines.append(f"last frame: pelvis {1000 * end['pelvis_ground_error_m']:.0f} mm off over the ground, heading "
+                     f"{end['heading_error_deg']:.1f} deg off" + (", FALLEN" if end["fallen"] else "")
+                     + (", OFF THE PERSON" if end["off_person"] else ""))
     if "stance_correct_fraction" in result:
         lines.append(f"stance leg right on {100 * result['stance_correct_fraction']:.1f}% of "
                      f"{result['stance_scored_frames']} frames with one foot planted")
