@@ -2,6 +2,8 @@
 marker observations of a walk simulated by the model's own components with a different seed."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -158,3 +160,15 @@ def test_start_outside_the_solved_gaits_is_refused_and_the_spread_redrawn():
     speed, step = model._sample_gaits(np.full(2000, near.speed), np.full(2000, near.step_length),
                                       config.spread, np.random.default_rng(0))
     assert np.all(holed.covers(speed, step, min_weight=1e-6))
+
+
+def test_an_unknown_stance_leg_starts_half_the_particles_on_each_leg():
+    s = StartDescription.from_yaml_text("start: {frame: 2, position: [0, 0], heading: 0, speed: 1.3}")
+    assert s.stance_leg is None and "stance_leg: unknown" in s.to_yaml_text()
+    assert StartDescription.from_yaml_text(s.to_yaml_text()).stance_leg is None
+    model = TrackerModel(BodyDescription.default(), s, marker_likelihood(0.03), TrackerConfig(dt=1 / 30))
+    legs = model.initial(200, np.random.default_rng(0)).walker.stance_leg
+    assert np.sum(legs == LEFT) == 100
+    known = TrackerModel(BodyDescription.default(), replace(s, stance_leg=LEFT), marker_likelihood(0.03),
+                         TrackerConfig(dt=1 / 30))
+    assert (known.initial(50, np.random.default_rng(0)).walker.stance_leg == LEFT).all()

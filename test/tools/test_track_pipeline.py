@@ -133,19 +133,23 @@ def test_track_with_nodes_in_two_processes(synth_bag: Path, localhost_context, t
     assert [_stamp(m) for m in got["joints"]] == tracked
 
 
-def test_track_without_start_description_says_what_to_provide(tmp_path: Path, capsys):
+def test_track_without_start_description_looks_for_the_person(tmp_path: Path, capsys):
+    """No start description anywhere: the tracker looks for a walking person itself and says when there is none."""
     from awalker_tools.bagio import SequenceWriter
+    from awalker_tracker.model.body import BodyDescription
     from awalker_tracker.vision.camera import Camera
 
     cam = Camera.look_at("cam0", 32, 24, 30.0, np.array([0.0, -5.0, 1.0]), np.array([0.0, 0.0, 1.0]))
     bag = tmp_path / "bare" / "seq.bag"
     bag.parent.mkdir()
+    (bag.parent / "body.yaml").write_text(BodyDescription.default().to_yaml_text())
     with SequenceWriter(bag, [cam]) as writer:
         for k in range(3):
             writer.write_frame(1000 + k, {"cam0": np.zeros((24, 32, 3), np.uint8)})
-    assert main(["track", str(bag), "--out", str(tmp_path / "out")]) == 2
+    assert main(["track", str(bag), "--out", str(tmp_path / "out"), "--no-overlay"]) == 2
     err = capsys.readouterr().err
-    assert "no start description" in err and "--start START.yaml" in err
+    assert "finding the walking person automatically" in err
+    assert "no walking person found in 3 frames" in err and "--start" in err
     assert main(["track", str(tmp_path / "missing.bag"), "--out", str(tmp_path / "out")]) == 2
     assert "no such bag" in capsys.readouterr().err
 

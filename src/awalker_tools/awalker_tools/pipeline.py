@@ -26,6 +26,7 @@ import yaml
 from awalker_tracker.errors import InputError
 from awalker_tracker.inference.tracker import StartDescription
 from awalker_tracker.model.body import BodyDescription
+from awalker_tracker.vision.extent import ExtentConfig
 
 from awalker_tools import evaluation
 
@@ -46,6 +47,8 @@ class TrackOptions:
     trust: float = 0.9
     seed: int = 0
     likelihood_scale: float = 0.1
+    auto_start: bool = False        # ignore any start description and find the walking person (also when none exists)
+    extent_weight: float = ExtentConfig.weight      # silhouette-extent term (vision/extent.py); 0: the paper's likelihood alone
     recovery: bool = True           # re-seed fallen walkers and re-acquire a lost track (inference/recovery.py)
     overlays: bool = True
     storage: str = "mcap"
@@ -71,26 +74,31 @@ class TrackResult:
         return self.summaries / self.seconds if self.seconds > 0 else 0.0
 
 
-def resolve_descriptions(bag: Path, reader: Any, start_path: Path | None, body_path: Path | None
-                         ) -> tuple[StartDescription, str, BodyDescription, str]:
-    """Start and body descriptions: the files given, else the bag's topics, else files beside the bag."""
+def resolve_descriptions(bag: Path, reader: Any, start_path: Path | None, body_path: Path | None,
+                         auto_start: bool = False) -> tuple[StartDescription | None, str, BodyDescription, str]:
+    """Start and body descriptions: the files given, else the bag's topics, else files beside the bag.
+    No start description (or ``auto_start``): None, and the tracker finds the walking person itself."""
     from awalker_tools.bagio import BODY_DESCRIPTION_TOPIC, START_DESCRIPTION_TOPIC
 
     beside = [bag.parent, bag] if bag.is_dir() else [bag.parent]
 
-    def resolve(parser: Any, path: Path | None, topic: str, file_name: str, kind: str, usage: str) -> tuple[Any, str]:
+    def resolve(parser: Any, path: Path | None, topic: str, file_name: str, kind: str, usage: str | None
+                ) -> tuple[Any, str]:
         if path is not None:
             return parser.from_yaml(path), str(path)
         if (text := reader.text(topic)) is not None:
             return parser.from_yaml_text(text, f"{bag}:{topic}"), topic
         if found := [d / file_name for d in beside if (d / file_name).is_file()]:
             return parser.from_yaml(found[0]), str(found[0])
+        if usage is None:
+            return None, f"none found (no --{kind}, no {topic} topic, no {file_name} beside the bag)"
         raise InputError(f"{bag}: no {kind} description (no {topic} topic, no {file_name} beside the bag); "
                          f"pass --{kind} {usage}")
 
-    start, start_src = resolve(StartDescription, start_path, START_DESCRIPTION_TOPIC, START_FILE, "start",
-                               "START.yaml with 'start: {frame, position: [x, y], heading, speed, step_length, "
-                               "stance_leg: left|right}' (metres, radians, m/s)")
+    if auto_start:
+        start, start_src = None, "--auto-start"
+    else:
+        start, start_src = resolve(StartDescription, start_path, START_DESCRIPTION_TOPIC, START_FILE, "start", None)
     body, body_src = resolve(BodyDescription, body_path, BODY_DESCRIPTION_TOPIC, BODY_FILE, "body",
                              "BODY.yaml with 'body: {upper_leg_length, lower_leg_length, ...}' (m)")
     return start, start_src, body, body_src
@@ -152,19 +160,25 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     with SequenceReader(bag) as reader:
         cameras = reader.cameras
         num_frames = len(reader.frame_stamps)
-        start, start_src, body, body_src = resolve_descriptions(bag, reader, options.start, options.body)
-    if start.frame >= num_frames:
+        start, start_src, body, body_src = resolve_descriptions(bag, reader, options.start, options.body,
+                                                                options.auto_start)
+    if start is not None and start.frame >= num_frames:
         raise InputError(f"start description ({start_src}): start frame {start.frame} but {bag} has {num_frames} frames")
     out.mkdir(parents=True, exist_ok=True)
     result_bag = out / "result.bag"
     if result_bag.exists():
         raise InputError(f"{result_bag}: exists already; choose a new --out directory or remove it")
     save_calibration(cameras, out / CALIBRATION_FILE)
-    (out / START_FILE).write_text(start.to_yaml_text())
+    if start is not None:
+        (out / START_FILE).write_text(start.to_yaml_text())
+    elif (out / START_FILE).exists():
+        (out / START_FILE).unlink()        # the tracker writes the start it finds
     (out / BODY_FILE).write_text(body.to_yaml_text())
     names = [c.name for c in cameras]
-    _progress(options, f"awalker track: {bag} ({num_frames} frames, cameras {', '.join(names)}), start frame "
-                       f"{start.frame} from {start_src}, body from {body_src}, {options.particles} particles")
+    _progress(options, f"awalker track: {bag} ({num_frames} frames, cameras {', '.join(names)}), "
+                       + (f"start frame {start.frame} from {start_src}" if start is not None else
+                          f"start description: {start_src}; finding the walking person automatically")
+                       + f", body from {body_src}, {options.particles} particles")
 
     # Read by the rmw when the context starts.
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST" if options.share_topics else "OFF"
@@ -178,17 +192,22 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         driver = Node("awalker_track_replay", context=context)
         nodes.append(driver)
         # the features nodes get the same start and body as the tracker (files or bag topics alike)
+        # (automatic start: none, the features nodes learn a robust median background)
         features = [FeatureNode(context=context, parameter_overrides=[
-            Parameter("camera_name", value=c), Parameter("start_description", value=str(out / START_FILE)),
+            Parameter("camera_name", value=c),
+            Parameter("start_description", value=str(out / START_FILE) if start is not None else ""),
+            Parameter("use_start_description", value=start is not None),
             Parameter("body_description", value=str(out / BODY_FILE))]) for c in names]
         nodes += features
         tracker = TrackerNode(context=context, parameter_overrides=[
             Parameter("cameras", value=names), Parameter("calibration", value=str(out / CALIBRATION_FILE)),
-            Parameter("start_description", value=str(out / START_FILE)),
+            Parameter("start_description", value=str(out / START_FILE) if start is not None else ""),
+            Parameter("auto_start", value=start is None), Parameter("start_output", value=str(out / START_FILE)),
             Parameter("body_description", value=str(out / BODY_FILE)),
             Parameter("num_particles", value=int(options.particles)), Parameter("lookahead", value=int(options.lookahead)),
             Parameter("trust", value=float(options.trust)), Parameter("seed", value=int(options.seed)),
             Parameter("likelihood_scale", value=float(options.likelihood_scale)),
+            Parameter("extent_weight", value=float(options.extent_weight)),
             Parameter("reseed_fallen", value=bool(options.recovery)), Parameter("reacquire", value=bool(options.recovery)),
             Parameter("idle_flush_s", value=1.0e9)])
         tracker.keep_summaries = True
@@ -246,9 +265,15 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         result.recorded = dict(recorder.counts)
         result.features = {node.camera_name: {"background": node.stats.background_from,
                                               "foreground_labels": node.stats.foreground_from} for node in features}
+        if tracker.start is not None and tracker.start_found_automatically:
+            start_src = f"found automatically at frame {tracker.start.frame} (written to {out / START_FILE})"
         if tracker.tracker is None or not tracker.summaries:
+            if tracker.start is None:
+                raise InputError(f"{bag}: no walking person found in {result.frames} frames (automatic start: "
+                                 "a person wholly in view of a camera, moving steadily for 0.7 s); give a start "
+                                 "description with --start")
             raise InputError(f"{bag}: no frame was tracked (frames received: {result.frames}; "
-                             f"start frame {start.frame}); check that the bag has images for every camera")
+                             f"start frame {tracker.start.frame}); check that the bag has images for every camera")
         write_outputs(out, tracker.tracker.map_trajectory(), tracker.summaries)
     finally:
         if recorder is not None:
@@ -262,7 +287,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     (out / RUN_FILE).write_text(yaml.safe_dump({
         "input": str(bag.resolve()), "start_source": start_src, "body_source": body_src,
         "particles": options.particles, "lookahead": options.lookahead, "trust": options.trust, "seed": options.seed,
-        "likelihood_scale": options.likelihood_scale, "recovery": options.recovery,
+        "likelihood_scale": options.likelihood_scale, "recovery": options.recovery, "extent_weight": options.extent_weight,
         "frames": result.frames, "posteriors": result.summaries, "seconds": round(result.seconds, 3),
         "seconds_in_filter": round(result.seconds_in_filter, 3), "sync_issues": result.sync_issues,
         "features": result.features, "recorded": result.recorded}, sort_keys=False))

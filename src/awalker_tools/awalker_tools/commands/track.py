@@ -5,6 +5,7 @@ import argparse
 from pathlib import Path
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.vision.extent import ExtentConfig
 
 
 def run(args: argparse.Namespace) -> int:
@@ -16,13 +17,17 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--likelihood-scale must be > 0, got {args.likelihood_scale}")
     if not 0.0 <= args.trust <= 1.0:
         raise InputError(f"--trust (gamma) must lie in [0, 1], got {args.trust}")
+    if not args.extent_weight >= 0:
+        raise InputError(f"--extent-weight must be >= 0, got {args.extent_weight}")
     if args.lookahead < 0:
         raise InputError(f"--lookahead must be >= 0, got {args.lookahead}")
     run_tracking(TrackOptions(
         bag=Path(args.bag), out=Path(args.out), start=Path(args.start) if args.start else None,
         body=Path(args.body) if args.body else None, particles=args.particles, lookahead=args.lookahead,
         trust=args.trust,
-        seed=args.seed, likelihood_scale=args.likelihood_scale, recovery=not args.no_recovery, overlays=not args.no_overlay, storage=args.storage,
+        seed=args.seed, likelihood_scale=args.likelihood_scale, recovery=not args.no_recovery,
+        auto_start=args.auto_start, extent_weight=args.extent_weight, overlays=not args.no_overlay,
+        storage=args.storage,
         share_topics=args.share_topics))
     return 0
 
@@ -34,10 +39,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "in one process and writes DIR/result.bag, poses.csv (MAP trajectory), summary.csv, "
                     "overlay images and video. Start and body descriptions: --start/--body, else the bag's "
                     "/awalker/start_description and /awalker/body_description, else start.yaml/body.yaml "
-                    "beside the bag.")
+                    "beside the bag; with no start description the tracker finds the walking person itself.")
     parser.add_argument("bag", help="input rosbag2 bag (directory, .mcap or .db3)")
     parser.add_argument("--out", required=True, help="output directory")
     parser.add_argument("--start", help="start description YAML (start: frame, position, heading, speed, ...)")
+    parser.add_argument("--auto-start", action="store_true",
+                        help="ignore any start description and find the walking person in the images (also done "
+                             "when there is none); the start found is written to DIR/start.yaml")
     parser.add_argument("--body", help="body description YAML (segment sizes in metres)")
     parser.add_argument("--particles", type=int, default=5000, help="number of particles (default 5000)")
     parser.add_argument("--lookahead", type=int, default=3, help="look-ahead tau in frames (default 3)")
@@ -46,6 +54,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--likelihood-scale", type=float, default=0.1,
                         help="exponent on the image likelihood (tempering, default 0.1)")
+    parser.add_argument("--extent-weight", type=float, default=ExtentConfig.weight,
+                        help="weight of the silhouette-extent term: the body's feet and head rows against the "
+                             "person's foreground blob (default 0, off; try 4)")
     parser.add_argument("--no-recovery", action="store_true",
                         help="never re-seed fallen walkers or re-acquire a lost track (the exact filter of the paper)")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="result bag storage")

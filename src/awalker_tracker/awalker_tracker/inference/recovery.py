@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from awalker_tracker.vision.camera import Camera
-from awalker_tracker.vision.detection import PersonDetection, detect_person
+from awalker_tracker.vision.detection import GroundTrack, PersonDetection, detect_person, wholly_in_view
 
 NOT_RESEEDED, RESEEDED_FALLEN, REACQUIRED = 0, 1, 2
 
@@ -82,7 +82,7 @@ class LostTrackMonitor:
         self.cameras = list(cameras)
         self.config = config
         self.dt = float(dt)
-        self._positions: dict[int, np.ndarray | None] = {}
+        self.track = GroundTrack(dt)
         self._run: dict[int, int] = {}
         self._orders: dict[int, Reacquisition | None] = {}
         self._quiet_until = -1
@@ -100,39 +100,18 @@ class LostTrackMonitor:
                 return False
         return True
 
-    def _reliable(self, detection: PersonDetection) -> bool:
-        """The person is wholly in view of some camera (a blob touching the image border misplaces the feet)."""
-        by_name = {c.name: c for c in self.cameras}
-        for blob in detection.blobs:
-            camera = by_name[blob.camera]
-            u0, v0, u1, v1 = blob.box
-            if u0 > 2 and v0 > 2 and u1 < camera.width - 3 and v1 < camera.height - 3:
-                return True
-        return False
-
-    def _ground_velocity(self, frame: int) -> np.ndarray | None:
-        """Least-squares ground velocity (m/s) of the detections over the track window, or None."""
-        span = max(2, int(round(self.config.track_window_s / self.dt)))
-        points = [(f, p) for f in range(frame - span, frame + 1) if (p := self._positions.get(f)) is not None]
-        if len(points) < max(3, int(0.8 * span)):
-            return None
-        t = np.array([f for f, _ in points], float) * self.dt
-        xy = np.array([p for _, p in points])
-        t -= t.mean()
-        return (t @ (xy - xy.mean(axis=0))) / max(float(t @ t), 1e-12)
-
     def update(self, frame: int, features: list[Any], pelvis: np.ndarray) -> Reacquisition | None:
         """The re-acquisition to make at ``frame`` (None: none), given the particles' mean pelvis (3,)."""
         if frame in self._orders:
             return self._orders[frame]
         detection = detect_person(list(features), self.cameras)
-        reliable = detection is not None and self._reliable(detection)
-        self._positions[frame] = detection.position if reliable else None
+        reliable = detection is not None and wholly_in_view(detection, self.cameras)
+        self.track.add(frame, detection.position if reliable else None)
         off = reliable and self._off_person(detection, pelvis)
         self._run[frame] = self._run.get(frame - 1, 0) + 1 if off else 0
         order = None
         if off and self._run[frame] * self.dt >= self.config.lost_after_s and frame >= self._quiet_until:
-            velocity = self._ground_velocity(frame)
+            velocity = self.track.velocity(frame, self.config.track_window_s)
             moving = velocity is not None and np.linalg.norm(velocity) >= self.config.moving_m_s
             order = Reacquisition(detection.position.copy(),
                                   float(np.arctan2(velocity[1], velocity[0])) if moving else None,
@@ -140,7 +119,7 @@ class LostTrackMonitor:
             self._quiet_until = frame + max(1, int(round(self.config.cooldown_s / self.dt)))
             self.reacquisitions += 1
         self._orders[frame] = order
-        for store in (self._positions, self._run, self._orders):     # keep a few seconds of history
+        for store in (self._run, self._orders):     # keep a few seconds of history
             for old in [f for f in store if f < frame - 300]:
                 del store[old]
         return order

@@ -41,7 +41,8 @@ from awalker_tracker.model.walker import LEFT, RIGHT, WalkerParams, WalkerState
 class StartDescription:
     """Coarse initial state (YAML ``start:`` mapping): frame index, ground xy under the pelvis (m),
     heading (rad, walking direction from world +x about +z), speed (m/s), optional step length (m;
-    None: the usual step length at that speed, ``step_length_for``), stance leg.
+    None: the usual step length at that speed, ``step_length_for``), stance leg (LEFT, RIGHT or None:
+    unknown, ``unknown`` or omitted in YAML; the particles then start on either leg, half each).
 
     ``frame`` is the index, counted from 0 at the bag's first frame, of the first frame the
     tracker uses (the person is in view); the frames before it are background-only and teach the
@@ -52,7 +53,7 @@ class StartDescription:
     heading: float = 0.0
     speed: float = 1.3
     step_length: float | None = None
-    stance_leg: int = LEFT
+    stance_leg: int | None = LEFT
 
     def step_length_for(self, params: WalkerParams) -> float:
         """The given step length, else a person's usual one at ``speed`` for this leg length (m)."""
@@ -69,13 +70,13 @@ class StartDescription:
             raise InputError(f"{where}: not valid YAML ({exc})") from None
         if not isinstance(data, dict) or not isinstance(data.get("start"), dict):
             raise InputError(f"{where}: expected a top-level 'start:' mapping with frame, position [x, y], "
-                             "heading (rad), speed (m/s), stance_leg (left|right) and optionally step_length (m)")
+                             "heading (rad), speed (m/s) and optionally step_length (m), stance_leg (left|right|unknown)")
         s = data["start"]
         known = {"frame", "position", "heading", "speed", "step_length", "stance_leg"}
         unknown = sorted(set(s) - known)
         if unknown:
             raise InputError(f"{where}: unknown start field(s) {', '.join(unknown)}; expected {sorted(known)}")
-        missing = sorted({"position", "heading", "speed", "stance_leg"} - set(s))
+        missing = sorted({"position", "heading", "speed"} - set(s))
         if missing:
             raise InputError(f"{where}: start is missing {', '.join(missing)}")
         try:
@@ -89,10 +90,11 @@ class StartDescription:
             raise InputError(f"{where}: start.position must be [x, y] and all values finite, got {s}")
         if frame < 0 or speed <= 0 or (step_length is not None and step_length <= 0):
             raise InputError(f"{where}: start.frame must be >= 0, speed and step_length > 0, got {s}")
-        leg = str(s["stance_leg"]).lower()
-        if leg not in ("left", "right"):
-            raise InputError(f"{where}: start.stance_leg must be 'left' or 'right', got {s['stance_leg']!r}")
-        return cls(frame, position, heading, speed, step_length, LEFT if leg == "left" else RIGHT)
+        leg = str(s.get("stance_leg") or "unknown").lower()
+        if leg not in ("left", "right", "unknown"):
+            raise InputError(f"{where}: start.stance_leg must be 'left', 'right' or 'unknown', "
+                             f"got {s['stance_leg']!r}")
+        return cls(frame, position, heading, speed, step_length, {"left": LEFT, "right": RIGHT}.get(leg))
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> "StartDescription":
@@ -107,7 +109,7 @@ class StartDescription:
                  "speed": float(self.speed)}
         if self.step_length is not None:
             start["step_length"] = float(self.step_length)
-        start["stance_leg"] = "left" if self.stance_leg == LEFT else "right"
+        start["stance_leg"] = {LEFT: "left", RIGHT: "right"}.get(self.stance_leg, "unknown")
         return yaml.safe_dump({"start": start}, sort_keys=False)
 
 
@@ -236,7 +238,13 @@ class TrackerModel:
                              f"{self.gaits.speeds[0]:.2f}-{self.gaits.speeds[-1]:.2f} m/s, "
                              f"{self.gaits.step_lengths[0]:.2f}-{self.gaits.step_lengths[-1]:.2f} m")
         return self._fresh(n, np.asarray(s.position, float), np.full(n, s.heading), np.full(n, s.speed),
-                           np.full(n, step_length), np.full(n, s.stance_leg, np.int8), rng, self.config.spread)
+                           np.full(n, step_length), self._start_legs(n, rng), rng, self.config.spread)
+
+    def _start_legs(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """(N,) stance legs of the initial particles: the start's, or half each when it is unknown."""
+        if self.start.stance_leg is not None:
+            return np.full(n, self.start.stance_leg, np.int8)
+        return rng.permutation(np.arange(n) % 2).astype(np.int8)
 
     def _fresh(self, n: int, pelvis_xy: np.ndarray, heading: np.ndarray, speed: np.ndarray, step: np.ndarray,
                stance_leg: np.ndarray, rng: np.random.Generator, spread: InitialSpread) -> TrackerStates:
@@ -484,20 +492,34 @@ class ImageObservation:
     occlusion_masks: tuple[np.ndarray | None, ...] = ()
 
 
-def image_likelihood(body: BodyDescription, cameras: list[Any]) -> LikelihoodFn:
-    """The image likelihood of paper Sec. 5.1 (eq. 9-12) over ``cameras`` (vision.likelihood), divided by the
-    number of cameras: with the tempering (``TrackerConfig.likelihood_scale``) this keeps the weight of the
-    evidence the same for any number of cameras. Summed as in eq. (12), two cameras at scale 0.1 lost the
-    walker in 1 of 6 tracker seeds (205 mm); averaged, 17-51 mm (mean 30) over the same seeds."""
+def image_likelihood(body: BodyDescription, cameras: list[Any], extent: Any = "default") -> LikelihoodFn:
+    """The image likelihood of paper Sec. 5.1 (eq. 9-12) over ``cameras`` (vision.likelihood), plus the
+    silhouette-extent term (vision.extent; ``extent``: an ExtentConfig, None for the paper's terms alone),
+    divided by the number of cameras: with the tempering (``TrackerConfig.likelihood_scale``) this keeps the
+    weight of the evidence the same for any number of cameras. Summed as in eq. (12), two cameras at scale
+    0.1 lost the walker in 1 of 6 tracker seeds (205 mm); averaged, 17-51 mm (mean 30) over the same seeds."""
+    from awalker_tracker.vision.detection import person_blob
+    from awalker_tracker.vision.extent import ExtentConfig, extent_log_likelihood
     from awalker_tracker.vision.likelihood import SilhouetteMemo, log_likelihood
 
     parts = body.parts
     memo = SilhouetteMemo()   # each frame's poses are the next frame's previous poses
+    extent_config = ExtentConfig() if extent == "default" else extent
+    blobs_of: dict[int, tuple[Any, list[Any]]] = {}     # id(features) -> (features, blobs): a frame is scored often
 
     def loglik(prev: TrackerStates | None, states: TrackerStates, obs: ImageObservation) -> np.ndarray:
         prev_segments = states.pose.segments if prev is None else prev.pose.segments
         masks = list(obs.occlusion_masks) or [None] * len(cameras)
-        return log_likelihood(parts, states.pose.segments, prev_segments, cameras, list(obs.features), masks,
-                              memo=memo) / len(cameras)
+        total = log_likelihood(parts, states.pose.segments, prev_segments, cameras, list(obs.features), masks,
+                               memo=memo)
+        if extent_config is not None and extent_config.weight > 0:
+            key = id(obs.features)
+            if key not in blobs_of or blobs_of[key][0] is not obs.features:
+                if len(blobs_of) > 64:
+                    blobs_of.clear()
+                blobs_of[key] = (obs.features, [person_blob(f, c.name) for f, c in zip(obs.features, cameras)])
+            total = total + extent_log_likelihood(states.pose.markers, states.pose.segments, parts, cameras,
+                                                  blobs_of[key][1], extent_config)
+        return total / len(cameras)
 
     return loglik

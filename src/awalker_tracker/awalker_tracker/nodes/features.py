@@ -13,7 +13,8 @@ Subscribes (camera ``<cam>`` from the ``camera_name`` parameter):
   image for learning the foreground: 0 = none, k = 1 + index into PART_CLASSES);
 - ``/awalker/start_description`` (latched std_msgs/String), or the ``start_description`` YAML
   file parameter: the frames before its ``frame`` are background-only (``background_frames`` =
-  -1, the default);
+  -1, the default); with ``use_start_description`` false neither is used (automatic start: the
+  background is the robust median of the first ``median_frames`` frames);
 - ``/awalker/body_description`` (latched), or the ``body_description`` file parameter: body
   sizes (start-pose projection, bands);
 - ``/<cam>/camera_info`` and ``/<cam>/camera_pose`` (latched geometry_msgs/PoseStamped, as the
@@ -50,6 +51,7 @@ from std_msgs.msg import Header, String
 
 from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import PART_CLASSES, BodyDescription
+from awalker_tracker.model.walker import LEFT
 from awalker_tracker.nodes.convert import camera_from_msgs, stamp_to_ns
 from awalker_tracker.nodes.spin import run_node
 from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor, FrameFeatures
@@ -184,6 +186,8 @@ class FeatureNode(Node):
                                                           "empty: the /awalker/start_description topic"))
         body_path = str(declare("body_description", "", "body YAML; empty: the /awalker/body_description topic "
                                                         "or the default body"))
+        use_start = bool(declare("use_start_description", True, "false: no start description (the tracker finds the "
+                                 "person itself): robust median background, foreground from height bands"))
         if not self.camera_name:
             raise InputError("parameter 'camera_name' is required (e.g. --ros-args -p camera_name:=cam0)")
         try:
@@ -220,9 +224,9 @@ class FeatureNode(Node):
                                  lambda m: self._on_image(m, f"{self.image_topic}/compressed"), qos_profile_sensor_data)
         self.create_subscription(Image, f"/{cam}/occlusion_mask", self._on_mask, QoSProfile(depth=30))
         self.create_subscription(Image, f"/{cam}/foreground_labels", self._on_labels, latched)
-        if start_path:
+        if start_path and use_start:
             self._use_start(StartDescription.from_yaml(start_path))
-        else:
+        elif use_start:
             self.create_subscription(String, START_TOPIC, self._on_start, latched)
         self.create_subscription(CameraInfo, f"/{cam}/camera_info", self._on_info, reliable)
         self.create_subscription(PoseStamped, f"/{cam}/camera_pose", self._on_pose, latched)
@@ -266,7 +270,8 @@ class FeatureNode(Node):
             return None
         s = self._start
         labels = start_pose_labels(self.extractor.body, camera, s.position, s.heading,
-                                   s.step_length_for(self.extractor.body.walker_params()), s.stance_leg)
+                                   s.step_length_for(self.extractor.body.walker_params()),
+                                   LEFT if s.stance_leg is None else s.stance_leg)
         if self.verbose:
             print(f"features {self.camera_name}: start pose covers {np.count_nonzero(labels >= 0)} px",
                   file=sys.stderr, flush=True)

@@ -19,6 +19,8 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 import rclpy
 from awalker_msgs.msg import ImageFeatures, PosteriorSummary
 from geometry_msgs.msg import PoseStamped
@@ -30,6 +32,7 @@ from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header, String
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.inference.autostart import AUTO_SPREAD
 from awalker_tracker.inference.posterior import PosteriorSummary as CoreSummary
 from awalker_tracker.inference.recovery import RecoveryConfig
 from awalker_tracker.inference.smc import SMCConfig
@@ -40,6 +43,7 @@ from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.nodes.convert import camera_from_msgs, header, stamp_to_ns, summary_to_msg
 from awalker_tracker.nodes.features import features_from_msg
 from awalker_tracker.nodes.spin import run_node
+from awalker_tracker.vision.extent import ExtentConfig
 
 START_TOPIC = "/awalker/start_description"
 BODY_TOPIC = "/awalker/body_description"
@@ -83,6 +87,12 @@ class TrackerNode(Node):
         seed = declare("seed", 0, "random seed")
         self.likelihood_scale = float(declare("likelihood_scale", TrackerConfig.likelihood_scale,
                                               "exponent (tempering) of the image likelihood"))
+        self.auto_start = bool(declare("auto_start", False, "no start description: find the walking person in the "
+                                       "images (inference/autostart.py)"))
+        self.start_output = str(declare("start_output", "", "write the start description used (given or found) "
+                                        "to this YAML file; empty: do not"))
+        self.extent_weight = float(declare("extent_weight", ExtentConfig.weight,
+                                           "weight of the silhouette-extent term (vision/extent.py); 0: off"))
         self.recovery = RecoveryConfig(
             reseed_fallen=bool(declare("reseed_fallen", True, "re-seed walkers that fall (inference/recovery.py)")),
             reacquire=bool(declare("reacquire", True, "re-acquire a lost track at the person seen in the images")))
@@ -113,7 +123,9 @@ class TrackerNode(Node):
         self._last_frame_time = time.monotonic()
         self._dirty = False   # frames pushed since the last flush
 
-        self.start = StartDescription.from_yaml(start_path) if start_path else None
+        self.start = StartDescription.from_yaml(start_path) if start_path and not self.auto_start else None
+        self.start_found_automatically = False
+        self._finder: Any = None
         self.body = BodyDescription.from_yaml(body_path) if body_path else None
         self._body_from_file = bool(body_path)
         self.cameras: dict[str, Any] = {}
@@ -137,7 +149,7 @@ class TrackerNode(Node):
                                          lambda m, c=cam: self._on_camera_info(c, m), reliable)
                 self.create_subscription(PoseStamped, f"/{cam}/camera_pose",
                                          lambda m, c=cam: self._on_camera_pose(c, m), latched)
-        if self.start is None:
+        if self.start is None and not self.auto_start:
             self.create_subscription(String, START_TOPIC, self._on_start, latched)
         if self.body is None:
             self.create_subscription(String, BODY_TOPIC, self._on_body, latched)
@@ -224,20 +236,62 @@ class TrackerNode(Node):
 
     # -- filtering -------------------------------------------------------------------------
     def ready(self) -> bool:
-        return self.start is not None and len(self.cameras) == len(self.camera_names)
+        return (self.start is not None or self.auto_start) and len(self.cameras) == len(self.camera_names)
+
+    def _dt(self) -> float | None:
+        """Frame period (s): the frame_rate parameter, else the first two stamps; None until known."""
+        if self.frame_rate > 0:
+            return 1.0 / self.frame_rate
+        if len(self._first_stamps) == 2:
+            return (self._first_stamps[1] - self._first_stamps[0]) * 1e-9
+        return None
+
+    def _find_start(self, final: bool) -> bool:
+        """Automatic start: feed the pending frames to the start finder until it finds the walking person;
+        frames before that are dropped (already acknowledged). True once the start is known."""
+        from awalker_tracker.inference.autostart import StartFinder
+
+        dt = self._dt() or (1.0 / 30.0 if final else None)
+        if dt is None:
+            return False
+        if self._finder is None:
+            self._finder = StartFinder([self.cameras[c] for c in self.camera_names], dt)
+        while self._pending:
+            item = self._pending[0]
+            found = self._finder.push(item.frame_index, list(item.messages))
+            if found is not None:
+                self.start, self.start_found_automatically = found, True
+                self.get_logger().info(
+                    f"automatic start at frame {found.frame}: person at ({found.position[0]:.2f}, "
+                    f"{found.position[1]:.2f}) m, heading {np.degrees(found.heading):.0f} deg, "
+                    f"{found.speed:.2f} m/s, stance leg unknown (both sampled)")
+                self._write_start()
+                return True
+            self._pending.pop(0)
+            if self._finder.frames_seen % 30 == 0:
+                self.get_logger().info(f"automatic start: waiting for a walking person ({self._finder.status()})")
+        if final:
+            self.get_logger().warning(f"automatic start: no walking person found ({self._finder.status()}); "
+                                      "nothing tracked")
+        return False
+
+    def _write_start(self) -> None:
+        if self.start_output and self.start is not None:
+            from pathlib import Path
+
+            Path(self.start_output).write_text(self.start.to_yaml_text())
 
     def _make_tracker(self) -> bool:
-        if self.frame_rate > 0:
-            dt = 1.0 / self.frame_rate
-        elif len(self._first_stamps) == 2:
-            dt = (self._first_stamps[1] - self._first_stamps[0]) * 1e-9
-        else:
+        dt = self._dt()
+        if dt is None:
             return False
         body = self.body or BodyDescription.default()
         cameras = [self.cameras[c] for c in self.camera_names]
         config = TrackerConfig(smc=self.smc_config, dt=dt, likelihood_scale=self.likelihood_scale,
-                               recovery=self.recovery)
-        model = TrackerModel(body, self.start, image_likelihood(body, cameras), config, cameras=cameras)
+                               recovery=self.recovery,
+                               spread=AUTO_SPREAD if self.start_found_automatically else TrackerConfig.spread)
+        model = TrackerModel(body, self.start, image_likelihood(body, cameras, ExtentConfig(weight=self.extent_weight)),
+                             config, cameras=cameras)
         self.tracker = Tracker(model)
         self.get_logger().info(f"tracking with {self.smc_config.num_particles} particles, dt {dt * 1e3:.1f} ms, "
                                f"cameras {', '.join(self.camera_names)}, start frame {self.start.frame}")
@@ -245,6 +299,8 @@ class TrackerNode(Node):
 
     def _process_pending(self, final: bool = False) -> None:
         if not self.ready() or not self._pending:
+            return
+        if self.start is None and not self._find_start(final):
             return
         if self.tracker is None and not self._make_tracker():
             if not final:

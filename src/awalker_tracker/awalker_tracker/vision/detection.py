@@ -2,18 +2,22 @@
 
 The features of every camera carry per-class log-likelihood ratios (foreground vs background,
 ``FrameFeatures.llr``). A pixel whose best class beats the background by ``threshold`` nats is
-foreground; the largest connected blob of at least ``min_area_px`` image pixels is the person
+foreground; the largest connected blob covering at least ``min_area_fraction`` of the image is the person
 (``person_blob``). Its image is placed in the world with the calibrated camera and the ground
 plane z = 0 (``detect_person``):
 
-- one camera: the ray through the blob's mean column at its lowest row (the feet) meets the ground;
+- one camera: the ray through the blob's mean column at its lowest row (the feet) meets the ground
+  at the near edge of the feet; the person stands ``near_edge_m`` (0.12 m: half a stride's width
+  of feet and hips, measured on renders) farther along the ray;
 - several cameras: each blob's middle column, seen from its camera, is a vertical plane; the
   person stands on the line where these planes meet (least squares over the cameras), which
   does not depend on where the feet end in the image. With two cameras looking nearly along the
   same line the planes are close to parallel; then the feet rows decide, as with one camera.
 
 The height is where the ray through the middle of the blob's top row passes over the ground
-point (median over cameras). Used to re-acquire a lost track (``inference.tracker``).
+point (median over cameras). ``GroundTrack`` keeps the positions of the frames where the person
+was wholly in view of some camera and fits their ground velocity. Used to re-acquire a lost track
+(``inference.recovery``) and to start the tracker without a start description (``inference.autostart``).
 """
 from __future__ import annotations
 
@@ -47,8 +51,9 @@ class PersonDetection:
 
 
 def person_blob(features: FrameFeatures, camera_name: str = "", threshold: float = 2.0,
-                min_area_px: float = 400.0) -> PersonBlob | None:
-    """The largest foreground blob (``threshold`` nats, ``min_area_px`` image pixels), or None."""
+                min_area_fraction: float = 0.0015) -> PersonBlob | None:
+    """The largest foreground blob (``threshold`` nats, at least ``min_area_fraction`` of the image: 460 px of
+    640x480), or None."""
     mask = (np.max(features.llr, axis=0) > threshold).astype(np.uint8)
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     if count <= 1:
@@ -56,7 +61,7 @@ def person_blob(features: FrameFeatures, camera_name: str = "", threshold: float
     best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     d = float(features.downsample)
     area = float(stats[best, cv2.CC_STAT_AREA]) * d * d
-    if area < min_area_px:
+    if area < min_area_fraction * features.image_width * features.image_height:
         return None
     rows, cols = np.nonzero(labels == best)
     top, bottom = rows.min(), rows.max()
@@ -95,11 +100,12 @@ def _height_over(camera: Camera, uv: tuple[float, float], xy: np.ndarray) -> flo
 
 
 def detect_person(features: list[FrameFeatures], cameras: list[Camera], threshold: float = 2.0,
-                  min_area_px: float = 400.0, min_plane_angle_deg: float = 20.0) -> PersonDetection | None:
+                  min_area_fraction: float = 0.0015, min_plane_angle_deg: float = 20.0,
+                  near_edge_m: float = 0.12) -> PersonDetection | None:
     """The person's ground position and height from every camera's largest blob (module docstring)."""
     blobs, planes = [], []
     for feats, camera in zip(features, cameras):
-        blob = person_blob(feats, camera.name, threshold, min_area_px)
+        blob = person_blob(feats, camera.name, threshold, min_area_fraction)
         if blob is None:
             continue
         blobs.append(blob)
@@ -120,10 +126,64 @@ def detect_person(features: list[FrameFeatures], cameras: list[Camera], threshol
             position = np.linalg.lstsq(normals, np.array([p[1] for p in planes]), rcond=None)[0]
     if position is None:
         by_camera = {c.name: c for c in cameras}
-        points = [p for b in blobs if (p := ground_point(by_camera[b.camera], b.feet_uv)) is not None]
+        points = []
+        for b in blobs:
+            camera = by_camera[b.camera]
+            point = ground_point(camera, b.feet_uv)
+            if point is not None:
+                away = point - camera.position[:2]
+                points.append(point + near_edge_m * away / max(float(np.linalg.norm(away)), 1e-9))
         if not points:
             return None
         position = np.mean(points, axis=0)
     by_camera = {c.name: c for c in cameras}
     heights = [_height_over(by_camera[b.camera], b.head_uv, position) for b in blobs]
     return PersonDetection(np.asarray(position, float), float(np.nanmedian(heights)), tuple(blobs))
+
+
+def wholly_in_view(detection: PersonDetection, cameras: list[Camera], border_px: float = 2.0) -> bool:
+    """The person is wholly in view of some camera: a blob touching the image border misplaces the feet."""
+    by_name = {c.name: c for c in cameras}
+    for blob in detection.blobs:
+        camera = by_name[blob.camera]
+        u0, v0, u1, v1 = blob.box
+        if u0 > border_px and v0 > border_px and u1 < camera.width - 1 - border_px and v1 < camera.height - 1 - border_px:
+            return True
+    return False
+
+
+class GroundTrack:
+    """Detected ground positions per frame (None: no reliable detection) and their recent velocity."""
+
+    def __init__(self, dt: float, keep_frames: int = 300) -> None:
+        self.dt = float(dt)
+        self.keep_frames = keep_frames
+        self.positions: dict[int, np.ndarray | None] = {}
+
+    def add(self, frame: int, position: np.ndarray | None) -> None:
+        self.positions[frame] = None if position is None else np.asarray(position, float)
+        for old in [f for f in self.positions if f < frame - self.keep_frames]:
+            del self.positions[old]
+
+    def velocity(self, frame: int, window_s: float, min_fraction: float = 0.8) -> np.ndarray | None:
+        """Least-squares ground velocity (m/s) over the ``window_s`` up to ``frame``, or None when fewer than
+        ``min_fraction`` of its frames (and fewer than 3) have a position."""
+        span = max(2, int(round(window_s / self.dt)))
+        points = [(f, p) for f in range(frame - span, frame + 1) if (p := self.positions.get(f)) is not None]
+        if len(points) < max(3, int(min_fraction * span)):
+            return None
+        t = np.array([f for f, _ in points], float) * self.dt
+        xy = np.array([p for _, p in points])
+        t -= t.mean()
+        return (t @ (xy - xy.mean(axis=0))) / max(float(t @ t), 1e-12)
+
+    def fitted_position(self, frame: int, window_s: float) -> np.ndarray | None:
+        """The straight-line fit of the window's positions evaluated at ``frame`` (steadier than one detection)."""
+        span = max(2, int(round(window_s / self.dt)))
+        points = [(f, p) for f in range(frame - span, frame + 1) if (p := self.positions.get(f)) is not None]
+        if len(points) < 2:
+            return None
+        t = np.array([f for f, _ in points], float)
+        xy = np.array([p for _, p in points])
+        fit = np.polyfit(t - frame, xy, 1)             # rows: slope, value at frame
+        return fit[1]

@@ -1,0 +1,80 @@
+"""Automatic start (inference/autostart.py): the walking person found in rendered frames."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from awalker_tracker.inference.autostart import AutoStartConfig, StartFinder
+from awalker_tracker.model.kinematics import pose_body
+from awalker_tracker.vision.features import FeatureExtractor
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "vision"))
+from test_detection import CONFIG  # noqa: E402
+from vision_scene import BODY, PARAMS, background_image, noisy, render_frames, side_camera, walking_poses  # noqa: E402
+
+DT = 1 / 30
+SPEED, HEADING = 1.2, 0.0   # the side camera looks along +y; the person walks along +x
+
+
+def walking(frames: int, x0: float) -> list:
+    """Poses moving along +x at SPEED: a repeated leg swing carried forward."""
+    swing = walking_poses(6, x0=x0)
+    poses = []
+    for f in range(frames):
+        pose = swing[f % 6]
+        kin = pose.kin.copy()
+        kin.contact_point = kin.contact_point + np.array([SPEED * f * DT, 0.0])
+        poses.append(type(pose)(pose.walker, kin))
+    return poses
+
+
+@pytest.fixture(scope="module")
+def frames():
+    """Features of 4 empty frames, then 30 of a person walking from x = -0.8 m."""
+    camera = side_camera()
+    background = background_image(camera, seed=0)
+    rng = np.random.default_rng(5)
+    extractor = FeatureExtractor(CONFIG)
+    for _ in range(CONFIG.background_frames):
+        extractor.process(noisy(background, rng))
+    empty = [extractor.process(noisy(background, rng)) for _ in range(4)]
+    poses = walking(30, x0=-0.8)
+    images, _ = render_frames(camera, poses, background, seed=2)
+    return camera, empty + [extractor.process(image) for image in images], poses
+
+
+def test_the_walking_person_starts_the_tracker(frames):
+    camera, features, poses = frames
+    finder = StartFinder([camera], DT)
+    found = None
+    for k, f in enumerate(features):
+        found = finder.push(k, f and [f])
+        if found is not None:
+            break
+        assert "frames" in finder.status()
+    assert found is not None, finder.status()
+    # after the empty frames, about the 0.7 s of track it needs (21 frames, 80 % of them seen)
+    assert 4 + 15 <= found.frame <= 4 + 23
+    pose = poses[found.frame - 4]
+    pelvis = pose_body(BODY, PARAMS, pose.walker, pose.kin).markers[0, 0, :2]
+    assert np.linalg.norm(np.array(found.position) - pelvis) < 0.15
+    # one camera: the feet row jitters in depth by ~8 cm as the legs swing, so the heading is rough
+    assert abs(np.angle(np.exp(1j * (found.heading - HEADING)))) < np.radians(20)
+    assert found.speed == pytest.approx(SPEED, rel=0.2)
+    assert found.stance_leg is None and found.step_length is None
+
+
+def test_a_person_standing_still_does_not_start_it(frames):
+    camera, features, _ = frames
+    finder = StartFinder([camera], DT)
+    still = features[10]
+    assert all(finder.push(k, [still]) is None for k in range(30))
+    assert "not yet walking" in finder.status()
+
+
+def test_config_is_checked():
+    with pytest.raises(ValueError):
+        AutoStartConfig(min_fraction=0.0)
