@@ -120,18 +120,25 @@ def test_from_mocap(tmp_path):
     assert start["speed"] == pytest.approx(1.37, abs=0.15) and abs(start["heading"]) < 0.2
     body = BodyDescription.from_yaml(tmp_path / "body.yaml")
     assert body.leg_length == pytest.approx(0.9, abs=0.06)
-    # More frames than the walk holds: all of it is used, with a note.
+    # More frames than the walk holds: the walk is repeated from a matching frame, moving on
     assert cli.main(["synth", "--out", str(tmp_path / "long"), "--size", "80", "60",
-                     "--frames", "500", "--background-frames", "0",
+                     "--frames", "200", "--background-frames", "0",
                      "--from-mocap", str(MOCAP_DIR / "07.asf"), str(MOCAP_DIR / "07_01.amc")]) == 0
-    assert len((tmp_path / "long" / "ground_truth.csv").read_text().splitlines()) == 1 + 79 * 13
+    _, _, _, long, _, _ = read(tmp_path / "long")
+    assert long.shape == (200, 13, 3)
+    pelvis_speed = np.linalg.norm(np.diff(long[:, M["pelvis"], :2], axis=0), axis=1) * 30
+    assert pelvis_speed.max() < 2.2 and pelvis_speed.min() > 0.8     # no jump where the walk repeats
+    travel = long[-1, M["pelvis"], :2] - long[0, M["pelvis"], :2]
+    assert np.linalg.norm(travel) / (199 / 30) == pytest.approx(1.37, abs=0.15)
 
 
 @pytest.mark.parametrize(
     ("args", "message"),
     [(["--cameras", "5"], "--cameras must be 1..4"), (["--turn", "120"], "--turn must be within"),
      (["--from-mocap", "missing.asf", "missing.amc"], "missing.asf"),
-     (["--from-mocap", "a.asf", "b.amc", "--turn", "30"], "is replayed as recorded")],
+     (["--from-mocap", "a.asf", "b.amc", "--turn", "30"], "takes --variant"),
+     (["--person", "dressed"], "need a motion capture walk"), (["--variant", "u-turn"], "need a motion capture walk"),
+     (["--from-mocap", "a.asf", "b.amc", "--variant", "u-turn"], "needs --frames >= 126")],
 )
 def test_bad_options_are_one_line_errors(tmp_path, capsys, args, message):
     assert synth(tmp_path, *args) == 2
@@ -143,3 +150,79 @@ def test_existing_bag_is_not_overwritten(tmp_path, capsys):
     assert synth(tmp_path, "--frames", "3") == 0
     assert synth(tmp_path, "--frames", "3") == 2
     assert "exists already" in capsys.readouterr().err
+
+
+MOCAP = ["--from-mocap", str(MOCAP_DIR / "07.asf"), str(MOCAP_DIR / "07_01.amc")]
+
+
+def test_dressed_person_is_not_the_model_body(tmp_path):
+    """`--person dressed` draws arms, clothes and a head the tracker's body lacks: more of the image
+    differs from the empty room than the model body covers, and both legs wear the same colour."""
+    from awalker_tracker.model.mocap import segments_from_markers
+    from awalker_tracker.vision.render import render
+
+    assert synth(tmp_path / "model", *MOCAP, "--seed", "2") == 0
+    assert synth(tmp_path / "dressed", *MOCAP, "--seed", "2", "--person", "dressed") == 0
+    cameras, frames, _, markers, _, _ = read(tmp_path / "dressed")
+    body = BodyDescription.from_yaml(tmp_path / "dressed" / "body.yaml")
+    room = frames[0][1]["cam0"].astype(float)
+    k = 8                                                              # a frame with the person
+    image = frames[3 + k][1]["cam0"].astype(float)
+    changed = np.abs(image - room).sum(axis=2) > 60
+    model = render(body, segments_from_markers(body, markers[k][None]), cameras[0])
+    inside = model.labels >= 0
+    assert changed[~inside].sum() > 0.3 * inside.sum()                 # arms, shoulders, hair outside the model
+    # the same trousers on both legs: mid-thigh pixels of the left and right leg have one colour
+    uv, _ = cameras[0].project(0.5 * (markers[k, [M["left_hip"], M["right_hip"]]] + markers[k, [M["left_knee"], M["right_knee"]]]))
+    left, right = (image[int(round(v)), int(round(u))] for u, v in uv)
+    assert np.abs(left - right).max() < 40
+    _, model_frames, *_ = read(tmp_path / "model")
+    assert not np.array_equal(model_frames[3 + k][1]["cam0"], frames[3 + k][1]["cam0"])
+
+
+@pytest.mark.parametrize(("variant", "turn_deg", "speed_factor"),
+                         [("u-turn", 180.0, 1.0), ("veer-left", 35.0, 1.0), ("veer-right", -35.0, 1.0),
+                          ("fast", 0.0, 1.2), ("slow", 0.0, 0.8)])
+def test_walk_variants_turn_and_change_speed_without_foot_skate(tmp_path, variant, turn_deg, speed_factor):
+    from awalker_tools import mocap_motion
+
+    frames = 130 if turn_deg else 60
+    assert cli.main(["synth", "--out", str(tmp_path / variant), "--size", "80", "60", "--frames", str(frames),
+                     "--background-frames", "0", *MOCAP, "--variant", variant]) == 0
+    assert cli.main(["synth", "--out", str(tmp_path / "straight"), "--size", "80", "60", "--frames", str(frames),
+                     "--background-frames", "0", *MOCAP]) == 0
+    _, _, _, walk, _, _ = read(tmp_path / variant)
+    _, _, _, straight, _, _ = read(tmp_path / "straight")
+    facing = np.unwrap(mocap_motion.facing(walk))
+    facing_straight = np.unwrap(mocap_motion.facing(straight))
+    turned = np.degrees((facing[-10:].mean() - facing[:10].mean()) - (facing_straight[-10:].mean() - facing_straight[:10].mean()))
+    assert turned == pytest.approx(turn_deg, abs=12)
+    if turn_deg:     # within the variant's 2 (u-turn) or 2.5 (veer) s, then straight again
+        late = np.degrees(facing[-25:] - facing_straight[-25:])
+        assert np.ptp(late) < 15
+    speed = np.linalg.norm(np.diff(walk[:30, M["pelvis"], :2], axis=0), axis=1).mean()
+    speed_straight = np.linalg.norm(np.diff(straight[:30, M["pelvis"], :2], axis=0), axis=1).mean()
+    assert speed / speed_straight == pytest.approx(speed_factor, rel=0.05)
+    # turning pivots on the stance foot: the planted foot does not slide more than in the recorded walk
+    def slide(points):
+        stance = mocap_motion.stance_feet(points)
+        same = stance[1:] == stance[:-1]
+        heel = np.where(stance[1:, None] == 0, points[1:, M["left_heel"], :2], points[1:, M["right_heel"], :2])
+        heel_before = np.where(stance[1:, None] == 0, points[:-1, M["left_heel"], :2], points[:-1, M["right_heel"], :2])
+        return np.median(np.linalg.norm(heel - heel_before, axis=1)[same])
+    assert slide(walk) < slide(straight) + 0.005
+
+
+def test_user_start_and_tape_measure_differ_from_the_truth_a_little(tmp_path):
+    assert synth(tmp_path / "exact", *MOCAP) == 0
+    assert synth(tmp_path / "user", *MOCAP, "--user-start", "--tape-measure") == 0
+    exact = yaml.safe_load((tmp_path / "exact" / "start.yaml").read_text())["start"]
+    user = yaml.safe_load((tmp_path / "user" / "start.yaml").read_text())["start"]
+    assert "step_length" in exact and "step_length" not in user
+    assert 0 < np.linalg.norm(np.subtract(user["position"], exact["position"])) <= 0.051
+    assert 0 < abs(user["heading"] - exact["heading"]) <= np.radians(5) + 1e-3
+    assert abs(user["speed"] / exact["speed"] - 1) <= 0.11
+    body_exact = BodyDescription.from_yaml(tmp_path / "exact" / "body.yaml")
+    body_user = BodyDescription.from_yaml(tmp_path / "user" / "body.yaml")
+    ratio = body_user.upper_leg_length / body_exact.upper_leg_length
+    assert ratio != 1.0 and abs(ratio - 1) <= 0.061

@@ -32,6 +32,7 @@ from awalker_tracker.vision.render import pixel_rays, render, render_rgb
 
 from awalker_tools import bagio
 from awalker_tools.overlay import save_overlay_png
+from awalker_tools.person_render import Outfit, PersonRenderer
 
 _M = {n: i for i, n in enumerate(MARKER_NAMES)}
 ROOM_HALF_SIZE = 8.0   # m: the room spans [-8, 8] x [-8, 8]
@@ -64,6 +65,10 @@ class SynthConfig:
     storage: str = "mcap"
     compressed: bool = True
     image_format: str = "jpeg"
+    person: str = "model"            # "model": the tracker's own body; "dressed": person_render.py (mocap only)
+    variant: str = "straight"        # mocap walks: straight, slow, fast, veer-left, veer-right, u-turn
+    user_start: bool = False         # start.yaml as a user would write it (position +-5 cm, heading +-5 deg, ...)
+    tape_measure: bool = False       # body.yaml lengths with tape-measure errors (a few per cent)
 
     def __post_init__(self) -> None:
         if not 1 <= self.cameras <= 4:
@@ -76,21 +81,45 @@ class SynthConfig:
             raise InputError(f"synth: --turn must be within [-90, 90] degrees, got {self.turn_deg:g}")
         if self.mocap is not None and (self.speed_change or self.turn_deg):
             raise InputError("synth: --speed-change and --turn shape the walker's motion; a --from-mocap walk "
-                             "is replayed as recorded")
+                             "takes --variant (slow, fast, veer-left, veer-right, u-turn) instead")
+        if self.person not in ("model", "dressed"):
+            raise InputError(f"synth: --person must be 'model' or 'dressed', got {self.person!r}")
+        if self.variant not in VARIANTS:
+            raise InputError(f"synth: --variant must be one of {', '.join(VARIANTS)}, got {self.variant!r}")
+        if self.mocap is None and (self.person == "dressed" or self.variant != "straight" or self.tape_measure):
+            raise InputError("synth: --person dressed, --variant and --tape-measure need a motion capture walk "
+                             "(--from-mocap ASF AMC)")
+        needed = VARIANTS[self.variant][2] * self.rate
+        if self.frames < needed:
+            raise InputError(f"synth: --variant {self.variant} needs --frames >= {int(np.ceil(needed))} at "
+                             f"{self.rate:g} Hz (the turn and a second after it), got {self.frames}")
         if self.width < 64 or self.height < 48:
             raise InputError(f"synth: image size {self.width}x{self.height} is too small")
+
+
+# Mocap walk variants: (time-warp factor, (turn angle deg, turn start s, turn duration s) or None, shortest walk s)
+VARIANTS: dict[str, tuple[float, tuple[float, float, float] | None, float]] = {
+    "straight": (1.0, None, 0.0),
+    "slow": (0.8, None, 0.0),
+    "fast": (1.2, None, 0.0),
+    "veer-left": (1.0, (35.0, 0.5, 2.5), 3.5),
+    "veer-right": (1.0, (-35.0, 0.5, 2.5), 3.5),
+    "u-turn": (1.0, (180.0, 1.0, 2.0), 4.2),
+}
 
 
 @dataclass
 class Motion:
     """Ground-truth motion for the frames with the person: markers (F, 13, 3), part poses, the
-    body, joint angles (F, J) or None, and the start description."""
+    body, joint angles (F, J) or None, the start description, and for mocap walks the whole
+    skeleton's points (F, len(person_render.POINT_NAMES), 3)."""
 
     markers: np.ndarray
     segments: BodySegments
     body: BodyDescription
     joint_angles: np.ndarray | None
     start: dict = field(default_factory=dict)
+    points: np.ndarray | None = None
 
 
 # ---- scene --------------------------------------------------------------------------------
@@ -256,35 +285,68 @@ def _start_from_markers(markers: np.ndarray, rate: float, first_frame: int, spee
     }}
 
 
+def user_start(start: dict, rng: np.random.Generator) -> dict:
+    """The start description as a person would write it after a look at the first frames: position
+    within 5 cm, heading within 5 degrees, speed within 10 %, no step length."""
+    s = dict(start["start"])
+    radius, angle = 0.05 * np.sqrt(rng.random()), rng.uniform(0, 2 * np.pi)
+    s["position"] = [round(float(s["position"][0] + radius * np.cos(angle)), 3),
+                     round(float(s["position"][1] + radius * np.sin(angle)), 3)]
+    s["heading"] = round(float(s["heading"] + np.radians(rng.uniform(-5, 5))), 3)
+    s["speed"] = round(float(s["speed"] * rng.uniform(0.9, 1.1)), 2)
+    s.pop("step_length", None)
+    return {"start": s}
+
+
+def tape_measured(body: BodyDescription, rng: np.random.Generator) -> BodyDescription:
+    """Segment lengths as a tape measure gives them: each off by up to about 5 % (1 sigma 3 %)."""
+    from dataclasses import replace
+
+    names = ("upper_leg_length", "lower_leg_length", "hip_width", "torso_length", "foot_length")
+    return replace(body, **{n: round(getattr(body, n) * float(np.clip(1 + 0.03 * rng.standard_normal(), 0.94, 1.06)), 3)
+                            for n in names})
+
+
 def mocap_motion(config: SynthConfig, start_xy: np.ndarray, heading: float) -> Motion:
-    """Motion from a CMU walk: resampled, turned and moved so that it starts at ``start_xy``
-    walking along ``heading``; the body sizes are measured from the markers."""
+    """Motion from a CMU walk (with arms, ``Motion.points``): floor levelled, resampled, played faster or
+    slower and turned as ``config.variant`` asks, repeated as long as ``config.frames`` needs, then turned
+    and moved so that it starts at ``start_xy`` walking along ``heading``; body sizes measured from the
+    markers."""
     from awalker_tracker.model.mocap import body_from_markers, load_mocap, segments_from_markers
+
+    from awalker_tools import mocap_motion as variants
 
     asf, amc = config.mocap  # type: ignore[misc]
     trial = load_mocap(asf, amc).resample(config.rate)
-    markers = trial.markers
-    if markers.shape[0] < config.frames:
-        print(f"synth: {amc} holds {markers.shape[0]} frames at {config.rate:g} Hz; using all of them "
-              f"(--frames {config.frames} asked for more)", file=sys.stderr)
-    markers = markers[: config.frames]
-    pelvis = markers[:, _M["pelvis"], :2]
-    travel = pelvis[-1] - pelvis[0]
-    angle = heading - np.arctan2(travel[1], travel[0])
+    rate = config.rate
+    points = variants.level_floor(np.concatenate([trial.markers, trial.extra], axis=1), rate)
+    warp, turn, _ = VARIANTS[config.variant]
+    if warp != 1.0:
+        points = variants.time_warp(points, warp)
+    points = variants.loop_to_duration(points, rate, (config.frames - 1) / rate)
+    # face the start heading: the direction of the first half second
+    pelvis = points[:, _M["pelvis"], :2]
+    ahead = pelvis[min(len(pelvis) - 1, int(0.5 * rate))] - pelvis[0]
+    angle = heading - np.arctan2(ahead[1], ahead[0])
     c, s = np.cos(angle), np.sin(angle)
     rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    centred = markers - np.append(pelvis[0], 0.0)
-    markers = centred @ rotation.T + np.append(start_xy, 0.0)
-    markers[..., 2] -= min(0.0, float(np.percentile(markers[:, 9:, 2].min(axis=1), 5)))  # feet not below floor
+    points = (points - np.append(pelvis[0], 0.0)) @ rotation.T + np.append(start_xy, 0.0)
+    if turn is not None:
+        points = variants.bend(points, rate, np.radians(turn[0]), turn[1], turn[2])
+    points = points[: config.frames]
+    points[..., 2] -= min(0.0, float(np.percentile(points[:, 9:13, 2].min(axis=1), 5)))  # feet not below floor
+    markers = np.ascontiguousarray(points[:, : len(MARKER_NAMES)])
     body = body_from_markers(markers)
-    duration = (len(markers) - 1) / config.rate
-    speed = float(np.linalg.norm(markers[-1, 0, :2] - markers[0, 0, :2]) / duration)
-    # Step length: distance between the feet along the path at their widest, averaged.
+    first_second = min(len(markers) - 1, int(rate))
+    speed = float(np.linalg.norm(markers[first_second, 0, :2] - markers[0, 0, :2]) / (first_second / rate))
+    # Step length: distance between the feet along the path at their widest over the first 1.5 s, plus
+    # ankles -> feet contact points, roughly
+    early = markers[: int(1.5 * rate) + 1]
     direction = np.array([np.cos(heading), np.sin(heading)])
-    spread = np.abs((markers[:, _M["left_ankle"], :2] - markers[:, _M["right_ankle"], :2]) @ direction)
-    step = float(np.percentile(spread, 95)) + 0.1  # ankles -> feet contact points, roughly
-    start = _start_from_markers(markers, config.rate, config.background_frames, speed, step)
-    return Motion(markers, segments_from_markers(body, markers), body, None, start)
+    spread = np.abs((early[:, _M["left_ankle"], :2] - early[:, _M["right_ankle"], :2]) @ direction)
+    step = float(np.percentile(spread, 95)) + 0.1
+    start = _start_from_markers(markers, rate, config.background_frames, speed, step)
+    return Motion(markers, segments_from_markers(body, markers), body, None, start, points)
 
 
 def _speed_schedule(config: SynthConfig) -> np.ndarray:
@@ -361,6 +423,9 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
     else:
         motion = walker_motion(config, start_xy, heading, rng)
     path_centre = 0.5 * (motion.markers[0, 0, :2] + motion.markers[-1, 0, :2])
+    if VARIANTS[config.variant][1] is not None:      # a turning walk: the middle of the ground it covers
+        pelvis = motion.markers[:, 0, :2]
+        path_centre = 0.5 * (pelvis.min(axis=0) + pelvis.max(axis=0))
     cameras = make_cameras(config.cameras, config.width, config.height, path_centre)
     textures = make_textures(rng)
     rooms = [render_room(cam, textures) for cam in cameras]
@@ -381,22 +446,33 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
     gain = 1.0 - config.lighting_change * 0.5 * (1 - np.cos(2 * np.pi * phase))
     tint = np.stack([1 + 0.04 * np.sin(2 * np.pi * phase), np.ones(total), 1 - 0.04 * np.sin(2 * np.pi * phase)], 1)
 
+    given_body = tape_measured(motion.body, rng) if config.tape_measure else motion.body
+    given_start = user_start(motion.start, rng) if config.user_start else motion.start
+    painters = {}
+    if config.person == "dressed":
+        outfit = Outfit.random(rng)
+        painters = {cam.name: PersonRenderer(cam, outfit) for cam in cameras}
     save_calibration(cameras, out / "calibration.yaml")
-    (out / "body.yaml").write_text(motion.body.to_yaml_text())
-    start_text = yaml.safe_dump(motion.start, sort_keys=False)
+    (out / "body.yaml").write_text(given_body.to_yaml_text())
+    start_text = yaml.safe_dump(given_start, sort_keys=False)
     (out / "start.yaml").write_text(start_text)
     csv_lines = ["frame,stamp_ns,marker,x,y,z"]
     overlays: dict[str, Path] = {}
     with bagio.SequenceWriter(bag_path, cameras, storage=config.storage, compressed=config.compressed,
                               image_format=config.image_format) as writer:
         writer.write_text(bagio.START_DESCRIPTION_TOPIC, int(stamps[0]), start_text)
-        writer.write_text(bagio.BODY_DESCRIPTION_TOPIC, int(stamps[0]), motion.body.to_yaml_text())
+        writer.write_text(bagio.BODY_DESCRIPTION_TOPIC, int(stamps[0]), given_body.to_yaml_text())
         for frame in range(total):
             person = frame - config.background_frames
             images = {}
             for cam, room in zip(cameras, rooms):
                 base = room
-                if person >= 0:
+                if person >= 0 and painters:
+                    base, depth = painters[cam.name].render(motion.points[person], room)
+                    if cam.name in occluders:
+                        hidden = occluders[cam.name] < depth
+                        base[hidden] = room[hidden]
+                elif person >= 0:
                     segments = BodySegments(motion.segments.origin[person][None], motion.segments.rotation[person][None])
                     result = render(motion.body, segments, cam)
                     if cam.name in occluders:

@@ -203,13 +203,24 @@ def forward_kinematics(skeleton: Skeleton, root: np.ndarray, values: dict[str, n
     return out
 
 
+# Skeleton points beyond the 13 markers (arms, neck, head top), for renderers that draw a whole person:
+# name -> the ASF bone whose end it is.
+EXTRA_POINTS: dict[str, str] = {
+    "left_shoulder": "lclavicle", "right_shoulder": "rclavicle", "left_elbow": "lhumerus",
+    "right_elbow": "rhumerus", "left_wrist": "lradius", "right_wrist": "rradius",
+    "left_hand": "lhand", "right_hand": "rhand", "neck": "lowerneck", "head_top": "head",
+}
+
+
 @dataclass
 class MocapTrial:
-    """Marker trajectories (F, 13, 3) in the world frame (z up, m) at ``rate`` Hz."""
+    """Marker trajectories (F, 13, 3) in the world frame (z up, m) at ``rate`` Hz, and the skeleton's
+    other points (F, len(EXTRA_POINTS), 3) in ``EXTRA_POINTS`` order (arms, neck, head top)."""
 
     markers: np.ndarray
     rate: float
     source: str = ""
+    extra: np.ndarray | None = None
 
     @property
     def duration(self) -> float:
@@ -226,9 +237,14 @@ class MocapTrial:
             raise ValueError(f"resample: rate must be > 0 Hz, got {rate}")
         times = np.arange(0.0, self.duration + 1e-9, 1.0 / rate)
         source = np.arange(self.markers.shape[0]) / self.rate
-        flat = self.markers.reshape(self.markers.shape[0], -1)
-        resampled = np.stack([np.interp(times, source, flat[:, k]) for k in range(flat.shape[1])], axis=1)
-        return MocapTrial(resampled.reshape(len(times), *self.markers.shape[1:]), float(rate), self.source)
+
+        def interp(points: np.ndarray) -> np.ndarray:
+            flat = points.reshape(points.shape[0], -1)
+            out = np.stack([np.interp(times, source, flat[:, k]) for k in range(flat.shape[1])], axis=1)
+            return out.reshape(len(times), *points.shape[1:])
+
+        return MocapTrial(interp(self.markers), float(rate), self.source,
+                          None if self.extra is None else interp(self.extra))
 
 
 def load_mocap(asf: str | Path, amc: str | Path, heel_offset: float = 0.05) -> MocapTrial:
@@ -254,7 +270,8 @@ def load_mocap(asf: str | Path, amc: str | Path, heel_offset: float = 0.05) -> M
     ], axis=1)
     assert markers_asf.shape[1] == len(MARKER_NAMES)
     markers = (markers_asf @ _ASF_TO_WORLD.T) * skeleton.scale
-    return MocapTrial(markers, MOCAP_RATE, f"{Path(asf).name}+{Path(amc).name}")
+    extra = np.stack([end[bone] for bone in EXTRA_POINTS.values()], axis=1) @ _ASF_TO_WORLD.T * skeleton.scale
+    return MocapTrial(markers, MOCAP_RATE, f"{Path(asf).name}+{Path(amc).name}", extra)
 
 
 def body_from_markers(markers: np.ndarray, template: BodyDescription | None = None) -> BodyDescription:

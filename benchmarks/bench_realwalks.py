@@ -1,0 +1,152 @@
+"""Tracking real human walks the tracker did not draw (issue 10): the development benchmark.
+
+Sequences: the two CMU subject-07 walks (07_01, 07_02; test/data/mocap) as `awalker synth
+--person dressed` renders them (arms, hair, striped shirt, jeans of one colour, shoes, shading, a
+contact shadow, blur and sensor noise; per-person widths), in the variants straight, slow / fast
+(time-warped -/+20 %), veer-left / veer-right (35 degrees over 2.5 s) and u-turn (180 degrees within
+2 s), seen by one camera or two, with start descriptions as a user would write them (--user-start:
+position within 5 cm, heading within 5 degrees, speed within 10 %, no step length) and tape-measured
+body sizes (--tape-measure). Each is tracked over tracker seeds with `awalker track` and scored with
+`awalker eval`; "dead reckoning" is the tracker with the image likelihood switched off
+(--likelihood-scale 1e-9, no recovery): the motion prior alone from the start description.
+
+Per sequence x setting x seed: absolute and relative median errors (mm, pelvis, thorax, hips, knees,
+ankles), the facing-direction error one second after a turn ends (degrees), left/right swaps, frames
+fallen or off the person, whether the run ended on the person, and recovery counts. Summary: median
+and worst over seeds. Prints ONE JSON document; progress and tables on stderr.
+
+    .venv/bin/python benchmarks/bench_realwalks.py --out bench_rw/                 # everything (~40 min)
+    .venv/bin/python benchmarks/bench_realwalks.py --out bench_rw/ --walks 07_01 --variants straight u-turn \\
+        --settings mono --seeds 0 1
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+MOCAP_DIR = REPO_ROOT / "test" / "data" / "mocap"
+sys.path.insert(0, str(REPO_ROOT / "benchmarks"))
+
+from bench_accuracy import evaluate_run  # noqa: E402  (one `awalker eval` wrapper for both benchmarks)
+
+WALKS = ("07_01", "07_02")
+VARIANT_NAMES = ("straight", "slow", "fast", "veer-left", "veer-right", "u-turn")
+SETTINGS = {"mono": 1, "two": 2}
+
+
+def log(text: str) -> None:
+    print(f"bench_realwalks: {text}", file=sys.stderr, flush=True)
+
+
+def sequence(root: Path, walk: str, variant: str, cameras: int, size: tuple[int, int], rate: float,
+             background: int) -> Path:
+    """The bag of one sequence, synthesised on first use (kept in ``root``)."""
+    from awalker_tools.synth import VARIANTS, SynthConfig, synthesise
+
+    seq = root / f"{walk}_{variant}_{cameras}cam"
+    bag = seq / "synth.bag"
+    if not bag.exists():
+        frames = int(np.ceil(max(3.0, VARIANTS[variant][2] + 0.2) * rate))
+        synthesise(SynthConfig(out_dir=seq, cameras=cameras, rate=rate, frames=frames, background_frames=background,
+                               seed=1, mocap=(MOCAP_DIR / "07.asf", MOCAP_DIR / f"{walk}.amc"), width=size[0],
+                               height=size[1], person="dressed", variant=variant, user_start=True,
+                               tape_measure=True), progress=False)
+    return bag
+
+
+def score(result: dict, variant: str, rate: float) -> dict:
+    """The reported figures of one run."""
+    from awalker_tools.synth import VARIANTS
+
+    walk = result["walk"]
+    entry = {"absolute_median_mm": round(result["absolute_mm"]["median"], 1),
+             "relative_median_mm": round(result["relative_mm"]["median"], 1),
+             "heading_median_deg": round(walk["heading_error_deg"]["median"], 1),
+             "swap_fraction": round(walk["swap_fraction"], 3), "fallen_frames": walk["fallen_frames"],
+             "off_person_frames": walk["off_person_frames"],
+             "ended_on_person": not (walk["end"]["fallen"] or walk["end"]["off_person"]),
+             "recovery": result.get("recovery", {})}
+    turn = VARIANTS[variant][1]
+    if turn is not None:
+        after = int(round((turn[1] + turn[2] + 1.0) * rate))       # frames after the person appears
+        headings = walk["per_frame_heading_error_deg"]
+        entry["heading_1s_after_turn_deg"] = round(headings[min(after, len(headings) - 1)], 1)
+    return entry
+
+
+def main(argv: list[str] | None = None) -> int:
+    from awalker_tools.pipeline import TrackOptions, run_tracking
+
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", type=Path, required=True, help="sequences and runs are kept (and reused) here")
+    parser.add_argument("--walks", nargs="+", choices=WALKS, default=list(WALKS))
+    parser.add_argument("--variants", nargs="+", choices=VARIANT_NAMES, default=list(VARIANT_NAMES))
+    parser.add_argument("--settings", nargs="+", choices=list(SETTINGS), default=list(SETTINGS))
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4], help="tracker seeds")
+    parser.add_argument("--particles", type=int, default=1000)
+    parser.add_argument("--size", nargs=2, type=int, default=(320, 240), metavar=("W", "H"))
+    parser.add_argument("--rate", type=float, default=30.0, choices=(30.0, 60.0))
+    parser.add_argument("--background-frames", type=int, default=15)
+    parser.add_argument("--no-dead-reckoning", action="store_true", help="skip the no-image baseline")
+    args = parser.parse_args(argv)
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+    args.out.mkdir(parents=True, exist_ok=True)
+    report: dict = {"benchmark": "realwalks", "settings": {
+        "particles": args.particles, "size": list(args.size), "rate": args.rate, "seeds": args.seeds,
+        "background_frames": args.background_frames, "cpus": os.cpu_count()}, "runs": {}, "summary": {}}
+    jobs = [(w, v, s) for w in args.walks for v in args.variants for s in args.settings]
+    for k, (walk, variant, setting) in enumerate(jobs):
+        name = f"{walk} {variant} {setting}"
+        started = time.monotonic()
+        bag = sequence(args.out / "sequences", walk, variant, SETTINGS[setting], tuple(args.size), args.rate,
+                       args.background_frames)
+        modes = [("tracker", seed, True) for seed in args.seeds]
+        if not args.no_dead_reckoning:
+            modes.append(("dead_reckoning", 0, False))
+        for mode, seed, images in modes:
+            run_dir = args.out / "runs" / f"{walk}_{variant}_{setting}_{mode}_s{seed}"
+            if not (run_dir / "eval.json").exists():
+                with contextlib.redirect_stdout(sys.stderr):
+                    run_tracking(TrackOptions(bag=bag, out=run_dir, particles=args.particles, seed=seed,
+                                              likelihood_scale=0.1 if images else 1e-9, recovery=images,
+                                              overlays=False, quiet=True))
+                evaluate_run(run_dir)
+            result = json.loads((run_dir / "eval.json").read_text())
+            report["runs"].setdefault(name, {}).setdefault(mode, {})[seed] = score(result, variant, args.rate)
+        runs = report["runs"][name]
+        tracked = list(runs["tracker"].values())
+        summary = {key: {"median": float(np.median([r[key] for r in tracked])),
+                         "worst": float(np.max([r[key] for r in tracked]))}
+                   for key in ("absolute_median_mm", "relative_median_mm")}
+        if "heading_1s_after_turn_deg" in tracked[0]:
+            values = [r["heading_1s_after_turn_deg"] for r in tracked]
+            summary["heading_1s_after_turn_deg"] = {"median": float(np.median(values)), "worst": float(np.max(values))}
+        summary["runs_ended_on_person"] = f"{sum(r['ended_on_person'] for r in tracked)}/{len(tracked)}"
+        summary["reacquisitions"] = [r["recovery"].get("reacquisitions", 0) for r in tracked]
+        summary["swap_fraction_median"] = float(np.median([r["swap_fraction"] for r in tracked]))
+        if "dead_reckoning" in runs:
+            summary["dead_reckoning_absolute_median_mm"] = runs["dead_reckoning"][0]["absolute_median_mm"]
+        report["summary"][name] = summary
+        log(f"[{k + 1}/{len(jobs)}] {name}: absolute {summary['absolute_median_mm']['median']:.0f} "
+            f"(worst {summary['absolute_median_mm']['worst']:.0f}), relative "
+            f"{summary['relative_median_mm']['median']:.0f} (worst {summary['relative_median_mm']['worst']:.0f}) mm"
+            + (f", heading 1 s after the turn {summary['heading_1s_after_turn_deg']['median']:.0f} deg"
+               if "heading_1s_after_turn_deg" in summary else "")
+            + f", on the person at the end {summary['runs_ended_on_person']}"
+            + (f", dead reckoning {summary['dead_reckoning_absolute_median_mm']:.0f} mm"
+               if "dead_reckoning_absolute_median_mm" in summary else "")
+            + f" ({time.monotonic() - started:.0f} s)")
+    print(json.dumps(report, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,132 @@
+"""Variants of a motion-capture walk for test sequences: level floor, longer walks, speed and turns.
+
+All functions work on points (F, P, 3) in the world frame (z up, m) at ``rate`` Hz, with the 13
+markers (``MARKER_NAMES``) first, so that any other skeleton points (arms, head) move with them.
+
+- ``level_floor``: CMU walks drift in height (07_01: the pelvis rises 8 cm over 3.6 m); the lowest
+  foot point per frame, fitted by a straight line in time over its lower envelope, is moved to z = 0.
+- ``loop_to_duration``: repeats the walk from a frame that matches a later one (pose relative to the
+  pelvis, and velocity), continuing the ground translation, until it lasts long enough.
+- ``time_warp``: plays the walk faster or slower (a factor of 1.2 is 20 % faster: the same steps,
+  taken more often).
+- ``bend``: turns the walk's heading progressively by ``angle`` over ``[start, start + duration]`` s.
+  People turn by pivoting on the stance foot, so the whole body is rotated about the current stance
+  foot's ground contact, which therefore stays put (no foot skate added); when the stance foot
+  changes, the pivot moves to the new one (the transform stays continuous).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from awalker_tracker.model.body import MARKER_NAMES
+
+_M = {n: i for i, n in enumerate(MARKER_NAMES)}
+FOOT_POINTS = {"left": [_M["left_heel"], _M["left_toe"]], "right": [_M["right_heel"], _M["right_toe"]]}
+
+
+def _rotation_z(angle: np.ndarray) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    out = np.zeros(np.shape(angle) + (3, 3))
+    out[..., 0, 0], out[..., 0, 1], out[..., 1, 0], out[..., 1, 1], out[..., 2, 2] = c, -s, s, c, 1.0
+    return out
+
+
+def level_floor(points: np.ndarray, rate: float) -> np.ndarray:
+    """Points with the floor under the feet moved to z = 0 (a straight-line fit in time to the lowest
+    foot point, using the frames in the lower quarter of its residuals)."""
+    feet = points[:, FOOT_POINTS["left"] + FOOT_POINTS["right"], 2].min(axis=1)
+    t = np.arange(len(points)) / rate
+    fit = np.polyfit(t, feet, 1)
+    for _ in range(3):            # the swing phase lifts nothing below the foot: keep the lower envelope
+        residual = feet - np.polyval(fit, t)
+        low = residual <= np.percentile(residual, 25)
+        fit = np.polyfit(t[low], feet[low], 1)
+    out = points.copy()
+    out[..., 2] -= np.polyval(fit, t)[:, None]
+    return out
+
+
+def _pose_distance(points: np.ndarray, i: np.ndarray, j: int, rate: float) -> np.ndarray:
+    """Distance between the pelvis-relative poses (and velocities) of frames ``i`` and frame ``j``."""
+    pelvis = points[:, _M["pelvis"]] * np.array([1.0, 1.0, 0.0])
+    relative = points[:, : len(MARKER_NAMES)] - pelvis[:, None]
+    velocity = np.gradient(points[:, : len(MARKER_NAMES)], axis=0) * rate
+    return (np.linalg.norm(relative[i] - relative[j], axis=-1).mean(axis=-1)
+            + 0.1 * np.linalg.norm(velocity[i] - velocity[j], axis=-1).mean(axis=-1))
+
+
+def loop_to_duration(points: np.ndarray, rate: float, duration: float) -> np.ndarray:
+    """At least ``duration`` s of walking: the stretch between two matching frames repeated, moved on
+    by the ground distance it covers (the walk must be roughly straight)."""
+    frames = int(round(duration * rate)) + 1
+    if len(points) >= frames:
+        return points[:frames]
+    n = len(points)
+    end = n - 1 - int(0.1 * n)                                   # a little before the end (end effects)
+    candidates = np.arange(int(0.05 * n), end - int(0.6 * rate))  # the loop lasts at least 0.6 s
+    start = int(candidates[np.argmin(_pose_distance(points, candidates, end, rate))])
+    out = [points[: end + 1]]
+    shift = points[end, _M["pelvis"]] - points[start, _M["pelvis"]]
+    shift[2] = 0.0
+    total = end + 1
+    k = 1
+    while total < frames:
+        piece = points[start + 1: end + 1] + k * shift
+        out.append(piece)
+        total += len(piece)
+        k += 1
+    return np.concatenate(out)[:frames]
+
+
+def time_warp(points: np.ndarray, factor: float) -> np.ndarray:
+    """The walk played ``factor`` times as fast (linear interpolation in time; same frame rate)."""
+    if factor <= 0:
+        raise ValueError(f"time_warp: factor must be > 0, got {factor}")
+    source = np.arange(len(points))
+    times = np.arange(0.0, len(points) - 1 + 1e-9, factor)
+    flat = points.reshape(len(points), -1)
+    out = np.stack([np.interp(times, source, flat[:, k]) for k in range(flat.shape[1])], axis=1)
+    return out.reshape(len(times), *points.shape[1:])
+
+
+def stance_feet(points: np.ndarray) -> np.ndarray:
+    """(F,) 0 = left, 1 = right: the foot whose lowest point is lower (with 1 cm hysteresis)."""
+    heights = np.stack([points[:, FOOT_POINTS[side], 2].min(axis=1) for side in ("left", "right")], axis=1)
+    stance = np.zeros(len(points), np.int8)
+    current = int(np.argmin(heights[0]))
+    for f in range(len(points)):
+        other = 1 - current
+        if heights[f, other] < heights[f, current] - 0.01:
+            current = other
+        stance[f] = current
+    return stance
+
+
+def bend(points: np.ndarray, rate: float, angle: float, start: float, duration: float) -> np.ndarray:
+    """The walk turned left by ``angle`` rad (right if negative), smoothly over ``duration`` s from ``start`` s,
+    pivoting on the stance foot (module docstring)."""
+    t = np.arange(len(points)) / rate
+    ramp = np.clip((t - start) / max(duration, 1e-9), 0.0, 1.0)
+    heading = angle * (0.5 - 0.5 * np.cos(np.pi * ramp))     # smooth start and end
+    stance = stance_feet(points)
+    out = np.empty_like(points)
+    pivot = None
+    offset = None            # T(p) = R(heading) (p - pivot) + offset
+    for f in range(len(points)):
+        contact = points[f, FOOT_POINTS["left" if stance[f] == 0 else "right"]].mean(axis=0) * np.array([1, 1, 0])
+        rotation = _rotation_z(heading[f])
+        if pivot is None:
+            pivot, offset = contact, contact.copy()
+        elif f > 0 and stance[f] != stance[f - 1]:
+            # the new stance foot becomes the pivot; where the transform of the last frame puts it
+            previous = _rotation_z(heading[f - 1])
+            offset = previous @ (contact - pivot) + offset
+            pivot = contact
+        out[f] = (points[f] - pivot) @ rotation.T + offset
+    return out
+
+
+def facing(points: np.ndarray) -> np.ndarray:
+    """(F,) heading (rad) the body faces: the hip line turned by +90 degrees."""
+    across = points[:, _M["right_hip"], :2] - points[:, _M["left_hip"], :2]
+    return np.arctan2(across[:, 0], -across[:, 1])
