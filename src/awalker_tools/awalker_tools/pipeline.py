@@ -26,7 +26,6 @@ import yaml
 from awalker_tracker.errors import InputError
 from awalker_tracker.inference.tracker import StartDescription
 from awalker_tracker.model.body import BodyDescription
-from awalker_tracker.vision.extent import ExtentConfig
 
 from awalker_tools import evaluation
 
@@ -48,7 +47,6 @@ class TrackOptions:
     seed: int = 0
     likelihood_scale: float = 0.1
     auto_start: bool = False        # ignore any start description and find the walking person (also when none exists)
-    extent_weight: float = ExtentConfig.weight      # silhouette-extent term (vision/extent.py); 0: the paper's likelihood alone
     recovery: bool = True           # re-seed fallen walkers and re-acquire a lost track (inference/recovery.py)
     overlays: bool = True
     storage: str = "mcap"
@@ -207,7 +205,6 @@ def run_tracking(options: TrackOptions) -> TrackResult:
             Parameter("num_particles", value=int(options.particles)), Parameter("lookahead", value=int(options.lookahead)),
             Parameter("trust", value=float(options.trust)), Parameter("seed", value=int(options.seed)),
             Parameter("likelihood_scale", value=float(options.likelihood_scale)),
-            Parameter("extent_weight", value=float(options.extent_weight)),
             Parameter("reseed_fallen", value=bool(options.recovery)), Parameter("reacquire", value=bool(options.recovery)),
             Parameter("idle_flush_s", value=1.0e9)])
         tracker.keep_summaries = True
@@ -287,7 +284,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     (out / RUN_FILE).write_text(yaml.safe_dump({
         "input": str(bag.resolve()), "start_source": start_src, "body_source": body_src,
         "particles": options.particles, "lookahead": options.lookahead, "trust": options.trust, "seed": options.seed,
-        "likelihood_scale": options.likelihood_scale, "recovery": options.recovery, "extent_weight": options.extent_weight,
+        "likelihood_scale": options.likelihood_scale, "recovery": options.recovery,
         "frames": result.frames, "posteriors": result.summaries, "seconds": round(result.seconds, 3),
         "seconds_in_filter": round(result.seconds_in_filter, 3), "sync_issues": result.sync_issues,
         "features": result.features, "recorded": result.recorded}, sort_keys=False))

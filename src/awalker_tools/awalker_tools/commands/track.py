@@ -5,7 +5,6 @@ import argparse
 from pathlib import Path
 
 from awalker_tracker.errors import InputError
-from awalker_tracker.vision.extent import ExtentConfig
 
 
 def run(args: argparse.Namespace) -> int:
@@ -17,8 +16,6 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--likelihood-scale must be > 0, got {args.likelihood_scale}")
     if not 0.0 <= args.trust <= 1.0:
         raise InputError(f"--trust (gamma) must lie in [0, 1], got {args.trust}")
-    if not args.extent_weight >= 0:
-        raise InputError(f"--extent-weight must be >= 0, got {args.extent_weight}")
     if args.lookahead < 0:
         raise InputError(f"--lookahead must be >= 0, got {args.lookahead}")
     run_tracking(TrackOptions(
@@ -26,7 +23,7 @@ def run(args: argparse.Namespace) -> int:
         body=Path(args.body) if args.body else None, particles=args.particles, lookahead=args.lookahead,
         trust=args.trust,
         seed=args.seed, likelihood_scale=args.likelihood_scale, recovery=not args.no_recovery,
-        auto_start=args.auto_start, extent_weight=args.extent_weight, overlays=not args.no_overlay,
+        auto_start=args.auto_start, overlays=not args.no_overlay,
         storage=args.storage,
         share_topics=args.share_topics))
     return 0
@@ -54,9 +51,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--likelihood-scale", type=float, default=0.1,
                         help="exponent on the image likelihood (tempering, default 0.1)")
-    parser.add_argument("--extent-weight", type=float, default=ExtentConfig.weight,
-                        help="weight of the silhouette-extent term: the body's feet and head rows against the "
-                             "person's foreground blob (default 0, off; try 4)")
     parser.add_argument("--no-recovery", action="store_true",
                         help="never re-seed fallen walkers or re-acquire a lost track (the exact filter of the paper)")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="result bag storage")

@@ -492,34 +492,20 @@ class ImageObservation:
     occlusion_masks: tuple[np.ndarray | None, ...] = ()
 
 
-def image_likelihood(body: BodyDescription, cameras: list[Any], extent: Any = "default") -> LikelihoodFn:
-    """The image likelihood of paper Sec. 5.1 (eq. 9-12) over ``cameras`` (vision.likelihood), plus the
-    silhouette-extent term (vision.extent; ``extent``: an ExtentConfig, None for the paper's terms alone),
-    divided by the number of cameras: with the tempering (``TrackerConfig.likelihood_scale``) this keeps the
-    weight of the evidence the same for any number of cameras. Summed as in eq. (12), two cameras at scale
-    0.1 lost the walker in 1 of 6 tracker seeds (205 mm); averaged, 17-51 mm (mean 30) over the same seeds."""
-    from awalker_tracker.vision.detection import person_blob
-    from awalker_tracker.vision.extent import ExtentConfig, extent_log_likelihood
+def image_likelihood(body: BodyDescription, cameras: list[Any]) -> LikelihoodFn:
+    """The image likelihood of paper Sec. 5.1 (eq. 9-12) over ``cameras`` (vision.likelihood), divided by the
+    number of cameras: with the tempering (``TrackerConfig.likelihood_scale``) this keeps the weight of the
+    evidence the same for any number of cameras. Summed as in eq. (12), two cameras at scale 0.1 lost the
+    walker in 1 of 6 tracker seeds (205 mm); averaged, 17-51 mm (mean 30) over the same seeds."""
     from awalker_tracker.vision.likelihood import SilhouetteMemo, log_likelihood
 
     parts = body.parts
     memo = SilhouetteMemo()   # each frame's poses are the next frame's previous poses
-    extent_config = ExtentConfig() if extent == "default" else extent
-    blobs_of: dict[int, tuple[Any, list[Any]]] = {}     # id(features) -> (features, blobs): a frame is scored often
 
     def loglik(prev: TrackerStates | None, states: TrackerStates, obs: ImageObservation) -> np.ndarray:
         prev_segments = states.pose.segments if prev is None else prev.pose.segments
         masks = list(obs.occlusion_masks) or [None] * len(cameras)
-        total = log_likelihood(parts, states.pose.segments, prev_segments, cameras, list(obs.features), masks,
-                               memo=memo)
-        if extent_config is not None and extent_config.weight > 0:
-            key = id(obs.features)
-            if key not in blobs_of or blobs_of[key][0] is not obs.features:
-                if len(blobs_of) > 64:
-                    blobs_of.clear()
-                blobs_of[key] = (obs.features, [person_blob(f, c.name) for f, c in zip(obs.features, cameras)])
-            total = total + extent_log_likelihood(states.pose.markers, states.pose.segments, parts, cameras,
-                                                  blobs_of[key][1], extent_config)
-        return total / len(cameras)
+        return log_likelihood(parts, states.pose.segments, prev_segments, cameras, list(obs.features), masks,
+                              memo=memo) / len(cameras)
 
     return loglik

@@ -43,7 +43,6 @@ from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.nodes.convert import camera_from_msgs, header, stamp_to_ns, summary_to_msg
 from awalker_tracker.nodes.features import features_from_msg
 from awalker_tracker.nodes.spin import run_node
-from awalker_tracker.vision.extent import ExtentConfig
 
 START_TOPIC = "/awalker/start_description"
 BODY_TOPIC = "/awalker/body_description"
@@ -91,8 +90,6 @@ class TrackerNode(Node):
                                        "images (inference/autostart.py)"))
         self.start_output = str(declare("start_output", "", "write the start description used (given or found) "
                                         "to this YAML file; empty: do not"))
-        self.extent_weight = float(declare("extent_weight", ExtentConfig.weight,
-                                           "weight of the silhouette-extent term (vision/extent.py); 0: off"))
         self.recovery = RecoveryConfig(
             reseed_fallen=bool(declare("reseed_fallen", True, "re-seed walkers that fall (inference/recovery.py)")),
             reacquire=bool(declare("reacquire", True, "re-acquire a lost track at the person seen in the images")))
@@ -290,7 +287,7 @@ class TrackerNode(Node):
         config = TrackerConfig(smc=self.smc_config, dt=dt, likelihood_scale=self.likelihood_scale,
                                recovery=self.recovery,
                                spread=AUTO_SPREAD if self.start_found_automatically else TrackerConfig.spread)
-        model = TrackerModel(body, self.start, image_likelihood(body, cameras, ExtentConfig(weight=self.extent_weight)),
+        model = TrackerModel(body, self.start, image_likelihood(body, cameras),
                              config, cameras=cameras)
         self.tracker = Tracker(model)
         self.get_logger().info(f"tracking with {self.smc_config.num_particles} particles, dt {dt * 1e3:.1f} ms, "
