@@ -104,8 +104,9 @@ def test_extractor_learns_from_the_median_when_no_background_frames_are_known():
 
 
 def test_lighting_changes_are_divided_out():
-    """The room darkens by 25 % with a tint after the background frames: with gain compensation the
-    background stays background and the walker stands out; without it the background does not."""
+    """The room brightens by 15-35 % with a tint after the background frames: with gain compensation the
+    background stays background and the walker stands out; without it the background does not (a
+    darkening the shadow model explains on its own: see test_shadows_are_background)."""
     import cv2
 
     from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
@@ -127,8 +128,27 @@ def test_lighting_changes_are_divided_out():
         for k in range(4):
             extractor.process(noisy(lit(clean, 1.0 - 0.03 * k), rng))
         extractor.process(lit(frames[0], 0.9))                      # learns the foreground
-        out = extractor.process(lit(frames[2], (0.72, 0.75, 0.8)))  # darker, bluish light
+        out = extractor.process(lit(frames[2], (1.35, 1.3, 1.15)))  # brighter, yellowish light
         best = out.llr.max(axis=0)
         results[compensate] = (np.mean(best[~body] < 0), np.mean(best[inner]))
     assert results[True][0] > 0.97 and results[True][1] > 5, results
     assert results[False][0] < 0.5, results
+
+
+def test_shadows_are_background():
+    """A patch of the background darkened to 60 % (a shadow) is background; one recoloured is not."""
+    from awalker_tracker.vision.background import BackgroundModel, fit_background, measurements
+
+    rng = np.random.default_rng(2)
+    clean = background_image(CAM)
+    model = fit_background(np.stack([measurements(noisy(clean, rng)) for _ in range(5)]))
+    frame = clean.astype(np.float32)
+    frame[100:140, 100:160] *= 0.6                                   # shadow
+    frame[100:140, 200:260] = frame[100:140, 200:260, ::-1]          # a different colour, same brightness
+    m = measurements(np.clip(frame, 0, 255).astype(np.uint8))
+    with_shadows = model.log_likelihood(m)
+    without = BackgroundModel(model.mean, model.covariance, shadows=False).log_likelihood(m)
+    lit = with_shadows[20:60, 20:60].mean()
+    assert with_shadows[105:135, 105:155].mean() > lit - 8          # explained, at the shadow prior's cost
+    assert without[105:135, 105:155].mean() < lit - 50
+    assert with_shadows[105:135, 205:255].mean() < lit - 50          # recoloured: still foreground

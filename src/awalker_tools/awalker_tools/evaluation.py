@@ -259,6 +259,7 @@ def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarra
         "estimate_feet": foot_plausibility(estimate, stance_left=stance_left),
         "truth_feet": foot_plausibility(truth),
         "walk": walk_quality(estimate, truth),
+        "gait": gait_comparison(estimate, truth, summary),
         "per_frame": {"frame": errors["frames"].tolist(), "stamp_ns": errors["stamps_ns"].tolist(),
                       "absolute_mm": errors["absolute_mm"].round(3).tolist(),
                       "relative_mm": errors["relative_mm"].round(3).tolist()},
@@ -281,6 +282,55 @@ def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarra
                 result["stance_correct_fraction"] = float(np.mean((p > 0.5) == l))
                 result["stance_scored_frames"] = len(known)
     return result
+
+
+GAIT_COLUMNS = ("index", "frame", "stamp_ns", "time_s", "foot", "x", "y", "step_length_m", "step_width_m",
+                "step_time_s", "stride_time_s", "cadence_steps_min", "speed_m_s")
+
+
+def track_steps(track: PoseTrack, stance_leg: np.ndarray | None = None) -> list:
+    """The steps of a pose track (``inference.gait``): from its stance legs (0 left / 1 right per frame)
+    when given (the tracker's own heel strikes), else from its heel markers."""
+    from awalker_tracker.inference import gait
+
+    from awalker_tracker.model.body import MARKER_NAMES
+
+    markers = _select(track, list(MARKER_NAMES), np.arange(len(track.frames)), "pose track")   # inference.gait's order
+    stance = gait.stance_from_heels(markers) if stance_leg is None else np.asarray(stance_leg)
+    return gait.steps(track.frames, track.stamps_ns, markers, stance)
+
+
+def write_gait(out: Path, track: PoseTrack, stance_leg: np.ndarray) -> list:
+    """gait.csv (one row per step, ``GAIT_COLUMNS``), gait.json (``inference.gait.summary``) and gait.png."""
+    import json
+
+    from awalker_tracker.inference import gait
+
+    from awalker_tools import plots
+
+    walk = track_steps(track, stance_leg)
+    with open(out / "gait.csv", "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=GAIT_COLUMNS)
+        writer.writeheader()
+        for row in gait.as_rows(walk):
+            writer.writerow({k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in row.items()})
+    (out / "gait.json").write_text(json.dumps(gait.summary(walk), indent=1))
+    plots.plot_gait(out / "gait.png", walk, track.marker("pelvis")[:, :2], title=f"footprints: {out.name}")
+    return walk
+
+
+def gait_comparison(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarray] | None) -> dict:
+    """Gait summaries of the estimate (its stance legs from summary.csv when there, else its heels) and of
+    the truth (its heels), and their comparison (``inference.gait.compare``)."""
+    from awalker_tracker.inference import gait
+
+    stance = None
+    if summary is not None:
+        lookup = dict(zip(summary["stamp_ns"].tolist(), summary["stance_leg"].tolist()))
+        if all(int(s) in lookup for s in estimate.stamps_ns):
+            stance = np.array([0 if lookup[int(s)] == "left" else 1 for s in estimate.stamps_ns])
+    est, true = track_steps(estimate, stance), track_steps(truth)
+    return {"estimate": gait.summary(est), "truth": gait.summary(true), "comparison": gait.compare(est, true)}
 
 
 def facing(track: PoseTrack, rows: np.ndarray) -> np.ndarray:
@@ -370,6 +420,17 @@ def format_table(result: dict[str, object], label: str = "") -> str:
         lines.append(f"last frame: pelvis {1000 * end['pelvis_ground_error_m']:.0f} mm off over the ground, heading "
                      f"{end['heading_error_deg']:.1f} deg off" + (", FALLEN" if end["fallen"] else "")
                      + (", OFF THE PERSON" if end["off_person"] else ""))
+    if "gait" in result:
+        g, c = result["gait"], result["gait"]["comparison"]
+        e, t = g["estimate"], g["truth"]
+
+        def fmt(v: object, f: str) -> str:
+            return format(v, f) if isinstance(v, (int, float)) else "-"
+        lines.append(f"gait: step length {fmt(e['step_length_m'], '.2f')} m (true {fmt(t['step_length_m'], '.2f')}), "
+                     f"cadence {fmt(e['cadence_steps_min'], '.0f')} steps/min (true {fmt(t['cadence_steps_min'], '.0f')}); "
+                     f"heel strikes matched {c['matched_strikes']}/{c['true_strikes']}, timing error "
+                     f"{fmt(c['timing_error_s_median'], '.3f')} s, step length error "
+                     f"{fmt(c['step_length_error_m_median'], '.3f')} m median")
     if "stance_correct_fraction" in result:
         lines.append(f"stance leg right on {100 * result['stance_correct_fraction']:.1f}% of "
                      f"{result['stance_scored_frames']} frames with one foot planted")

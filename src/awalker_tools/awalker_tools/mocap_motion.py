@@ -11,13 +11,15 @@ markers (``MARKER_NAMES``) first, so that any other skeleton points (arms, head)
   taken more often).
 - ``bend``: turns the walk's heading progressively by ``angle`` over ``[start, start + duration]`` s.
   People turn by pivoting on the stance foot, so the whole body is rotated about the current stance
-  foot's ground contact, which therefore stays put (no foot skate added); when the stance foot
-  changes, the pivot moves to the new one (the transform stays continuous).
+  foot's ground contact (its lower end, heel or toe), which therefore stays put (no foot skate
+  added); as the foot rolls, or the other heel strikes (``inference.gait.stance_from_heels``), the
+  pivot moves with the contact and the transform stays continuous.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from awalker_tracker.inference.gait import stance_from_heels
 from awalker_tracker.model.body import MARKER_NAMES
 
 _M = {n: i for i, n in enumerate(MARKER_NAMES)}
@@ -89,40 +91,24 @@ def time_warp(points: np.ndarray, factor: float) -> np.ndarray:
     return out.reshape(len(times), *points.shape[1:])
 
 
-def stance_feet(points: np.ndarray) -> np.ndarray:
-    """(F,) 0 = left, 1 = right: the foot whose lowest point is lower (with 1 cm hysteresis)."""
-    heights = np.stack([points[:, FOOT_POINTS[side], 2].min(axis=1) for side in ("left", "right")], axis=1)
-    stance = np.zeros(len(points), np.int8)
-    current = int(np.argmin(heights[0]))
-    for f in range(len(points)):
-        other = 1 - current
-        if heights[f, other] < heights[f, current] - 0.01:
-            current = other
-        stance[f] = current
-    return stance
-
-
 def bend(points: np.ndarray, rate: float, angle: float, start: float, duration: float) -> np.ndarray:
     """The walk turned left by ``angle`` rad (right if negative), smoothly over ``duration`` s from ``start`` s,
     pivoting on the stance foot (module docstring)."""
     t = np.arange(len(points)) / rate
     ramp = np.clip((t - start) / max(duration, 1e-9), 0.0, 1.0)
     heading = angle * (0.5 - 0.5 * np.cos(np.pi * ramp))     # smooth start and end
-    stance = stance_feet(points)
+    stance = stance_from_heels(points[:, : len(MARKER_NAMES)])
     out = np.empty_like(points)
-    pivot = None
-    offset = None            # T(p) = R(heading) (p - pivot) + offset
+    pivot = offset = None          # T_f(p) = R(heading_f) (p - pivot_f) + offset_f
     for f in range(len(points)):
-        contact = points[f, FOOT_POINTS["left" if stance[f] == 0 else "right"]].mean(axis=0) * np.array([1, 1, 0])
-        rotation = _rotation_z(heading[f])
+        foot = points[f, FOOT_POINTS["left" if stance[f] == 0 else "right"]]
+        contact = foot[np.argmin(foot[:, 2])] * np.array([1.0, 1.0, 0.0])   # heel or toe, the lower
         if pivot is None:
-            pivot, offset = contact, contact.copy()
-        elif f > 0 and stance[f] != stance[f - 1]:
-            # the new stance foot becomes the pivot; where the transform of the last frame puts it
-            previous = _rotation_z(heading[f - 1])
-            offset = previous @ (contact - pivot) + offset
-            pivot = contact
-        out[f] = (points[f] - pivot) @ rotation.T + offset
+            offset = contact.copy()
+        else:   # the new pivot goes where the last frame's transform put it: continuous, and the contact stays
+            offset = _rotation_z(heading[f - 1]) @ (contact - pivot) + offset
+        pivot = contact
+        out[f] = (points[f] - pivot) @ _rotation_z(heading[f]).T + offset
     return out
 
 

@@ -295,7 +295,8 @@ def run_tracking(options: TrackOptions) -> TrackResult:
 
 
 def write_outputs(out: Path, trajectory: Any, summaries: list[Any]) -> None:
-    """poses.csv (MAP trajectory) and summary.csv (per-frame posterior summaries)."""
+    """poses.csv (MAP trajectory), summary.csv (per-frame posterior summaries) and the gait analytics of
+    the MAP trajectory: gait.csv (one row per step), gait.json (summary) and gait.png (footprints)."""
     track = evaluation.PoseTrack(trajectory.frames, trajectory.stamps_ns, tuple(trajectory.marker_names),
                                  trajectory.markers)
     evaluation.write_poses_csv(out / "poses.csv", track)
@@ -308,6 +309,7 @@ def write_outputs(out: Path, trajectory: Any, summaries: list[Any]) -> None:
              "reseeded_fallen": s.reseeded_fallen, "reacquired": s.reacquired}
             for s in summaries]
     evaluation.write_summary_csv(out / "summary.csv", rows)
+    evaluation.write_gait(out, track, trajectory.stance_leg)
 
 
 def write_overlays(bag: Path, out: Path, camera: Any, body: BodyDescription, fps: float | None = None) -> Path | None:

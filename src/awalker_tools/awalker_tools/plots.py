@@ -58,3 +58,47 @@ def plot_speed_and_stance(path: Path, frames: np.ndarray, speed: np.ndarray, spe
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return Path(path)
+
+
+def plot_gait(path: Path, steps: list, pelvis_xy: np.ndarray, true_steps: list | None = None,
+              true_pelvis_xy: np.ndarray | None = None, title: str = "") -> Path:
+    """Footprints seen from above over the ground plane with the pelvis path (left), and step length,
+    step time and speed per step (right). ``steps``: inference.gait.Step lists."""
+    plt = _pyplot()
+    fig = plt.figure(figsize=(11, 4.5))
+    top_view = fig.add_subplot(1, 2, 1)
+    colours = {"left": "tab:blue", "right": "tab:red"}
+    if true_steps is not None:
+        top_view.plot(true_pelvis_xy[:, 0], true_pelvis_xy[:, 1], color="0.6", lw=1, label="true path")
+        for s in true_steps:
+            top_view.plot(s.x, s.y, marker="s", ms=9, mfc="none", mec=colours[s.foot], alpha=0.6)
+    top_view.plot(pelvis_xy[:, 0], pelvis_xy[:, 1], color="k", lw=1.5, label="estimated path")
+    for s in steps:
+        top_view.plot(s.x, s.y, marker="o", ms=6, color=colours[s.foot])
+        top_view.annotate(str(s.index), (s.x, s.y), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    top_view.plot([], [], "o", color=colours["left"], label="left heel strike")
+    top_view.plot([], [], "o", color=colours["right"], label="right heel strike")
+    if true_steps is not None:
+        top_view.plot([], [], "s", mfc="none", mec="0.4", label="true strikes")
+    top_view.set_aspect("equal", adjustable="datalim")
+    top_view.set_xlabel("x (m)")
+    top_view.set_ylabel("y (m)")
+    top_view.grid(alpha=0.3)
+    top_view.legend(fontsize=7)
+    top_view.set_title(title or "footprints from above")
+    per_step = fig.add_subplot(1, 2, 2)
+    t = [s.time_s for s in steps]
+    per_step.plot(t, [s.step_length_m for s in steps], "o-", label="step length (m)")
+    per_step.plot(t, [s.step_time_s for s in steps], "s-", label="step time (s)")
+    per_step.plot(t, [s.speed_m_s for s in steps], "^-", label="speed (m/s)")
+    if true_steps is not None:
+        per_step.plot([s.time_s for s in true_steps], [s.step_length_m for s in true_steps], "o--", color="0.5",
+                      label="true step length")
+    per_step.set_xlabel("time of heel strike (s)")
+    per_step.grid(alpha=0.3)
+    per_step.legend(fontsize=7)
+    per_step.set_title("gait parameters per step")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return Path(path)

@@ -66,6 +66,12 @@ def run(args: argparse.Namespace) -> int:
             run_dir / "speed_stance.png", summary["frame"], summary["speed"], summary["speed_std"],
             summary["stance_left_probability"], true_speed=evaluation.pelvis_speed(truth, rate),
             true_frames=truth.frames, title=f"speed and stance leg: {run_dir.name}"))
+    stance = None
+    if summary is not None and len(summary["stamp_ns"]) == len(estimate.stamps_ns):
+        stance = np.array([0 if leg == "left" else 1 for leg in summary["stance_leg"]])
+    pngs.append(plots.plot_gait(run_dir / "gait_vs_truth.png", evaluation.track_steps(estimate, stance),
+                                estimate.marker("pelvis")[:, :2], evaluation.track_steps(truth),
+                                truth.marker("pelvis")[:, :2], title=f"footprints: {run_dir.name} (squares: truth)"))
     print(evaluation.format_table(result, label=run_dir.name))
     print(f"wrote {out} and {', '.join(str(p) for p in pngs)}")
     return 0

@@ -53,20 +53,39 @@ def measurements(rgb: np.ndarray, downsample: int = 1) -> np.ndarray:
     return np.concatenate([small, gx[..., None], gy[..., None]], axis=2)
 
 
+# Shadows: a background pixel darkened to between SHADOW_DARKEST and 1 times its brightness (a person's
+# shadow on the floor) is still background, with this prior probability.
+SHADOW_DARKEST = 0.4
+SHADOW_PRIOR = 0.1
+
+
 @dataclass(frozen=True, eq=False)
 class BackgroundModel:
-    """Per-pixel mean (h, w, 5) and shared covariance (5, 5) of the background measurement."""
+    """Per-pixel mean (h, w, 5) and shared covariance (5, 5) of the background measurement.
+
+    ``log_likelihood`` also explains shadows: the background scaled by the factor in
+    [SHADOW_DARKEST, 1] that best matches the measurement (colour and gradients alike), mixed in with
+    prior SHADOW_PRIOR. A person's contact shadow is then not foreground, so it does not pull the
+    body's feet toward the camera; a real colour change still is."""
 
     mean: np.ndarray
     covariance: np.ndarray
+    shadows: bool = True
 
     @property
     def shape(self) -> tuple[int, int]:
         return int(self.mean.shape[0]), int(self.mean.shape[1])
 
     def log_likelihood(self, m: np.ndarray) -> np.ndarray:
-        """log p_bg(m) per pixel for measurements (h, w, 5) -> (h, w) float32."""
-        return gaussian_log_density(m - self.mean, self.covariance)
+        """log p_bg(m) per pixel for measurements (h, w, 5) -> (h, w) float32 (with shadows, see the class)."""
+        lit = gaussian_log_density(m - self.mean, self.covariance)
+        if not self.shadows:
+            return lit
+        colour = self.mean[..., :3]
+        scale = np.sum(m[..., :3] * colour, axis=-1) / np.maximum(np.sum(colour * colour, axis=-1), 1e-6)
+        scale = np.clip(scale, SHADOW_DARKEST, 1.0)[..., None]
+        shaded = gaussian_log_density(m - scale * self.mean, self.covariance) + np.float32(np.log(SHADOW_PRIOR))
+        return np.logaddexp(lit, shaded).astype(np.float32)
 
     def mahalanobis2(self, m: np.ndarray) -> np.ndarray:
         """Squared Mahalanobis distance of each pixel's measurement from the background, (h, w)."""
@@ -83,7 +102,7 @@ class BackgroundModel:
         where the pixel matches the background)."""
         keep = self.foreground_mask(m) if foreground is None else foreground
         weight = np.where(keep, 0.0, rate).astype(np.float32)[..., None]
-        return BackgroundModel(self.mean + weight * (m - self.mean), self.covariance)
+        return BackgroundModel(self.mean + weight * (m - self.mean), self.covariance, self.shadows)
 
 
 def illumination_gains(m: np.ndarray, reference: np.ndarray, stride: int = 3) -> np.ndarray:

@@ -1,0 +1,148 @@
+"""Gait analytics from a tracked (or true) walk: heel strikes, steps and their parameters.
+
+A step ends at a heel strike: the frame where the stance leg changes to the other foot (the
+walker's own event for the tracker's MAP trajectory; for marker data without stance labels, the
+frame a heel comes down after a swing: ``stance_from_heels``). Per step: time (s),
+foot, ground position (the striking heel's xy, m); step length = the displacement from the
+previous strike along the walking direction (the stride from the same foot's previous strike,
+else the step itself); step width = across it; step time, stride time (s), cadence
+(steps/min) and speed (step length / step time, m/s).
+
+Stance and swing: the walker's toe-off is an impulse at the other foot's heel strike, so each
+foot stands from its own strike to the other foot's next one: stance is exactly half the stride
+and there is no double support (people: about 60 % and 20 %). ``summary`` says so rather than
+reporting a measured proportion.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from awalker_tracker.model.body import MARKER_NAMES
+from awalker_tracker.model.walker import LEFT
+
+_M = {n: i for i, n in enumerate(MARKER_NAMES)}
+_FOOT = {0: ("left_heel", "left_toe"), 1: ("right_heel", "right_toe")}
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step, ending at the heel strike of ``foot`` ("left"/"right") at ``time_s``."""
+
+    index: int
+    frame: int
+    stamp_ns: int
+    time_s: float                  # from the first frame of the track
+    foot: str
+    x: float                       # the striking heel, world m
+    y: float
+    step_length_m: float           # NaN for the first strike
+    step_width_m: float            # NaN for the first two strikes
+    step_time_s: float
+    stride_time_s: float           # NaN until the same foot struck before
+    cadence_steps_min: float
+    speed_m_s: float
+
+
+def stance_from_heels(markers: np.ndarray, contact_m: float = 0.02, swing_m: float = 0.05) -> np.ndarray:
+    """(F,) stance foot (LEFT 0 / RIGHT 1) of marker data (F, 13, 3) without stance labels (e.g. motion
+    capture): a foot strikes when its heel comes down to within ``contact_m`` of its lowest height after
+    having been ``swing_m`` above it; the stance passes to it at that frame."""
+    heels = markers[:, [_M["left_heel"], _M["right_heel"]], 2]
+    ground = np.percentile(heels, 5, axis=0)
+    events = []
+    for foot in (0, 1):
+        h = heels[:, foot] - ground[foot]
+        swinging = False
+        for f in range(len(h)):
+            if h[f] > swing_m:
+                swinging = True
+            elif swinging and h[f] < contact_m:
+                events.append((f, foot))
+                swinging = False
+    events.sort()
+    # before the first strike: the foot that is lower
+    first = 0 if heels[0, 0] - ground[0] <= heels[0, 1] - ground[1] else 1
+    stance = np.full(len(markers), first, np.int8)
+    for f, foot in events:
+        stance[f:] = foot
+    return stance
+
+
+def steps(frames: np.ndarray, stamps_ns: np.ndarray, markers: np.ndarray, stance_leg: np.ndarray) -> list[Step]:
+    """The steps of a walk: markers (F, 13, 3) in MARKER_NAMES order, stance leg per frame (0/1)."""
+    stance = np.asarray(stance_leg).astype(int)
+    strikes = [f for f in range(1, len(stance)) if stance[f] != stance[f - 1]]
+    t = (np.asarray(stamps_ns, np.int64) - int(stamps_ns[0])) * 1e-9
+    out: list[Step] = []
+    points = []
+    for k, f in enumerate(strikes):
+        foot = int(stance[f])
+        heel = markers[f, _M[_FOOT[foot][0]], :2]
+        points.append(heel)
+        length = width = step_time = stride_time = cadence = speed = float("nan")
+        if k >= 1:
+            step = heel - points[k - 1]
+            along = heel - points[k - 2] if k >= 2 else step
+            direction = along / max(float(np.linalg.norm(along)), 1e-9)
+            length = float(step @ direction)
+            if k >= 2:    # across the stride direction (the step's own direction has no width)
+                width = float(abs(step[0] * direction[1] - step[1] * direction[0]))
+            step_time = float(t[f] - t[strikes[k - 1]])
+            cadence = 60.0 / step_time if step_time > 0 else float("nan")
+            speed = length / step_time if step_time > 0 else float("nan")
+        if k >= 2:
+            stride_time = float(t[f] - t[strikes[k - 2]])
+        out.append(Step(k, int(frames[f]), int(stamps_ns[f]), float(t[f]), "left" if foot == LEFT else "right",
+                        float(heel[0]), float(heel[1]), length, width, step_time, stride_time, cadence, speed))
+    return out
+
+
+def summary(walk: list[Step]) -> dict[str, object]:
+    """Medians over steps, left/right symmetry (left / right medians) and the stance/swing note."""
+    def median(key: str, foot: str | None = None) -> float | None:
+        values = [getattr(s, key) for s in walk if (foot is None or s.foot == foot) and np.isfinite(getattr(s, key))]
+        return float(np.median(values)) if values else None
+
+    out: dict[str, object] = {"steps": len(walk)}
+    for key in ("step_length_m", "step_width_m", "step_time_s", "stride_time_s", "cadence_steps_min", "speed_m_s"):
+        out[key] = median(key)
+    symmetry = {}
+    for key in ("step_length_m", "step_time_s"):
+        left, right = median(key, "left"), median(key, "right")
+        symmetry[key] = left / right if left is not None and right else None
+    out["symmetry_left_over_right"] = symmetry
+    out["stance_fraction"] = 0.5
+    out["double_support_fraction"] = 0.0
+    out["stance_note"] = ("impulsive toe-off: each foot stands from its heel strike to the other foot's next one, "
+                          "so stance is half the stride and there is no double support (people: ~60 % and ~20 %)")
+    return out
+
+
+def as_rows(walk: list[Step]) -> list[dict[str, object]]:
+    """Steps as dicts (CSV rows)."""
+    return [asdict(s) for s in walk]
+
+
+def compare(estimate: list[Step], truth: list[Step], max_offset_s: float = 0.2) -> dict[str, object]:
+    """Each true heel strike matched to the nearest estimated strike of the same foot within ``max_offset_s``:
+    timing error (s), step length error (m) of matched steps, and the median speeds' difference (m/s)."""
+    timing, length = [], []
+    for s in truth:
+        same = [e for e in estimate if e.foot == s.foot]
+        if not same:
+            continue
+        best = min(same, key=lambda e: abs(e.time_s - s.time_s))
+        if abs(best.time_s - s.time_s) <= max_offset_s:
+            timing.append(best.time_s - s.time_s)
+            if np.isfinite(best.step_length_m) and np.isfinite(s.step_length_m):
+                length.append(best.step_length_m - s.step_length_m)
+    est_speed, true_speed = summary(estimate)["speed_m_s"], summary(truth)["speed_m_s"]
+    return {
+        "true_strikes": len(truth), "matched_strikes": len(timing),
+        "timing_error_s_median": float(np.median(np.abs(timing))) if timing else None,
+        "step_length_error_m_median": float(np.median(np.abs(length))) if length else None,
+        "speed_error_m_s": (abs(est_speed - true_speed) if est_speed is not None and true_speed is not None
+                            else None),
+    }

@@ -1,0 +1,82 @@
+"""Gait analytics (inference/gait.py) on walks with known heel strikes and step geometry."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from awalker_tracker.inference import gait
+from awalker_tracker.model.body import MARKER_NAMES
+
+M = {n: i for i, n in enumerate(MARKER_NAMES)}
+RATE = 30.0
+
+
+def stylised_walk(step_length=0.7, step_frames=15, width=0.2, steps=6, heading=0.4):
+    """Markers of a walk along ``heading``: during step k (``step_frames`` frames) foot k % 2 (left first)
+    stands at k * ``step_length`` ahead, ``width`` / 2 to its side; the other heel is 0.1 m up. Returns
+    markers, stance (0 left / 1 right) and the frames of the heel strikes."""
+    frames = (steps + 1) * step_frames
+    forward = np.array([np.cos(heading), np.sin(heading)])
+    left_dir = np.array([-forward[1], forward[0]])
+    markers = np.zeros((frames, len(MARKER_NAMES), 3))
+    stance = np.zeros(frames, np.int8)
+
+    def spot(k: int) -> np.ndarray:
+        return k * step_length * forward + (0.5 if k % 2 == 0 else -0.5) * width * left_dir
+
+    for f in range(frames):
+        k = f // step_frames
+        stance[f] = k % 2
+        for foot, planted in ((k % 2, k), (1 - k % 2, k + 1)):      # the swing foot is over its next spot
+            side = "left" if foot == 0 else "right"
+            markers[f, M[f"{side}_heel"], :2] = spot(planted)
+            markers[f, M[f"{side}_toe"], :2] = spot(planted) + 0.2 * forward
+            markers[f, M[f"{side}_heel"], 2] = 0.0 if planted == k else 0.1
+            markers[f, M[f"{side}_toe"], 2] = 0.0 if planted == k else 0.1
+    return markers, stance, [k * step_frames for k in range(1, steps + 1)]
+
+
+def test_heel_strikes_and_steps_of_a_known_walk():
+    markers, stance, strikes = stylised_walk()
+    found = gait.stance_from_heels(markers)
+    assert np.array_equal(found, stance)
+    frames = np.arange(len(markers))
+    stamps = 1_000_000_000 + np.round(frames * 1e9 / RATE).astype(np.int64)
+    walk = gait.steps(frames, stamps, markers, found)
+    assert [s.frame for s in walk] == strikes
+    assert [s.foot for s in walk] == ["right", "left"] * 3
+    measured = walk[1:]
+    # the second strike has no stride yet to give the direction: its step is measured along itself
+    assert walk[1].step_length_m == pytest.approx(np.hypot(0.7, 0.2))
+    assert all(s.step_length_m == pytest.approx(0.7, abs=1e-6) for s in walk[2:])
+    assert all(s.step_width_m == pytest.approx(0.2, abs=1e-6) for s in walk[2:])
+    assert all(s.step_time_s == pytest.approx(0.5, abs=1e-6) for s in measured)
+    assert all(s.cadence_steps_min == pytest.approx(120.0) for s in measured)
+    assert all(s.speed_m_s == pytest.approx(1.4) for s in walk[2:])
+    summary = gait.summary(walk)
+    assert summary["step_length_m"] == pytest.approx(0.7) and summary["stride_time_s"] == pytest.approx(1.0)
+    assert summary["symmetry_left_over_right"]["step_length_m"] == pytest.approx(1.0)
+    assert summary["stance_fraction"] == 0.5 and "impulsive" in summary["stance_note"]
+
+
+def test_asymmetry_and_comparison_with_the_truth():
+    markers, stance, _ = stylised_walk()
+    frames = np.arange(len(markers))
+    stamps = 1_000_000_000 + np.round(frames * 1e9 / RATE).astype(np.int64)
+    truth = gait.steps(frames, stamps, markers, stance)
+    late = np.roll(stance, 2)                    # the estimate sees every strike 2 frames late
+    late[:2] = stance[0]
+    shifted = markers.copy()
+    shifted[:, :, :2] += np.array([0.05, 0.0])   # and 5 cm off (all markers: step lengths unchanged)
+    estimate = gait.steps(frames, stamps, shifted, late)
+    result = gait.compare(estimate, truth)
+    assert result["matched_strikes"] == result["true_strikes"] == 6
+    assert result["timing_error_s_median"] == pytest.approx(2 / RATE, abs=1e-6)
+    assert result["step_length_error_m_median"] == pytest.approx(0.0, abs=0.03)
+    assert result["speed_error_m_s"] == pytest.approx(0.0, abs=0.1)
+    # a limp: right steps shorter than left ones
+    limp = markers.copy()
+    right = [M["right_heel"], M["right_toe"]]
+    limp[:, right, :2] -= 0.1 * np.array([np.cos(0.4), np.sin(0.4)])
+    summary = gait.summary(gait.steps(frames, stamps, limp, stance))
+    assert summary["symmetry_left_over_right"]["step_length_m"] == pytest.approx(0.8 / 0.6, rel=0.02)
