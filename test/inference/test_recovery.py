@@ -118,3 +118,22 @@ def test_monitor_does_not_trust_a_person_cut_by_the_image_border():
     monitor = LostTrackMonitor([camera], RecoveryConfig(lost_after_s=0.0), dt=1 / 30)
     far = np.array([5.0, 0.0, 0.9])
     assert all(monitor.update(f, [features[-1]], far) is None for f in range(5))
+
+
+def test_two_cameras_catch_a_depth_error_one_camera_cannot_see(seen):
+    """The pelvis 0.6 m off along the side camera's line of sight still projects onto the person there,
+    but cameras at two angles place the person on the ground: lost. 0.2 m off: kept."""
+    from test_detection import features_of as features_in
+    from vision_scene import front_camera
+
+    side, side_features, markers = seen
+    front = front_camera()
+    front_features = features_in(front, walking_poses(3, x0=0.4), 1)[0][-1]
+    pelvis = markers[PELVIS]
+    config = RecoveryConfig(lost_after_s=0.0)
+    for offset, lost in ((0.6, True), (0.2, False)):
+        behind = pelvis + np.array([0.0, offset, 0.0])        # the side camera looks along +y
+        mono = LostTrackMonitor([side], config, dt=1 / 30)
+        both = LostTrackMonitor([side, front], config, dt=1 / 30)
+        assert mono.update(0, [side_features], behind) is None
+        assert (both.update(0, [side_features, front_features], behind) is not None) == lost

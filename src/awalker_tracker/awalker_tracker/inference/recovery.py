@@ -8,7 +8,9 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   walker falls is replaced, in the frame it falls, by a walker on the cyclic gait of its recent
   speed (clamped to the gait table), standing on its current stance foot, with its heading.
 - **Lost tracks.** When the particles' weighted-mean pelvis projects outside the person's
-  foreground blob (``vision.detection``) in every camera that sees the person, for ``lost_after_s``,
+  foreground blob (``vision.detection``) in every camera that sees the person, or, where cameras
+  at different angles place the person on the ground (``PersonDetection.triangulated``), lies more
+  than ``lost_distance_m`` from that place over the ground, for ``lost_after_s``,
   the track is lost: a fraction of the particles (the lowest weights) are re-seeded around the
   detected ground position, with the heading and speed of the detections' recent ground track
   (when it moves), then the image likelihood decides. At most once per ``cooldown_s``.
@@ -41,6 +43,7 @@ class RecoveryConfig:
     position_spread_m: float = 0.15    # re-seeded pelvis ground positions around the detection
     heading_spread_rad: float = 0.25
     box_margin: float = 0.25           # the blob box is widened by this fraction of its size on each side
+    lost_distance_m: float = 0.4       # triangulated detections: the pelvis this far off over the ground is lost
     track_window_s: float = 0.5        # detections over this time give the person's ground velocity
     moving_m_s: float = 0.3            # slower ground tracks give no heading
 
@@ -48,7 +51,7 @@ class RecoveryConfig:
         if not 0.0 < self.reacquire_fraction <= 1.0:
             raise ValueError(f"RecoveryConfig.reacquire_fraction must lie in (0, 1], got {self.reacquire_fraction}")
         if min(self.lost_after_s, self.cooldown_s, self.position_spread_m, self.heading_spread_rad,
-               self.box_margin, self.track_window_s, self.moving_m_s) < 0:
+               self.box_margin, self.track_window_s, self.moving_m_s, self.lost_distance_m) < 0:
             raise ValueError("RecoveryConfig: times, spreads and margins must be >= 0")
 
 
@@ -89,7 +92,10 @@ class LostTrackMonitor:
         self.reacquisitions = 0
 
     def _off_person(self, detection: PersonDetection, pelvis: np.ndarray) -> bool:
-        """True when the pelvis projects outside every widened blob box."""
+        """True when the pelvis is off the triangulated ground position, or projects outside every widened
+        blob box."""
+        if detection.triangulated:
+            return bool(np.linalg.norm(pelvis[:2] - detection.position) > self.config.lost_distance_m)
         by_name = {c.name: c for c in self.cameras}
         margin = self.config.box_margin
         for blob in detection.blobs:

@@ -48,6 +48,7 @@ class PersonDetection:
     position: np.ndarray
     height: float
     blobs: tuple[PersonBlob, ...]
+    triangulated: bool = False        # position from several cameras' planes (~0.1 m), not one feet row
 
 
 def person_blob(features: FrameFeatures, camera_name: str = "", threshold: float = 2.0,
@@ -117,13 +118,14 @@ def detect_person(features: list[FrameFeatures], cameras: list[Camera], threshol
             planes.append((normal, float(normal @ camera.position[:2]), camera, blob))
     if not blobs:
         return None
-    position = None
+    position, triangulated = None, False
     if len(planes) >= 2:
         normals = np.array([p[0] for p in planes])
         cosines = np.abs(normals @ normals.T)           # planes meet at the angle between their normals
         spread = np.degrees(np.arccos(np.clip(cosines.min(), 0.0, 1.0)))
         if spread >= min_plane_angle_deg:
             position = np.linalg.lstsq(normals, np.array([p[1] for p in planes]), rcond=None)[0]
+            triangulated = True
     if position is None:
         by_camera = {c.name: c for c in cameras}
         points = []
@@ -138,7 +140,7 @@ def detect_person(features: list[FrameFeatures], cameras: list[Camera], threshol
         position = np.mean(points, axis=0)
     by_camera = {c.name: c for c in cameras}
     heights = [_height_over(by_camera[b.camera], b.head_uv, position) for b in blobs]
-    return PersonDetection(np.asarray(position, float), float(np.nanmedian(heights)), tuple(blobs))
+    return PersonDetection(np.asarray(position, float), float(np.nanmedian(heights)), tuple(blobs), triangulated)
 
 
 def wholly_in_view(detection: PersonDetection, cameras: list[Camera], border_px: float = 2.0) -> bool:
