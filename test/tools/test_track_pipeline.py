@@ -77,6 +77,16 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     capsys.readouterr()
     assert main(["eval", str(out)]) == 0          # ground truth found beside the input bag
     assert "absolute" in capsys.readouterr().out
+    # gait analytics of the MAP trajectory, and the one-page report
+    with open(out / "gait.csv") as fh:
+        steps = fh.read().strip().splitlines()
+    assert steps[0].startswith("index,frame,stamp_ns,time_s,foot")      # 10 frames: perhaps no heel strike yet
+    assert main(["report", str(out)]) == 0
+    page = (out / "report.html").read_text()
+    assert "<h2>Gait</h2>" in page and "Tracking quality" in page and "Against ground truth" in page
+    assert page.count("data:image/png;base64,") >= 3 and page.count("<tr>") >= len(steps) + 2
+    assert main(["report", str(tmp_path)]) == 2
+    assert "no summary.csv, gait.csv, gait.json" in capsys.readouterr().err
 
 
 def test_track_with_nodes_in_two_processes(synth_bag: Path, localhost_context, tmp_path: Path):
