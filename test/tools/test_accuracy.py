@@ -244,11 +244,12 @@ def test_a_real_walk_turning_round_is_followed(dressed_uturn, tmp_path, images: 
     assert main(["eval", str(out)]) == 0
     result = json.loads((out / "eval.json").read_text())
     absolute, end = result["absolute_mm"]["median"], result["walk"]["end"]
-    # measured (500 particles, synthesis seed 1): tracker seeds 0-2 absolute median ..., last frame ... m off,
-    # heading ... deg off; dead reckoning ... mm
+    # measured (500 particles, synthesis seed 1): tracker seeds 0-2 absolute median 147-238 mm, last frame
+    # 0.13-0.18 m off over the ground, heading 12-19 deg off (1-2 re-acquisitions); dead reckoning 748 mm,
+    # 5.3 m and 168 deg off at the end
     if images:
         assert absolute < 450.0, f"absolute median {absolute:.0f} mm"
         assert end["pelvis_ground_error_m"] < 0.5 and not end["fallen"], end
         assert end["heading_error_deg"] < 45.0, end
     else:
-        assert absolute > 700.0 and end["heading_error_deg"] > 90.0, (absolute, end)
+        assert end["pelvis_ground_error_m"] > 2.0 and end["heading_error_deg"] > 90.0, (absolute, end)
