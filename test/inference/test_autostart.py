@@ -65,6 +65,13 @@ def test_the_walking_person_starts_the_tracker(frames):
     assert abs(np.angle(np.exp(1j * (found.heading - HEADING)))) < np.radians(20)
     assert found.speed == pytest.approx(SPEED, rel=0.2)
     assert found.stance_leg is None and found.step_length is None
+    # the person's height from the blob's top row over the ground point, and a body scaled to it
+    assert finder.estimated_height() == pytest.approx(BODY.height, rel=0.08)
+    scaled = BODY.scaled_to_height(finder.estimated_height())
+    assert scaled.height == pytest.approx(finder.estimated_height())
+    assert scaled.leg_length / scaled.height == pytest.approx(BODY.leg_length / BODY.height)
+    with pytest.raises(ValueError, match="1.0-2.3 m"):
+        BODY.scaled_to_height(3.0)
 
 
 def test_a_person_standing_still_does_not_start_it(frames):

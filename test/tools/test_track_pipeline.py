@@ -162,6 +162,12 @@ def test_track_without_start_description_looks_for_the_person(tmp_path: Path, ca
     assert "no walking person found in 3 frames" in err and "--start" in err
     assert main(["track", str(tmp_path / "missing.bag"), "--out", str(tmp_path / "out")]) == 2
     assert "no such bag" in capsys.readouterr().err
+    # a start description but no body description: refused, saying what to give
+    (bag.parent / "body.yaml").unlink()
+    (bag.parent / "start.yaml").write_text("start: {frame: 1, position: [0, 0], heading: 0, speed: 1.3}\n")
+    assert main(["track", str(bag), "--out", str(tmp_path / "out2"), "--no-overlay"]) == 2
+    err = capsys.readouterr().err
+    assert "no body description" in err and "--body BODY.yaml" in err
 
 
 def test_track_option_errors(tmp_path: Path, capsys):

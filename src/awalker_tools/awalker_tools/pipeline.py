@@ -73,9 +73,10 @@ class TrackResult:
 
 
 def resolve_descriptions(bag: Path, reader: Any, start_path: Path | None, body_path: Path | None,
-                         auto_start: bool = False) -> tuple[StartDescription | None, str, BodyDescription, str]:
+                         auto_start: bool = False) -> tuple[StartDescription | None, str, BodyDescription | None, str]:
     """Start and body descriptions: the files given, else the bag's topics, else files beside the bag.
-    No start description (or ``auto_start``): None, and the tracker finds the walking person itself."""
+    No start description (or ``auto_start``): None, and the tracker finds the walking person itself; then
+    also no body description: None, and the tracker scales one to the person's height."""
     from awalker_tools.bagio import BODY_DESCRIPTION_TOPIC, START_DESCRIPTION_TOPIC
 
     beside = [bag.parent, bag] if bag.is_dir() else [bag.parent]
@@ -97,8 +98,10 @@ def resolve_descriptions(bag: Path, reader: Any, start_path: Path | None, body_p
         start, start_src = None, "--auto-start"
     else:
         start, start_src = resolve(StartDescription, start_path, START_DESCRIPTION_TOPIC, START_FILE, "start", None)
+    # with an automatic start, a missing body is scaled from the person's height seen in the images
     body, body_src = resolve(BodyDescription, body_path, BODY_DESCRIPTION_TOPIC, BODY_FILE, "body",
-                             "BODY.yaml with 'body: {upper_leg_length, lower_leg_length, ...}' (m)")
+                             None if start is None else "BODY.yaml with 'body: {upper_leg_length, lower_leg_length, "
+                             "...}' (m)")
     return start, start_src, body, body_src
 
 
@@ -171,7 +174,10 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         (out / START_FILE).write_text(start.to_yaml_text())
     elif (out / START_FILE).exists():
         (out / START_FILE).unlink()        # the tracker writes the start it finds
-    (out / BODY_FILE).write_text(body.to_yaml_text())
+    if body is not None:
+        (out / BODY_FILE).write_text(body.to_yaml_text())
+    elif (out / BODY_FILE).exists():
+        (out / BODY_FILE).unlink()         # the tracker writes the body it estimates
     names = [c.name for c in cameras]
     _progress(options, f"awalker track: {bag} ({num_frames} frames, cameras {', '.join(names)}), "
                        + (f"start frame {start.frame} from {start_src}" if start is not None else
@@ -195,13 +201,14 @@ def run_tracking(options: TrackOptions) -> TrackResult:
             Parameter("camera_name", value=c),
             Parameter("start_description", value=str(out / START_FILE) if start is not None else ""),
             Parameter("use_start_description", value=start is not None),
-            Parameter("body_description", value=str(out / BODY_FILE))]) for c in names]
+            Parameter("body_description", value=str(out / BODY_FILE) if body is not None else "")]) for c in names]
         nodes += features
         tracker = TrackerNode(context=context, parameter_overrides=[
             Parameter("cameras", value=names), Parameter("calibration", value=str(out / CALIBRATION_FILE)),
             Parameter("start_description", value=str(out / START_FILE) if start is not None else ""),
             Parameter("auto_start", value=start is None), Parameter("start_output", value=str(out / START_FILE)),
-            Parameter("body_description", value=str(out / BODY_FILE)),
+            Parameter("body_description", value=str(out / BODY_FILE) if body is not None else ""),
+            Parameter("estimate_body", value=body is None), Parameter("body_output", value=str(out / BODY_FILE)),
             Parameter("num_particles", value=int(options.particles)), Parameter("lookahead", value=int(options.lookahead)),
             Parameter("trust", value=float(options.trust)), Parameter("seed", value=int(options.seed)),
             Parameter("likelihood_scale", value=float(options.likelihood_scale)),
@@ -210,7 +217,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         tracker.keep_summaries = True
         nodes.append(tracker)
         poser = PosePublisherNode(context=context, parameter_overrides=[
-            Parameter("body_description", value=str(out / BODY_FILE))])
+            Parameter("body_description", value=str(out / BODY_FILE) if body is not None else "")])
         nodes.append(poser)
         from awalker_msgs.msg import ImageFeatures, PosteriorSummary
         from sensor_msgs.msg import JointState
@@ -262,6 +269,9 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         result.recorded = dict(recorder.counts)
         result.features = {node.camera_name: {"background": node.stats.background_from,
                                               "foreground_labels": node.stats.foreground_from} for node in features}
+        if body is None and tracker.body is not None:
+            body = tracker.body
+            body_src = f"scaled to the person's height seen in the images (written to {out / BODY_FILE})"
         if tracker.start is not None and tracker.start_found_automatically:
             start_src = f"found automatically at frame {tracker.start.frame} (written to {out / START_FILE})"
         if tracker.tracker is None or not tracker.summaries:

@@ -8,7 +8,8 @@ at ``min_speed_m_s`` or faster, the start is that frame, the straight-line fit o
 positions at it, its direction (heading) and speed (clamped to ``speed_range_m_s``, the gaits the
 tracker knows); step length: the usual one at that speed; stance leg unknown (both sampled, at
 any phase). Before that it answers None: a person standing still, half out of view, or nobody,
-does not start the tracker.
+does not start the tracker. The detections' heights (top of the blob over the ground point) give the
+person's height (``estimated_height``), from which a body can be scaled when nobody measured one.
 """
 from __future__ import annotations
 
@@ -53,6 +54,11 @@ class StartFinder:
         self.frames_seen = 0
         self.frames_detected = 0
         self.last_detection: PersonDetection | None = None
+        self.heights: list[float] = []
+
+    def estimated_height(self) -> float | None:
+        """Median height (m) of the person over the frames seen wholly so far (None before any)."""
+        return float(np.median(self.heights)) if self.heights else None
 
     def push(self, frame: int, features: list[Any]) -> StartDescription | None:
         """The start description at ``frame`` if the person is found walking by then, else None."""
@@ -64,6 +70,8 @@ class StartFinder:
             return None
         self.frames_detected += 1
         self.last_detection = detection
+        if np.isfinite(detection.height):
+            self.heights.append(float(detection.height))
         cfg = self.config
         velocity = self.track.velocity(frame, cfg.window_s, cfg.min_fraction)
         if velocity is None or np.linalg.norm(velocity) < cfg.min_speed_m_s:

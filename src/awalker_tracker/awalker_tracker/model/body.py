@@ -164,6 +164,15 @@ class BodyDescription:
         """Standing height (m)."""
         return self.leg_length + self.torso_length + self.head_length
 
+    def scaled_to_height(self, height: float) -> "BodyDescription":
+        """This body's proportions at another standing height (m): every length and width scaled alike
+        (a first guess from a person's height when nobody measured them)."""
+        if not (np.isfinite(height) and 1.0 <= height <= 2.3):
+            raise ValueError(f"BodyDescription.scaled_to_height: height must lie in 1.0-2.3 m, got {height!r}")
+        k = height / self.height
+        return type(self)(**{f.name: (tuple(v * k for v in getattr(self, f.name)) if f.name in _PAIR_FIELDS
+                                      else getattr(self, f.name) * k) for f in fields(self)})
+
     def walker_params(self, **overrides: float) -> WalkerParams:
         """Walker parameters with L = this body's leg length (other fields from ``overrides``)."""
         return WalkerParams(leg_length=self.leg_length, **overrides)

@@ -90,6 +90,9 @@ class TrackerNode(Node):
                                        "images (inference/autostart.py)"))
         self.start_output = str(declare("start_output", "", "write the start description used (given or found) "
                                         "to this YAML file; empty: do not"))
+        self.estimate_body = bool(declare("estimate_body", False, "no body description: with the automatic start, "
+                                          "scale the default body to the person's height seen in the images"))
+        self.body_output = str(declare("body_output", "", "write an estimated body description to this YAML file"))
         self.recovery = RecoveryConfig(
             reseed_fallen=bool(declare("reseed_fallen", True, "re-seed walkers that fall (inference/recovery.py)")),
             reacquire=bool(declare("reacquire", True, "re-acquire a lost track at the person seen in the images")))
@@ -282,6 +285,16 @@ class TrackerNode(Node):
         dt = self._dt()
         if dt is None:
             return False
+        if self.body is None and self.estimate_body and self._finder is not None:
+            height = self._finder.estimated_height()
+            if height is not None:
+                self.body = BodyDescription.default().scaled_to_height(float(np.clip(height, 1.2, 2.1)))
+                self.get_logger().info(f"body scaled to the person's height, {self.body.height:.2f} m (seen "
+                                       f"{height:.2f} m): leg length {self.body.leg_length:.2f} m")
+                if self.body_output:
+                    from pathlib import Path
+
+                    Path(self.body_output).write_text(self.body.to_yaml_text())
         body = self.body or BodyDescription.default()
         cameras = [self.cameras[c] for c in self.camera_names]
         config = TrackerConfig(smc=self.smc_config, dt=dt, likelihood_scale=self.likelihood_scale,
