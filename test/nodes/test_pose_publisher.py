@@ -10,7 +10,7 @@ from awalker_tracker.inference.posterior import LEFT, RIGHT, WALKER_FIELDS, Foot
 from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription
 
 
-def make_summary(stamp_ns: int, frame: int, rng) -> PosteriorSummary:
+def make_summary(stamp_ns: int, frame: int, rng, contacts=None) -> PosteriorSummary:
     markers = rng.normal(size=(13, 3)) + [0, 0, 1]
     return PosteriorSummary(
         frame_index=frame, stamp_ns=stamp_ns, marker_names=MARKER_NAMES, joint_names=JOINT_NAMES,
@@ -19,8 +19,9 @@ def make_summary(stamp_ns: int, frame: int, rng) -> PosteriorSummary:
         map_stance_leg=RIGHT, map_walker={k: float(i) for i, k in enumerate(WALKER_FIELDS)},
         speed=1.3, speed_std=0.1, stance_left_probability=0.2, effective_sample_size=321.0, num_particles=500,
         resampled=True,
-        contacts=(FootContactEstimate(LEFT, np.array([0.1, 0.2, 0.0]), 0.2, False),
-                  FootContactEstimate(RIGHT, np.array([0.4, 0.0, 0.0]), 0.8, True)),
+        contacts=contacts if contacts is not None else (
+            FootContactEstimate(LEFT, np.array([0.1, 0.2, 0.0]), 0.2, False),
+            FootContactEstimate(RIGHT, np.array([0.4, 0.0, 0.0]), 0.8, True)),
         clouds=(MarkerCloud("head", rng.normal(size=(20, 3)), rng.random(20) / 20),))
 
 
@@ -118,3 +119,54 @@ def test_bad_body_description_is_reported(ros_context, tmp_path):
     with pytest.raises(InputError, match="body.yaml"):
         PosePublisherNode(context=ros_context,
                           parameter_overrides=[Parameter("body_description", value=str(bad))])
+
+
+def test_heel_strikes_become_gait_steps(ros_context):
+    """A strike every 15 frames (0.5 s), alternate feet 0.7 m apart along x and 0.2 m across: GaitStep
+    messages at those frames with the step geometry and timing."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile
+
+    from awalker_msgs.msg import GaitStep
+    from awalker_tracker.nodes.convert import stamp_to_ns, summary_to_msg
+    from awalker_tracker.nodes.pose_publisher import PosePublisherNode
+
+    node = PosePublisherNode(context=ros_context, parameter_overrides=[])
+    probe = Node("gait_probe", context=ros_context)
+    got: list = []
+    qos = QoSProfile(depth=100)
+    probe.create_subscription(GaitStep, "/awalker/gait_steps", got.append, qos)
+    from awalker_msgs.msg import PosteriorSummary as SummaryMsg
+    pub = probe.create_publisher(SummaryMsg, "/awalker/posterior", qos)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(probe)
+    try:
+        deadline = time.monotonic() + 5
+        while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        rng = np.random.default_rng(4)
+        stamps = [1_000_000_000 + k * 33_333_333 for k in range(61)]
+        for k, stamp in enumerate(stamps):
+            strike = k > 0 and k % 15 == 0
+            foot = (k // 15) % 2                     # 0 left, 1 right
+            spot = np.array([0.7 * (k // 15), 0.1 if foot == LEFT else -0.1, 0.0])
+            contacts = (FootContactEstimate(foot, spot, 0.9, strike), FootContactEstimate(1 - foot, spot, 0.1, False))
+            pub.publish(summary_to_msg(make_summary(stamp, k, rng, contacts)))
+            for _ in range(3):                        # the node keeps up (its queue holds 10 summaries)
+                executor.spin_once(timeout_sec=0.01)
+        while len(got) < 4 and time.monotonic() < deadline + 5:
+            executor.spin_once(timeout_sec=0.05)
+        assert [m.frame_index for m in got] == [15, 30, 45, 60]
+        assert [stamp_to_ns(m.header.stamp) for m in got] == [stamps[15], stamps[30], stamps[45], stamps[60]]
+        assert [m.foot for m in got] == [GaitStep.RIGHT, GaitStep.LEFT, GaitStep.RIGHT, GaitStep.LEFT]
+        assert np.isnan(got[0].step_length) and np.isnan(got[1].step_width)
+        assert [round(m.step_length, 6) for m in got[2:]] == [0.7, 0.7]
+        assert [round(m.step_width, 6) for m in got[2:]] == [0.2, 0.2]
+        assert all(abs(m.step_time - 0.5) < 1e-6 and abs(m.cadence - 120) < 1e-3 for m in got[1:])
+        assert abs(got[3].stride_time - 1.0) < 1e-6 and abs(got[3].speed - 1.4) < 1e-6
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        probe.destroy_node()

@@ -219,7 +219,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         poser = PosePublisherNode(context=context, parameter_overrides=[
             Parameter("body_description", value=str(out / BODY_FILE) if body is not None else "")])
         nodes.append(poser)
-        from awalker_msgs.msg import ImageFeatures, PosteriorSummary
+        from awalker_msgs.msg import GaitStep, ImageFeatures, PosteriorSummary
         from sensor_msgs.msg import JointState
         from std_msgs.msg import Header
         from visualization_msgs.msg import MarkerArray
@@ -229,6 +229,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
             "/awalker/joint_states": (JointState, "sensor_msgs/msg/JointState"),
             f"/humans/bodies/{poser.body_id}/joint_states": (JointState, "sensor_msgs/msg/JointState"),
             "/awalker/markers": (MarkerArray, "visualization_msgs/msg/MarkerArray"),
+            "/awalker/gait_steps": (GaitStep, "awalker_msgs/msg/GaitStep"),
             "/awalker/ack": (Header, "std_msgs/msg/Header"),
         }
         topics.update({f"/{c}/features": (ImageFeatures, "awalker_msgs/msg/ImageFeatures") for c in names})

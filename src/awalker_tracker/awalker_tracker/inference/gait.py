@@ -70,33 +70,43 @@ def stance_from_heels(markers: np.ndarray, contact_m: float = 0.02, swing_m: flo
     return stance
 
 
-def steps(frames: np.ndarray, stamps_ns: np.ndarray, markers: np.ndarray, stance_leg: np.ndarray) -> list[Step]:
-    """The steps of a walk: markers (F, 13, 3) in MARKER_NAMES order, stance leg per frame (0/1)."""
-    stance = np.asarray(stance_leg).astype(int)
-    strikes = [f for f in range(1, len(stance)) if stance[f] != stance[f - 1]]
-    t = (np.asarray(stamps_ns, np.int64) - int(stamps_ns[0])) * 1e-9
-    out: list[Step] = []
-    points = []
-    for k, f in enumerate(strikes):
-        foot = int(stance[f])
-        heel = markers[f, _M[_FOOT[foot][0]], :2]
-        points.append(heel)
+class StepCounter:
+    """Steps from heel strikes as they come (online: the tracker's events while it runs); ``steps``
+    feeds it a whole walk. Times in s, positions world xy (m)."""
+
+    def __init__(self) -> None:
+        self.strikes: list[tuple[float, np.ndarray]] = []      # (time, heel xy) of every strike so far
+
+    def add(self, frame: int, stamp_ns: int, time_s: float, foot: int, heel_xy: np.ndarray) -> Step:
+        """The step that ends with this heel strike of ``foot`` (LEFT 0 / RIGHT 1)."""
+        heel = np.asarray(heel_xy, float)[:2]
+        k = len(self.strikes)
         length = width = step_time = stride_time = cadence = speed = float("nan")
         if k >= 1:
-            step = heel - points[k - 1]
-            along = heel - points[k - 2] if k >= 2 else step
+            previous_time, previous = self.strikes[-1]
+            step = heel - previous
+            along = heel - self.strikes[-2][1] if k >= 2 else step
             direction = along / max(float(np.linalg.norm(along)), 1e-9)
             length = float(step @ direction)
             if k >= 2:    # across the stride direction (the step's own direction has no width)
                 width = float(abs(step[0] * direction[1] - step[1] * direction[0]))
-            step_time = float(t[f] - t[strikes[k - 1]])
+                stride_time = float(time_s - self.strikes[-2][0])
+            step_time = float(time_s - previous_time)
             cadence = 60.0 / step_time if step_time > 0 else float("nan")
             speed = length / step_time if step_time > 0 else float("nan")
-        if k >= 2:
-            stride_time = float(t[f] - t[strikes[k - 2]])
-        out.append(Step(k, int(frames[f]), int(stamps_ns[f]), float(t[f]), "left" if foot == LEFT else "right",
-                        float(heel[0]), float(heel[1]), length, width, step_time, stride_time, cadence, speed))
-    return out
+        self.strikes.append((float(time_s), heel))
+        return Step(k, int(frame), int(stamp_ns), float(time_s), "left" if foot == LEFT else "right",
+                    float(heel[0]), float(heel[1]), length, width, step_time, stride_time, cadence, speed)
+
+
+def steps(frames: np.ndarray, stamps_ns: np.ndarray, markers: np.ndarray, stance_leg: np.ndarray) -> list[Step]:
+    """The steps of a walk: markers (F, 13, 3) in MARKER_NAMES order, stance leg per frame (0/1)."""
+    stance = np.asarray(stance_leg).astype(int)
+    t = (np.asarray(stamps_ns, np.int64) - int(stamps_ns[0])) * 1e-9
+    counter = StepCounter()
+    return [counter.add(int(frames[f]), int(stamps_ns[f]), float(t[f]), int(stance[f]),
+                        markers[f, _M[_FOOT[int(stance[f])][0]], :2])
+            for f in range(1, len(stance)) if stance[f] != stance[f - 1]]
 
 
 def summary(walk: list[Step]) -> dict[str, object]:

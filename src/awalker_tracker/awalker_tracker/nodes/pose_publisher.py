@@ -7,13 +7,17 @@ the image stamp of each summary:
 - ``/awalker/markers`` visualization_msgs/MarkerArray in the world frame: skeleton lines and
   joints of the MAP pose, body cylinders (sizes from the body description), particle clouds of
   head/pelvis/knees/ankles coloured by weight, foot contacts (heel strikes larger);
+- ``/awalker/gait_steps`` awalker_msgs/GaitStep at every heel strike the posterior reports (the foot
+  whose strike carries more than half the weight): where the heel came down, step length and width,
+  step and stride time, cadence and speed (``inference.gait.StepCounter``; online, from the filter at
+  its look-ahead lag, so it can differ from gait.csv, which follows the final MAP trajectory);
 - tf ``world -> <body_id>_pelvis`` when ``tf2_ros`` can be imported (not on PyPI; optional).
 """
 from __future__ import annotations
 
 import numpy as np
 import rclpy
-from awalker_msgs.msg import PosteriorSummary
+from awalker_msgs.msg import GaitStep, PosteriorSummary
 from geometry_msgs.msg import Point, Vector3
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -21,8 +25,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
+from awalker_tracker.inference.gait import Step, StepCounter
 from awalker_tracker.model.body import BodyDescription
-from awalker_tracker.nodes.convert import points_from_msg
+from awalker_tracker.nodes.convert import points_from_msg, stamp_to_ns
 from awalker_tracker.nodes.spin import run_node
 
 BONES = (("pelvis", "thorax"), ("thorax", "head"), ("pelvis", "left_hip"), ("pelvis", "right_hip"),
@@ -57,6 +62,15 @@ def quaternion_z_to(direction: np.ndarray) -> tuple[float, float, float, float]:
     q = np.array([-d[1], d[0], 0.0, w])
     q /= np.linalg.norm(q)
     return tuple(float(v) for v in q)
+
+
+def gait_step_to_msg(step: Step, header) -> GaitStep:
+    """awalker_msgs/GaitStep of one step (``header``: the strike frame's)."""
+    return GaitStep(header=header, index=step.index, frame_index=step.frame,
+                    foot=GaitStep.LEFT if step.foot == "left" else GaitStep.RIGHT,
+                    position=Point(x=step.x, y=step.y, z=0.0), step_length=step.step_length_m,
+                    step_width=step.step_width_m, step_time=step.step_time_s, stride_time=step.stride_time_s,
+                    cadence=step.cadence_steps_min, speed=step.speed_m_s)
 
 
 def joint_state_from_summary(msg: PosteriorSummary) -> JointState:
@@ -139,6 +153,9 @@ class PosePublisherNode(Node):
         self.joint_pub = self.create_publisher(JointState, "/awalker/joint_states", qos)
         self.rep155_pub = self.create_publisher(JointState, f"/humans/bodies/{body_id}/joint_states", qos)
         self.marker_pub = self.create_publisher(MarkerArray, "/awalker/markers", qos)
+        self.gait_pub = self.create_publisher(GaitStep, "/awalker/gait_steps", qos)
+        self.steps = StepCounter()
+        self._first_stamp_ns: int | None = None
         self.tf_broadcaster = _tf_broadcaster(self)
         self.count = 0
         self.create_subscription(PosteriorSummary, self.get_parameter("posterior_topic").value, self.on_summary, qos)
@@ -151,6 +168,14 @@ class PosePublisherNode(Node):
         self.joint_pub.publish(joints)
         self.rep155_pub.publish(joints)
         self.marker_pub.publish(marker_array_from_summary(msg, self.cylinders, self.body_id, self.publish_clouds))
+        stamp = stamp_to_ns(msg.header.stamp)
+        if self._first_stamp_ns is None:
+            self._first_stamp_ns = stamp
+        for contact in msg.contacts:
+            if contact.heel_strike and np.isfinite(contact.position.x):
+                step = self.steps.add(msg.frame_index, stamp, (stamp - self._first_stamp_ns) * 1e-9, int(contact.foot),
+                                      np.array([contact.position.x, contact.position.y]))
+                self.gait_pub.publish(gait_step_to_msg(step, msg.header))
         if self.tf_broadcaster is not None:
             from geometry_msgs.msg import TransformStamped
 
