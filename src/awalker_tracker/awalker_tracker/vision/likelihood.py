@@ -329,6 +329,8 @@ def _chunk_log_likelihood(parts: tuple[PartShape, ...], sil: "_Silhouettes", pre
         frow = (fy_ + np.float32(0.5)) * flow.inv_cell
         inside = (fcol >= 0) & (fcol < flow.cols) & (frow >= 0) & (frow < flow.rows) & ok
         inside &= (prev.da > 1e-6) & (prev.db > 1e-6)
+        # (points behind the camera project to NaN: zeroed before the integer cast, then sent to the dummy cell)
+        frow, fcol = np.where(inside, frow, np.float32(0)), np.where(inside, fcol, np.float32(0))
         cell = np.where(inside, frow.astype(np.int32) * flow.cols + fcol.astype(np.int32), flow.valid.size - 1)
         du = flow.fx[cell] - mu
         dv = flow.fy[cell] - mv
