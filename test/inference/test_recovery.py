@@ -137,3 +137,34 @@ def test_two_cameras_catch_a_depth_error_one_camera_cannot_see(seen):
         both = LostTrackMonitor([side, front], config, dt=1 / 30)
         assert mono.update(0, [side_features], behind) is None
         assert (both.update(0, [side_features, front_features], behind) is not None) == lost
+
+
+def test_a_second_larger_person_does_not_count_as_losing_the_first():
+    """Two people in view: the one followed stands at x = 0.4 m; another, nearer the camera (larger),
+    at x = -0.5 m. The track on the first is not lost; a track on neither is."""
+    from awalker_tracker.vision.detection import person_blobs
+    from awalker_tracker.vision.features import FeatureExtractor
+    from awalker_tracker.vision.render import render, render_rgb
+    from test_detection import CONFIG
+    from vision_scene import background_image, noisy
+
+    camera = side_camera()
+    followed = walking_poses(3, x0=0.4)[-1]
+    other = walking_poses(3, x0=-0.5)[-1]
+    other.kin.contact_point = other.kin.contact_point + np.array([0.0, -0.8])   # 0.8 m nearer the camera
+    background = background_image(camera, seed=0)
+    image = render_rgb(BODY, followed.segments(), camera, background, result=render(BODY, followed.segments(), camera))
+    image = render_rgb(BODY, other.segments(), camera, image, result=render(BODY, other.segments(), camera))
+    rng = np.random.default_rng(3)
+    extractor = FeatureExtractor(CONFIG)
+    for _ in range(CONFIG.background_frames):
+        extractor.process(noisy(background, rng))
+    extractor.process(noisy(image, rng))                 # learns the foreground
+    features = extractor.process(noisy(image, rng))
+    blobs = person_blobs(features, camera.name)
+    assert len(blobs) == 2 and blobs[0].area_px > blobs[1].area_px         # the other person is the larger
+    pelvis = pose_body(BODY, PARAMS, followed.walker, followed.kin).markers[0, PELVIS]
+    monitor = LostTrackMonitor([camera], RecoveryConfig(lost_after_s=0.0), dt=1 / 30)
+    assert all(monitor.update(f, [features], pelvis) is None for f in range(5))
+    lost = LostTrackMonitor([camera], RecoveryConfig(lost_after_s=0.0), dt=1 / 30)
+    assert lost.update(0, [features], pelvis + np.array([2.5, 0.0, 0.0])) is not None

@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 
 from awalker_tracker.vision.camera import Camera
-from awalker_tracker.vision.detection import GroundTrack, PersonDetection, detect_person, wholly_in_view
+from awalker_tracker.vision.detection import (
+    GroundTrack, PersonDetection, detect_person, person_blobs, wholly_in_view)
 
 NOT_RESEEDED, RESEEDED_FALLEN, REACQUIRED = 0, 1, 2
 
@@ -91,14 +92,16 @@ class LostTrackMonitor:
         self._quiet_until = -1
         self.reacquisitions = 0
 
-    def _off_person(self, detection: PersonDetection, pelvis: np.ndarray) -> bool:
+    def _off_person(self, detection: PersonDetection, pelvis: np.ndarray, features: list[Any]) -> bool:
         """True when the pelvis is off the triangulated ground position, or projects outside every widened
-        blob box."""
+        box of every person-sized blob (so a second, larger person in view does not count as losing the
+        one followed)."""
         if detection.triangulated:
             return bool(np.linalg.norm(pelvis[:2] - detection.position) > self.config.lost_distance_m)
         by_name = {c.name: c for c in self.cameras}
         margin = self.config.box_margin
-        for blob in detection.blobs:
+        blobs = [b for f, c in zip(features, self.cameras) for b in person_blobs(f, c.name)]
+        for blob in blobs:
             uv, depth = by_name[blob.camera].project(pelvis[None])
             u0, v0, u1, v1 = blob.box
             du, dv = margin * (u1 - u0), margin * (v1 - v0)
@@ -113,7 +116,7 @@ class LostTrackMonitor:
         detection = detect_person(list(features), self.cameras)
         reliable = detection is not None and wholly_in_view(detection, self.cameras)
         self.track.add(frame, detection.position if reliable else None)
-        off = reliable and self._off_person(detection, pelvis)
+        off = reliable and self._off_person(detection, pelvis, list(features))
         self._run[frame] = self._run.get(frame - 1, 0) + 1 if off else 0
         order = None
         if off and self._run[frame] * self.dt >= self.config.lost_after_s and frame >= self._quiet_until:

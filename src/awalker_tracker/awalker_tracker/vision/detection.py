@@ -51,28 +51,36 @@ class PersonDetection:
     triangulated: bool = False        # position from several cameras' planes (~0.1 m), not one feet row
 
 
-def person_blob(features: FrameFeatures, camera_name: str = "", threshold: float = 2.0,
-                min_area_fraction: float = 0.0015) -> PersonBlob | None:
-    """The largest foreground blob (``threshold`` nats, at least ``min_area_fraction`` of the image: 460 px of
-    640x480), or None."""
+def person_blobs(features: FrameFeatures, camera_name: str = "", threshold: float = 2.0,
+                 min_area_fraction: float = 0.0015) -> list[PersonBlob]:
+    """Every foreground blob big enough to be a person (``threshold`` nats, at least ``min_area_fraction``
+    of the image: 460 px of 640x480), largest first."""
     mask = (np.max(features.llr, axis=0) > threshold).astype(np.uint8)
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    if count <= 1:
-        return None
-    best = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     d = float(features.downsample)
-    area = float(stats[best, cv2.CC_STAT_AREA]) * d * d
-    if area < min_area_fraction * features.image_width * features.image_height:
-        return None
-    rows, cols = np.nonzero(labels == best)
-    top, bottom = rows.min(), rows.max()
-    # map pixel j covers image pixels d j .. d j + d - 1 (centre d j + (d - 1) / 2)
-    centre = lambda j: d * j + 0.5 * (d - 1)  # noqa: E731
-    # the blob's mean column (steadier than the lowest row's, which follows the planted foot)
-    middle = centre(float(np.mean(cols)))
-    feet, head = (middle, centre(bottom)), (middle, centre(top))
-    box = (d * cols.min() - 0.5, d * top - 0.5, d * (cols.max() + 1) - 0.5, d * (bottom + 1) - 0.5)
-    return PersonBlob(camera_name, box, area, feet, head)
+    min_area = min_area_fraction * features.image_width * features.image_height
+    order = 1 + np.argsort(-stats[1:, cv2.CC_STAT_AREA])
+    blobs = []
+    for label in order:
+        area = float(stats[label, cv2.CC_STAT_AREA]) * d * d
+        if area < min_area:
+            break
+        rows, cols = np.nonzero(labels == label)
+        top, bottom = rows.min(), rows.max()
+        # map pixel j covers image pixels d j .. d j + d - 1 (centre d j + (d - 1) / 2)
+        centre = lambda j: d * j + 0.5 * (d - 1)  # noqa: E731
+        # the blob's mean column (steadier than the lowest row's, which follows the planted foot)
+        middle = centre(float(np.mean(cols)))
+        box = (d * cols.min() - 0.5, d * top - 0.5, d * (cols.max() + 1) - 0.5, d * (bottom + 1) - 0.5)
+        blobs.append(PersonBlob(camera_name, box, area, (middle, centre(bottom)), (middle, centre(top))))
+    return blobs
+
+
+def person_blob(features: FrameFeatures, camera_name: str = "", threshold: float = 2.0,
+                min_area_fraction: float = 0.0015) -> PersonBlob | None:
+    """The largest of ``person_blobs``, or None."""
+    blobs = person_blobs(features, camera_name, threshold, min_area_fraction)
+    return blobs[0] if blobs else None
 
 
 def _ray(camera: Camera, uv: tuple[float, float]) -> np.ndarray:
