@@ -18,6 +18,13 @@ and worst over seeds. Prints ONE JSON document; progress and tables on stderr.
     .venv/bin/python benchmarks/bench_realwalks.py --out bench_rw/                 # everything (~40 min)
     .venv/bin/python benchmarks/bench_realwalks.py --out bench_rw/ --walks 07_01 --variants straight u-turn \\
         --settings mono --seeds 0 1
+    .venv/bin/python benchmarks/bench_realwalks.py --out bench_rw/ --hands-off     # after the line above
+
+--hands-off (issue 12): the same walks as a user's own video: no background-only frames, no start and no
+body description (`synth --no-descriptions --background-frames 0`), tracked with the automatic start.
+Adds the start delay (s after the first frame, where the person is already in view) and, where the
+hand-started runs of the same --out exist, their absolute error for comparison. The hands-off runs are
+scored from the frame the tracker started at; the hand-started ones from the first frame.
 """
 from __future__ import annotations
 
@@ -47,16 +54,17 @@ def log(text: str) -> None:
 
 
 def sequence(root: Path, walk: str, variant: str, cameras: int, size: tuple[int, int], rate: float,
-             background: int) -> Path:
-    """The bag of one sequence, synthesised on first use (kept in ``root``)."""
+             background: int, hands_off: bool = False) -> Path:
+    """The bag of one sequence, synthesised on first use (kept in ``root``). ``hands_off``: no
+    background-only frames and no start or body description."""
     from awalker_tools.synth import VARIANTS, SynthConfig, synthesise
 
-    seq = root / f"{walk}_{variant}_{cameras}cam"
+    seq = root / (f"{walk}_{variant}_{cameras}cam" + ("_handsoff" if hands_off else ""))
     bag = seq / "synth.bag"
     if not bag.exists():
         frames = int(np.ceil(max(3.0, VARIANTS[variant][2] + 0.2) * rate))
-        synthesise(SynthConfig(out_dir=seq, cameras=cameras, rate=rate, frames=frames, background_frames=background,
-                               seed=1, mocap=(MOCAP_DIR / "07.asf", MOCAP_DIR / f"{walk}.amc"), width=size[0],
+        synthesise(SynthConfig(out_dir=seq, cameras=cameras, rate=rate, frames=frames,
+                               background_frames=0 if hands_off else background, descriptions=not hands_off, seed=1, mocap=(MOCAP_DIR / "07.asf", MOCAP_DIR / f"{walk}.amc"), width=size[0],
                                height=size[1], person="dressed", variant=variant, user_start=True,
                                tape_measure=True), progress=False)
     return bag
@@ -82,6 +90,19 @@ def score(result: dict, variant: str, rate: float) -> dict:
     return entry
 
 
+def hands_off_figures(runs: Path, run_dir: Path, job: str, seed: int, rate: float) -> dict:
+    """Start delay (s after the first frame; None if it never started) of a hands-off run, and the
+    absolute median error of the hand-started run of the same sequence and seed (None if not run)."""
+    import yaml
+
+    start = run_dir / "start.yaml"
+    frame = (yaml.safe_load(start.read_text()) or {}).get("start", {}).get("frame") if start.is_file() else None
+    hand = runs / f"{job}_tracker_s{seed}" / "eval.json"
+    return {"start_delay_s": None if frame is None else round(frame / rate, 3),
+            "hand_started_absolute_median_mm": round(json.loads(hand.read_text())["absolute_mm"]["median"], 1)
+            if hand.is_file() else None}
+
+
 def main(argv: list[str] | None = None) -> int:
     from awalker_tools.pipeline import TrackOptions, run_tracking
 
@@ -96,31 +117,37 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rate", type=float, default=30.0, choices=(30.0, 60.0))
     parser.add_argument("--background-frames", type=int, default=15)
     parser.add_argument("--no-dead-reckoning", action="store_true", help="skip the no-image baseline")
+    parser.add_argument("--hands-off", action="store_true",
+                        help="no background-only frames, no start or body description: the automatic start")
     args = parser.parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
     args.out.mkdir(parents=True, exist_ok=True)
     report: dict = {"benchmark": "realwalks", "settings": {
         "particles": args.particles, "size": list(args.size), "rate": args.rate, "seeds": args.seeds,
-        "background_frames": args.background_frames, "cpus": os.cpu_count()}, "runs": {}, "summary": {}}
+        "background_frames": 0 if args.hands_off else args.background_frames, "hands_off": args.hands_off,
+        "cpus": os.cpu_count()}, "runs": {}, "summary": {}}
     jobs = [(w, v, s) for w in args.walks for v in args.variants for s in args.settings]
     for k, (walk, variant, setting) in enumerate(jobs):
         name = f"{walk} {variant} {setting}"
         started = time.monotonic()
         bag = sequence(args.out / "sequences", walk, variant, SETTINGS[setting], tuple(args.size), args.rate,
-                       args.background_frames)
+                       args.background_frames, args.hands_off)
         modes = [("tracker", seed, True) for seed in args.seeds]
-        if not args.no_dead_reckoning:
+        if not (args.no_dead_reckoning or args.hands_off):    # dead reckoning needs a start description
             modes.append(("dead_reckoning", 0, False))
         for mode, seed, images in modes:
-            run_dir = args.out / "runs" / f"{walk}_{variant}_{setting}_{mode}_s{seed}"
+            run_dir = args.out / "runs" / f"{walk}_{variant}_{setting}_{mode}{'_handsoff' if args.hands_off else ''}_s{seed}"
             if not (run_dir / "eval.json").exists():
                 with contextlib.redirect_stdout(sys.stderr):
                     run_tracking(TrackOptions(bag=bag, out=run_dir, particles=args.particles, seed=seed,
                                               likelihood_scale=0.1 if images else 1e-9, recovery=images,
-                                              overlays=False, quiet=True))
+                                              auto_start=args.hands_off, overlays=False, quiet=True))
                 evaluate_run(run_dir)
             result = json.loads((run_dir / "eval.json").read_text())
-            report["runs"].setdefault(name, {}).setdefault(mode, {})[seed] = score(result, variant, args.rate)
+            entry = score(result, variant, args.rate)
+            if args.hands_off:
+                entry.update(hands_off_figures(args.out / "runs", run_dir, f"{walk}_{variant}_{setting}", seed, args.rate))
+            report["runs"].setdefault(name, {}).setdefault(mode, {})[seed] = entry
         runs = report["runs"][name]
         tracked = list(runs["tracker"].values())
         summary = {key: {"median": float(np.median([r[key] for r in tracked])),
@@ -132,6 +159,15 @@ def main(argv: list[str] | None = None) -> int:
         summary["runs_ended_on_person"] = f"{sum(r['ended_on_person'] for r in tracked)}/{len(tracked)}"
         summary["reacquisitions"] = [r["recovery"].get("reacquisitions", 0) for r in tracked]
         summary["swap_fraction_median"] = float(np.median([r["swap_fraction"] for r in tracked]))
+        if args.hands_off:
+            delays = [r["start_delay_s"] for r in tracked if r["start_delay_s"] is not None]
+            summary["started"] = f"{len(delays)}/{len(tracked)}"
+            summary["start_delay_s"] = {"median": float(np.median(delays)) if delays else None,
+                                        "worst": float(np.max(delays)) if delays else None}
+            hand = [r["hand_started_absolute_median_mm"] for r in tracked if r["hand_started_absolute_median_mm"]]
+            if len(hand) == len(tracked):
+                summary["hand_started_absolute_median_mm"] = {"median": float(np.median(hand)),
+                                                              "worst": float(np.max(hand))}
         if "dead_reckoning" in runs:
             summary["dead_reckoning_absolute_median_mm"] = runs["dead_reckoning"][0]["absolute_median_mm"]
         report["summary"][name] = summary
@@ -141,6 +177,10 @@ def main(argv: list[str] | None = None) -> int:
             + (f", heading 1 s after the turn {summary['heading_1s_after_turn_deg']['median']:.0f} deg"
                if "heading_1s_after_turn_deg" in summary else "")
             + f", on the person at the end {summary['runs_ended_on_person']}"
+            + (f", started {summary['started']} after {summary['start_delay_s']['median']} s (median)"
+               if args.hands_off else "")
+            + (f", hand-started {summary['hand_started_absolute_median_mm']['median']:.0f} mm"
+               if "hand_started_absolute_median_mm" in summary else "")
             + (f", dead reckoning {summary['dead_reckoning_absolute_median_mm']:.0f} mm"
                if "dead_reckoning_absolute_median_mm" in summary else "")
             + f" ({time.monotonic() - started:.0f} s)")

@@ -232,3 +232,34 @@ def test_user_start_and_tape_measure_differ_from_the_truth_a_little(tmp_path):
     body_user = BodyDescription.from_yaml(tmp_path / "user" / "body.yaml")
     ratio = body_user.upper_leg_length / body_exact.upper_leg_length
     assert ratio != 1.0 and abs(ratio - 1) <= 0.061
+
+
+def test_no_descriptions_is_a_users_own_video(tmp_path):
+    """--no-descriptions: the same frames and truth, but no start or body description in the bag or beside it."""
+    assert synth(tmp_path / "with", *MOCAP) == 0
+    assert synth(tmp_path / "bare", *MOCAP, "--no-descriptions") == 0
+    assert not (tmp_path / "bare" / "start.yaml").exists() and not (tmp_path / "bare" / "body.yaml").exists()
+    _, frames, stamps, markers, start, _ = read(tmp_path / "bare")
+    _, frames_with, _, markers_with, start_with, _ = read(tmp_path / "with")
+    with SequenceReader(tmp_path / "bare" / "synth.bag") as bag:
+        assert bag.text("/awalker/body_description") is None
+    assert start is None and start_with is not None
+    assert np.array_equal(markers, markers_with)
+    assert all(np.array_equal(a[1]["cam0"], b[1]["cam0"]) for a, b in zip(frames, frames_with))
+
+
+def test_stop_variant_stands_still_with_both_feet_down_then_walks_on(tmp_path):
+    from awalker_tools.synth import PAUSES
+
+    rate = 30.0
+    assert cli.main(["synth", "--out", str(tmp_path / "stop"), "--size", "80", "60", "--frames", "140",
+                     "--background-frames", "0", *MOCAP, "--variant", "stop"]) == 0
+    _, _, _, walk, _, _ = read(tmp_path / "stop")
+    speed = np.linalg.norm(np.diff(walk[:, M["pelvis"], :2], axis=0), axis=1) * rate
+    still = np.flatnonzero(speed < 1e-6)
+    begin, duration = PAUSES["stop"]
+    assert still.size == int(round(duration * rate)) and np.all(np.diff(still) == 1)     # one stop, as long as asked
+    assert begin * rate <= still[0] <= (begin + 0.5) * rate
+    feet = walk[still[0], [M["left_heel"], M["left_toe"], M["right_heel"], M["right_toe"]], 2]
+    assert feet.reshape(2, 2).min(axis=1).max() < 0.05                 # both feet on the floor
+    assert speed[: still[0]].mean() > 1.0 and speed[still[-1] + 2:].mean() > 1.0     # walking before and after

@@ -91,6 +91,21 @@ def time_warp(points: np.ndarray, factor: float) -> np.ndarray:
     return out.reshape(len(times), *points.shape[1:])
 
 
+def pause(points: np.ndarray, rate: float, start: float, duration: float) -> np.ndarray:
+    """The walk with the person standing still for ``duration`` s: from ``start`` s, the first frame
+    within half a second whose higher foot is lowest (both feet on the floor, as when stopping with
+    the feet apart) is held, then the walk goes on from there."""
+    first = int(round(start * rate))
+    window = slice(first, min(len(points), first + max(int(0.5 * rate), 1)))
+    feet = points[window][:, FOOT_POINTS["left"] + FOOT_POINTS["right"], 2]
+    left, right = (feet[:, : len(FOOT_POINTS["left"])].min(axis=1), feet[:, len(FOOT_POINTS["left"]):].min(axis=1))
+    if feet.size == 0:
+        raise ValueError(f"pause: the walk is shorter than {start:g} s")
+    hold = first + int(np.argmin(np.maximum(left, right)))
+    still = np.repeat(points[hold: hold + 1], int(round(duration * rate)), axis=0)
+    return np.concatenate([points[: hold + 1], still, points[hold + 1:]])
+
+
 def bend(points: np.ndarray, rate: float, angle: float, start: float, duration: float) -> np.ndarray:
     """The walk turned left by ``angle`` rad (right if negative), smoothly over ``duration`` s from ``start`` s,
     pivoting on the stance foot (module docstring)."""

@@ -69,6 +69,7 @@ class SynthConfig:
     variant: str = "straight"        # mocap walks: straight, slow, fast, veer-left, veer-right, u-turn
     user_start: bool = False         # start.yaml as a user would write it (position +-5 cm, heading +-5 deg, ...)
     tape_measure: bool = False       # body.yaml lengths with tape-measure errors (a few per cent)
+    descriptions: bool = True        # False: a user's own video, no start/body description (file or topic)
 
     def __post_init__(self) -> None:
         if not 1 <= self.cameras <= 4:
@@ -105,7 +106,10 @@ VARIANTS: dict[str, tuple[float, tuple[float, float, float] | None, float]] = {
     "veer-left": (1.0, (35.0, 0.5, 2.5), 3.5),
     "veer-right": (1.0, (-35.0, 0.5, 2.5), 3.5),
     "u-turn": (1.0, (180.0, 1.0, 2.0), 4.2),
+    "stop": (1.0, None, 4.5),
 }
+# Variants where the person stands still: (from s, for s)
+PAUSES: dict[str, tuple[float, float]] = {"stop": (1.5, 1.5)}
 
 
 @dataclass
@@ -324,6 +328,8 @@ def mocap_motion(config: SynthConfig, start_xy: np.ndarray, heading: float) -> M
     if warp != 1.0:
         points = variants.time_warp(points, warp)
     points = variants.loop_to_duration(points, rate, (config.frames - 1) / rate)
+    if config.variant in PAUSES:
+        points = variants.pause(points, rate, *PAUSES[config.variant])
     # face the start heading: the direction of the first half second
     pelvis = points[:, _M["pelvis"], :2]
     ahead = pelvis[min(len(pelvis) - 1, int(0.5 * rate))] - pelvis[0]
@@ -453,15 +459,17 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
         outfit = Outfit.random(rng)
         painters = {cam.name: PersonRenderer(cam, outfit) for cam in cameras}
     save_calibration(cameras, out / "calibration.yaml")
-    (out / "body.yaml").write_text(given_body.to_yaml_text())
     start_text = yaml.safe_dump(given_start, sort_keys=False)
-    (out / "start.yaml").write_text(start_text)
+    if config.descriptions:
+        (out / "body.yaml").write_text(given_body.to_yaml_text())
+        (out / "start.yaml").write_text(start_text)
     csv_lines = ["frame,stamp_ns,marker,x,y,z"]
     overlays: dict[str, Path] = {}
     with bagio.SequenceWriter(bag_path, cameras, storage=config.storage, compressed=config.compressed,
                               image_format=config.image_format) as writer:
-        writer.write_text(bagio.START_DESCRIPTION_TOPIC, int(stamps[0]), start_text)
-        writer.write_text(bagio.BODY_DESCRIPTION_TOPIC, int(stamps[0]), given_body.to_yaml_text())
+        if config.descriptions:
+            writer.write_text(bagio.START_DESCRIPTION_TOPIC, int(stamps[0]), start_text)
+            writer.write_text(bagio.BODY_DESCRIPTION_TOPIC, int(stamps[0]), given_body.to_yaml_text())
         for frame in range(total):
             person = frame - config.background_frames
             images = {}
@@ -503,6 +511,6 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
             if progress and (frame % 20 == 0 or frame == total - 1):
                 print(f"synth: frame {frame + 1}/{total}", file=sys.stderr, flush=True)
     (out / "ground_truth.csv").write_text("\n".join(csv_lines) + "\n")
-    return {"bag": bag_path, "calibration": out / "calibration.yaml", "body": out / "body.yaml",
-            "start": out / "start.yaml", "ground_truth": out / "ground_truth.csv",
+    descriptions = {"body": out / "body.yaml", "start": out / "start.yaml"} if config.descriptions else {}
+    return {"bag": bag_path, "calibration": out / "calibration.yaml", **descriptions, "ground_truth": out / "ground_truth.csv",
             **{f"overlay {name}": path for name, path in overlays.items()}}

@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from awalker_tools.synth import SynthConfig, synthesise
+from awalker_tools.synth import VARIANTS, SynthConfig, synthesise
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -34,15 +34,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--person", choices=("model", "dressed"), default="model",
                         help="model: the tracker's own body (a mirror); dressed: a person with arms, hair, striped "
                              "shirt, jeans and shoes drawn by another renderer (needs --from-mocap)")
-    parser.add_argument("--variant", choices=("straight", "slow", "fast", "veer-left", "veer-right", "u-turn"),
+    parser.add_argument("--variant", choices=tuple(VARIANTS),
                         default="straight", help="mocap walk variant: 20 %% slower/faster, veering 35 degrees over "
-                                                 "2.5 s, or a 180-degree turn within 2 s (the walk is repeated as "
-                                                 "long as --frames needs)")
+                                                 "2.5 s, a 180-degree turn within 2 s, or standing still for 1.5 s "
+                                                 "after 1.5 s (stop) (the walk is repeated as long as --frames needs)")
     parser.add_argument("--user-start", action="store_true",
                         help="start.yaml as a user would write it: position within 5 cm, heading within 5 degrees, "
                              "speed within 10 %%, no step length")
     parser.add_argument("--tape-measure", action="store_true",
                         help="body.yaml lengths off by a few per cent, as measured with a tape (mocap walks)")
+    parser.add_argument("--no-descriptions", action="store_true",
+                        help="a user's own video: no start.yaml, body.yaml or description topics (track it with the "
+                             "automatic start; add --background-frames 0 for no empty frames either)")
     parser.add_argument("--size", nargs=2, type=int, default=(640, 480), metavar=("W", "H"),
                         help="image size in pixels (default 640 480)")
     parser.add_argument("--noise", type=float, default=3.0, help="sensor noise sigma, grey levels (default 3)")
@@ -61,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
         noise_sigma=args.noise, storage=args.storage, compressed=args.image_format != "raw",
         image_format="png" if args.image_format == "raw" else args.image_format,
         person=args.person, variant=args.variant, user_start=args.user_start, tape_measure=args.tape_measure,
+        descriptions=not args.no_descriptions,
     )
     paths = synthesise(config)
     for kind, path in paths.items():
