@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from awalker_tracker.inference.recovery import (
-    NOT_RESEEDED, RESEEDED_FALLEN, LostTrackMonitor, RecoveryConfig, put_rows)
+    HELD, NOT_RESEEDED, RESEEDED_FALLEN, LostTrackMonitor, RecoveryConfig, put_rows)
 from awalker_tracker.inference.tracker import StartDescription, TrackerConfig, TrackerModel, marker_likelihood
 from awalker_tracker.model.body import MARKER_NAMES, BodyDescription
 from awalker_tracker.model.walker import LEFT
@@ -168,3 +168,58 @@ def test_a_second_larger_person_does_not_count_as_losing_the_first():
     assert all(monitor.update(f, [features], pelvis) is None for f in range(5))
     lost = LostTrackMonitor([camera], RecoveryConfig(lost_after_s=0.0), dt=1 / 30)
     assert lost.update(0, [features], pelvis + np.array([2.5, 0.0, 0.0])) is not None
+
+
+@pytest.fixture(scope="module")
+def walk_stop_walk():
+    """The side camera's features of a person walking at 1.3 m/s for 20 frames, standing for 25, walking on for 20."""
+    camera = side_camera()
+    x = np.concatenate([0.4 + 1.3 / 30 * np.arange(20), np.full(25, 0.4 + 1.3 / 30 * 19),
+                        0.4 + 1.3 / 30 * np.arange(20, 40)]) - 0.6
+    poses = [walking_poses(1, x0=float(x0))[0] for x0 in x]
+    features, _ = features_of(camera, poses, 0)
+    pelvis = np.array([pose_body(BODY, PARAMS, p.walker, p.kin).markers[0, PELVIS] for p in poses])
+    return camera, features, pelvis
+
+
+@pytest.mark.parametrize("hold", [True, False])
+def test_monitor_says_when_the_person_stands_still_and_when_they_walk_on(walk_stop_walk, hold: bool):
+    camera, features, pelvis = walk_stop_walk
+    monitor = LostTrackMonitor([camera], RecoveryConfig(hold_still=hold), dt=1 / 30)
+    still = []
+    for f, (feats, p) in enumerate(zip(features, pelvis)):
+        assert monitor.update(f, [feats], p) is None           # the track is on the person throughout
+        still.append(monitor.still(f))
+    if not hold:
+        assert not any(still)
+        return
+    frames = np.flatnonzero(still)
+    assert frames.size and np.all(np.diff(frames) == 1)       # one stop
+    assert 20 <= frames[0] <= 20 + 10                          # noticed within a third of a second of stopping
+    assert 45 <= frames[-1] + 1 <= 45 + 5                     # and the walk on within a sixth
+
+
+def test_the_walkers_are_held_while_the_person_stands_still(walk_stop_walk):
+    from awalker_tracker.inference.tracker import ImageObservation, image_likelihood
+
+    camera, features, pelvis = walk_stop_walk
+    body = BodyDescription.default()
+    config = TrackerConfig(dt=1 / 30, recovery=RecoveryConfig(reacquire=False))
+    start = StartDescription(0, (float(pelvis[0, 0]), float(pelvis[0, 1])), 0.0, 1.3, 0.7, LEFT)
+    model = TrackerModel(body, start, image_likelihood(body, [camera]), config, cameras=[camera])
+    rng = np.random.default_rng(0)
+    states = model.initial(16, rng)
+    weights = np.zeros(16)
+    held = []
+    for f, feats in enumerate(features):
+        parent = states
+        moved, _ = model.transition(parent, rng)
+        states = model.rejuvenate(f, weights, parent, moved, ImageObservation(features=(feats,)), rng)
+        if model.monitor.still(f):
+            assert states.pose.markers is parent.pose.markers and (states.speed == 0).all()
+            assert (states.reseeded == HELD).all()
+            assert not model.outputs(states, _).heel_strike.any()
+            held.append(f)
+        else:
+            assert states is moved
+    assert 15 <= len(held) <= 30

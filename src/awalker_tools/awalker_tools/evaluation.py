@@ -3,8 +3,9 @@
 Files (one row per frame and marker, metres, world frame z up):
     poses.csv / ground_truth.csv: ``frame,stamp_ns,marker,x,y,z``
     summary.csv: ``frame,stamp_ns,speed,speed_std,stance_left_probability,effective_sample_size,
-                  resampled,heel_strike,stance_leg,reseeded_fallen,reacquired`` (the last two:
-                  particles re-seeded at that frame after a fall / at the detected person)
+                  resampled,heel_strike,stance_leg,reseeded_fallen,reacquired,person_still`` (the last
+                  three: particles re-seeded at that frame after a fall / at the detected person, and 1
+                  where the person stood still and the walkers were held)
 Metrics:
 - absolute error: per frame, mean 3D distance (mm) over pelvis, thorax, hips, knees, ankles;
 - relative error: the same after translating the estimated pelvis onto the true one;
@@ -32,9 +33,10 @@ EVAL_MARKERS = ("pelvis", "thorax", "left_hip", "right_hip", "left_knee", "right
 FOOT_MARKERS = {"left": ("left_heel", "left_toe"), "right": ("right_heel", "right_toe")}
 POSE_COLUMNS = ("frame", "stamp_ns", "marker", "x", "y", "z")
 SUMMARY_COLUMNS = ("frame", "stamp_ns", "speed", "speed_std", "stance_left_probability",
-                   "effective_sample_size", "resampled", "heel_strike", "stance_leg", "reseeded_fallen", "reacquired")
+                   "effective_sample_size", "resampled", "heel_strike", "stance_leg", "reseeded_fallen", "reacquired",
+                   "person_still")
 # columns later versions added, read as 0 from older files
-OPTIONAL_SUMMARY_COLUMNS = {"reseeded_fallen": "0", "reacquired": "0"}
+OPTIONAL_SUMMARY_COLUMNS = {"reseeded_fallen": "0", "reacquired": "0", "person_still": "0"}
 
 
 @dataclass(frozen=True)
@@ -128,7 +130,7 @@ def read_summary_csv(path: Path) -> dict[str, np.ndarray]:
             col = [r.get(key) or OPTIONAL_SUMMARY_COLUMNS.get(key, "") for r in rows]
             if key in ("heel_strike", "stance_leg"):
                 out[key] = np.array(col, dtype=object)
-            elif key in ("frame", "stamp_ns", "reseeded_fallen", "reacquired"):
+            elif key in ("frame", "stamp_ns", "reseeded_fallen", "reacquired", "person_still"):
                 out[key] = np.array(col, np.int64)
             elif key == "resampled":
                 out[key] = np.array([c.strip().lower() in ("1", "true") for c in col])
@@ -270,7 +272,8 @@ def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarra
     if summary is not None:
         result["recovery"] = {"reseeded_fallen_particles": int(np.sum(summary["reseeded_fallen"])),
                               "frames_with_fallen_reseeds": int(np.sum(summary["reseeded_fallen"] > 0)),
-                              "reacquisitions": int(np.sum(summary["reacquired"] > 0))}
+                              "reacquisitions": int(np.sum(summary["reacquired"] > 0)),
+                              "still_frames": int(np.sum(summary["person_still"] > 0))}
         result["estimated_speed_m_s"] = float(np.median(summary["speed"]))
         left = planted_stance_left(truth)
         if left is not None:
@@ -438,7 +441,9 @@ def format_table(result: dict[str, object], label: str = "") -> str:
         rec = result["recovery"]
         lines.append(f"recovery: {rec['reacquisitions']} re-acquisitions of a lost track, "
                      f"{rec['reseeded_fallen_particles']} fallen particles re-seeded over "
-                     f"{rec['frames_with_fallen_reseeds']} frames")
+                     f"{rec['frames_with_fallen_reseeds']} frames"
+                     + (f"; the person stood still (walkers held) on {rec['still_frames']} frames"
+                        if rec.get("still_frames") else ""))
     if "estimated_speed_m_s" in result and "truth_speed_m_s" in result:
         lines.append(f"speed: estimated {result['estimated_speed_m_s']:.2f} m/s, true {result['truth_speed_m_s']:.2f} m/s")
     return "\n".join(lines)

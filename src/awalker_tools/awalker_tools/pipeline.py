@@ -213,6 +213,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
             Parameter("trust", value=float(options.trust)), Parameter("seed", value=int(options.seed)),
             Parameter("likelihood_scale", value=float(options.likelihood_scale)),
             Parameter("reseed_fallen", value=bool(options.recovery)), Parameter("reacquire", value=bool(options.recovery)),
+            Parameter("hold_still", value=bool(options.recovery)),
             Parameter("idle_flush_s", value=1.0e9)])
         tracker.keep_summaries = True
         nodes.append(tracker)
@@ -317,7 +318,7 @@ def write_outputs(out: Path, trajectory: Any, summaries: list[Any]) -> None:
              "effective_sample_size": f"{s.effective_sample_size:.1f}", "resampled": int(s.resampled),
              "heel_strike": s.heel_strike_foot,
              "stance_leg": "left" if map_leg.get(s.stamp_ns, s.map_stance_leg) == 0 else "right",
-             "reseeded_fallen": s.reseeded_fallen, "reacquired": s.reacquired}
+             "reseeded_fallen": s.reseeded_fallen, "reacquired": s.reacquired, "person_still": int(s.person_still)}
             for s in summaries]
     evaluation.write_summary_csv(out / "summary.csv", rows)
     evaluation.write_gait(out, track, trajectory.stance_leg)

@@ -81,10 +81,11 @@ def build_report(run_dir: Path) -> Path:
         "resampled frames": int(np.sum(summary["resampled"])),
         "re-acquisitions": int(np.sum(summary["reacquired"] > 0)),
         "fallen walkers re-seeded": int(np.sum(summary["reseeded_fallen"])),
+        "frames standing still (walkers held)": int(np.sum(summary["person_still"] > 0)),
         "frames with an uncertain stance leg (0.2-0.8)":
             int(np.sum((summary["stance_left_probability"] > 0.2) & (summary["stance_left_probability"] < 0.8))),
     }], ["frames", "N_eff median", "N_eff min", "resampled frames", "re-acquisitions", "fallen walkers re-seeded",
-         "frames with an uncertain stance leg (0.2-0.8)"]))
+         "frames standing still (walkers held)", "frames with an uncertain stance leg (0.2-0.8)"]))
     if (run_dir / "eval.json").is_file():
         result = json.loads((run_dir / "eval.json").read_text())
         parts.append("<h2>Against ground truth</h2>")

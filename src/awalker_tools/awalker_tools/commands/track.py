@@ -52,7 +52,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--likelihood-scale", type=float, default=0.1,
                         help="exponent on the image likelihood (tempering, default 0.1)")
     parser.add_argument("--no-recovery", action="store_true",
-                        help="never re-seed fallen walkers or re-acquire a lost track (the exact filter of the paper)")
+                        help="never re-seed fallen walkers, re-acquire a lost track or hold the walkers while the person "
+                             "stands still (the exact filter of the paper)")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="result bag storage")
     parser.add_argument("--no-overlay", action="store_true", help="skip overlay images and video")
     parser.add_argument("--share-topics", action="store_true",

@@ -31,7 +31,8 @@ class ParticleOutputs:
     heel_strike: np.ndarray        # (N,) bool: the swing foot struck the ground during this frame
     strike_point: np.ndarray       # (N, 3) where it struck (valid where heel_strike), world (m)
     walker: dict[str, np.ndarray]  # WALKER_FIELDS -> (N,) walker and control state
-    reseeded: np.ndarray           # (N,) int8: 0, or re-seeded this frame: 1 after a fall, 2 at the detected person
+    reseeded: np.ndarray           # (N,) int8: 0, or re-seeded this frame: 1 after a fall, 2 at the detected person,
+                                   # 3 held where it stood (the person stands still; inference.recovery)
 
     def take(self, indices: np.ndarray) -> "ParticleOutputs":
         values = {}
@@ -81,6 +82,7 @@ class PosteriorSummary:
     clouds: tuple[MarkerCloud, ...]
     reseeded_fallen: int = 0        # particles re-seeded at this frame after their walker fell
     reacquired: int = 0             # particles re-seeded at this frame at the person seen in the images
+    person_still: bool = False      # the person stood still at this frame: the walkers were held
 
     @property
     def heel_strike_foot(self) -> str:
@@ -127,4 +129,4 @@ def summarize(frame_index: int, stamp_ns: int, log_weights: np.ndarray, outputs:
         speed=speed, speed_std=speed_std, stance_left_probability=float(np.sum(w[left])),
         effective_sample_size=float(1.0 / np.sum(w * w)), num_particles=n, resampled=bool(resampled),
         contacts=tuple(contacts), clouds=clouds, reseeded_fallen=int(np.sum(outputs.reseeded == 1)),
-        reacquired=int(np.sum(outputs.reseeded == 2)))
+        reacquired=int(np.sum(outputs.reseeded == 2)), person_still=bool(np.any(outputs.reseeded == 3)))

@@ -14,6 +14,11 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   the track is lost: a fraction of the particles (the lowest weights) are re-seeded around the
   detected ground position, with the heading and speed of the detections' recent ground track
   (when it moves), then the image likelihood decides. At most once per ``cooldown_s``.
+- **A person who stops.** The walker only walks (the paper's model has no standing still): with
+  ``hold_still``, while the detections' ground track moves slower than ``still_m_s`` over
+  ``still_window_s`` (and until it moves faster than ``moving_m_s`` again), each frame's particles
+  are the previous frame's, held where they stand with speed 0 (``HELD``), and the summaries say the
+  person stands still; when the person walks on, the walkers go on from where they were held.
 
 Both are proposals the prior does not make, and their weights are not corrected for it: recovery
 trades the filter's exactness for not staying lost. The summaries count the re-seeded particles.
@@ -29,7 +34,7 @@ from awalker_tracker.vision.camera import Camera
 from awalker_tracker.vision.detection import (
     GroundTrack, PersonDetection, detect_person, person_blobs, wholly_in_view)
 
-NOT_RESEEDED, RESEEDED_FALLEN, REACQUIRED = 0, 1, 2
+NOT_RESEEDED, RESEEDED_FALLEN, REACQUIRED, HELD = 0, 1, 2, 3
 
 
 @dataclass(frozen=True)
@@ -46,13 +51,17 @@ class RecoveryConfig:
     box_margin: float = 0.25           # the blob box is widened by this fraction of its size on each side
     lost_distance_m: float = 0.4       # triangulated detections: the pelvis this far off over the ground is lost
     track_window_s: float = 0.5        # detections over this time give the person's ground velocity
-    moving_m_s: float = 0.3            # slower ground tracks give no heading
+    moving_m_s: float = 0.3            # slower ground tracks give no heading (and do not end a stop)
+    hold_still: bool = True            # hold the walkers while the person stands still
+    still_m_s: float = 0.15            # a ground track slower than this over still_window_s: standing still
+    still_window_s: float = 0.3
 
     def __post_init__(self) -> None:
         if not 0.0 < self.reacquire_fraction <= 1.0:
             raise ValueError(f"RecoveryConfig.reacquire_fraction must lie in (0, 1], got {self.reacquire_fraction}")
         if min(self.lost_after_s, self.cooldown_s, self.position_spread_m, self.heading_spread_rad,
-               self.box_margin, self.track_window_s, self.moving_m_s, self.lost_distance_m) < 0:
+               self.box_margin, self.track_window_s, self.moving_m_s, self.lost_distance_m, self.still_m_s,
+               self.still_window_s) < 0:
             raise ValueError("RecoveryConfig: times, spreads and margins must be >= 0")
 
 
@@ -89,6 +98,7 @@ class LostTrackMonitor:
         self.track = GroundTrack(dt)
         self._run: dict[int, int] = {}
         self._orders: dict[int, Reacquisition | None] = {}
+        self._still: dict[int, bool] = {}
         self._quiet_until = -1
         self.reacquisitions = 0
 
@@ -109,26 +119,39 @@ class LostTrackMonitor:
                 return False
         return True
 
+    def still(self, frame: int) -> bool:
+        """Whether the person stood still at ``frame`` (decided by ``update``; False if not yet)."""
+        return self._still.get(frame, False)
+
     def update(self, frame: int, features: list[Any], pelvis: np.ndarray) -> Reacquisition | None:
-        """The re-acquisition to make at ``frame`` (None: none), given the particles' mean pelvis (3,)."""
+        """The re-acquisition to make at ``frame`` (None: none), given the particles' mean pelvis (3,);
+        also decides ``still(frame)``."""
         if frame in self._orders:
             return self._orders[frame]
+        cfg = self.config
         detection = detect_person(list(features), self.cameras)
         reliable = detection is not None and wholly_in_view(detection, self.cameras)
         self.track.add(frame, detection.position if reliable else None)
-        off = reliable and self._off_person(detection, pelvis, list(features))
+        velocity = self.track.velocity(frame, cfg.track_window_s)
+        speed = None if velocity is None else float(np.linalg.norm(velocity))
+        recent = self.track.velocity(frame, cfg.still_window_s)
+        recent_speed = None if recent is None else float(np.linalg.norm(recent))
+        was_still = self._still.get(frame - 1, False)
+        # hysteresis: a stop starts below still_m_s and lasts until the track moves at moving_m_s
+        self._still[frame] = cfg.hold_still and recent_speed is not None and (
+            recent_speed < (cfg.moving_m_s if was_still else cfg.still_m_s))
+        off = cfg.reacquire and reliable and self._off_person(detection, pelvis, list(features))
         self._run[frame] = self._run.get(frame - 1, 0) + 1 if off else 0
         order = None
-        if off and self._run[frame] * self.dt >= self.config.lost_after_s and frame >= self._quiet_until:
-            velocity = self.track.velocity(frame, self.config.track_window_s)
-            moving = velocity is not None and np.linalg.norm(velocity) >= self.config.moving_m_s
+        if off and self._run[frame] * self.dt >= cfg.lost_after_s and frame >= self._quiet_until:
+            moving = speed is not None and speed >= cfg.moving_m_s
             order = Reacquisition(detection.position.copy(),
                                   float(np.arctan2(velocity[1], velocity[0])) if moving else None,
                                   float(np.linalg.norm(velocity)) if moving else None)
             self._quiet_until = frame + max(1, int(round(self.config.cooldown_s / self.dt)))
             self.reacquisitions += 1
         self._orders[frame] = order
-        for store in (self._run, self._orders):     # keep a few seconds of history
+        for store in (self._run, self._orders, self._still):     # keep a few seconds of history
             for old in [f for f in store if f < frame - 300]:
                 del store[old]
         return order

@@ -7,9 +7,10 @@ A model provides, for N particles held as arrays (a "states" object with ``take(
   ``info`` is anything the model wants reported with the new states (e.g. heel strikes);
 - ``log_likelihood(prev_states, states, obs) -> (N,)``: log p(z_t | s_t) (``prev_states`` is
   None at the first frame; models with optical flow use it);
-- optionally ``rejuvenate(frame, log_weights, states, obs, rng) -> states``: a data-driven move
-  made after the transition and before the likelihood of frame ``frame`` (e.g. re-seeding particles
-  at a person detected in ``obs``); ``log_weights`` are the particles' weights before this frame.
+- optionally ``rejuvenate(frame, log_weights, parent, states, obs, rng) -> states``: a data-driven
+  move made after the transition (``parent`` -> ``states``; ``parent`` None at the first frame) and
+  before the likelihood of frame ``frame`` (e.g. re-seeding particles at a person detected in
+  ``obs``); ``log_weights`` are the particles' weights before this frame.
   Its proposals are not weight-corrected: a robustness device outside the exact filter.
 
 The filter keeps S_{t-1} = {s_{t-1}, w_{t-1}} and a window of simulated futures
@@ -193,7 +194,7 @@ class ParticleFilter(Generic[States]):
             # the particles' weights as they stand before this frame: w_{t-1} times the window's likelihoods
             log_weights = self._prev_log_weights + sum((f.log_likelihood for f in self._window),
                                                        np.zeros(self.num_particles))
-            states = rejuvenate(self._next_frame + len(self._window), log_weights, states, obs, self.rng)
+            states = rejuvenate(self._next_frame + len(self._window), log_weights, parent, states, obs, self.rng)
         loglik = self._checked_loglik(parent, states, obs)
         self._window.append(_Future(states, info, obs, loglik))
 

@@ -29,7 +29,7 @@ from scipy.spatial.transform import Rotation
 from awalker_tracker.errors import InputError
 from awalker_tracker.inference.posterior import ParticleOutputs, PosteriorSummary, summarize
 from awalker_tracker.inference.recovery import (
-    REACQUIRED, RESEEDED_FALLEN, LostTrackMonitor, RecoveryConfig, put_rows)
+    HELD, REACQUIRED, RESEEDED_FALLEN, LostTrackMonitor, RecoveryConfig, put_rows)
 from awalker_tracker.inference.smc import AncestryHistory, FilterStep, ParticleFilter, SMCConfig
 from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription, BodyPoseBatch
 from awalker_tracker.model.walker import LEFT, RIGHT, WalkerParams, WalkerState
@@ -225,7 +225,7 @@ class TrackerModel:
         self._gaits = gaits
         self._kin = kin_mod
         self.monitor = (LostTrackMonitor(cameras, config.recovery, config.dt)
-                        if cameras and config.recovery.reacquire else None)
+                        if cameras and (config.recovery.reacquire or config.recovery.hold_still) else None)
         self.reseeded_fallen = 0     # particles re-seeded after a fall, over the run
 
     # -- SMC protocol ---------------------------------------------------------------------
@@ -344,16 +344,21 @@ class TrackerModel:
         self.reseeded_fallen += rows.size
         return put_rows(states, rows, fresh)
 
-    def rejuvenate(self, frame: int, log_weights: np.ndarray, states: TrackerStates, obs: Any,
-                   rng: np.random.Generator) -> TrackerStates:
-        """Re-acquire a lost track from the image (``inference.recovery``): called by the filter with the
-        particles' current log weights before the likelihood of ``obs`` is computed."""
+    def rejuvenate(self, frame: int, log_weights: np.ndarray, parent: TrackerStates | None, states: TrackerStates,
+                   obs: Any, rng: np.random.Generator) -> TrackerStates:
+        """Hold the walkers while the person stands still and re-acquire a lost track from the image
+        (``inference.recovery``): called by the filter with the particles' current log weights, the
+        states before the transition (``parent``, None at the first frame) and after it, before the
+        likelihood of ``obs`` is computed."""
         if self.monitor is None or not isinstance(obs, ImageObservation):
             return states
         w = np.exp(log_weights - np.max(log_weights))
         w /= w.sum()
         pelvis = w @ states.pose.markers[:, MARKER_NAMES.index("pelvis")]
         order = self.monitor.update(frame, obs.features, pelvis)
+        if parent is not None and self.monitor.still(frame):
+            # the person stands still: the frame's walkers are the previous frame's, not moving
+            states = replace(parent, speed=np.zeros(len(parent)), reseeded=np.full(len(parent), HELD, np.int8))
         if order is None:
             return states
         n = len(states)
@@ -393,7 +398,8 @@ class TrackerModel:
     def outputs(self, states: TrackerStates, events: Any | None) -> ParticleOutputs:
         n = len(states)
         contact = np.column_stack([states.kin.contact_point, np.zeros(n)])
-        struck = np.zeros(n, bool) if events is None else np.asarray(events.heel_strike, bool)
+        # (held walkers did not make the transition whose events these are)
+        struck = (np.zeros(n, bool) if events is None else np.asarray(events.heel_strike, bool)) & (states.reseeded != HELD)
         c = states.control
         walker_fields = {k: getattr(states.walker, k) for k in
                          ("stance_angle", "swing_angle", "stance_rate", "swing_rate", "contact_origin")}

@@ -82,6 +82,7 @@ def summary_to_msg(summary: core.PosteriorSummary, world_frame: str = "world") -
     msg.resampled = bool(summary.resampled)
     msg.reseeded_fallen = int(summary.reseeded_fallen)
     msg.reacquired = int(summary.reacquired)
+    msg.person_still = bool(summary.person_still)
     msg.contacts = [FootContact(foot=int(c.foot), position=Point(**dict(zip("xyz", map(float, c.position)))),
                                 probability=float(c.probability), heel_strike=bool(c.heel_strike))
                     for c in summary.contacts]
@@ -110,6 +111,7 @@ def summary_from_msg(msg: PosteriorSummary) -> core.PosteriorSummary:
         stance_left_probability=float(msg.stance_left_probability),
         effective_sample_size=float(msg.effective_sample_size), num_particles=int(msg.num_particles),
         resampled=bool(msg.resampled), reseeded_fallen=int(msg.reseeded_fallen), reacquired=int(msg.reacquired),
+        person_still=bool(msg.person_still),
         contacts=tuple(core.FootContactEstimate(int(c.foot), np.array([c.position.x, c.position.y, c.position.z]),
                                                 float(c.probability), bool(c.heel_strike)) for c in msg.contacts),
         clouds=tuple(core.MarkerCloud(c.marker_name, points_from_msg(c.points), np.asarray(c.weights, float))

@@ -95,7 +95,9 @@ class TrackerNode(Node):
         self.body_output = str(declare("body_output", "", "write an estimated body description to this YAML file"))
         self.recovery = RecoveryConfig(
             reseed_fallen=bool(declare("reseed_fallen", True, "re-seed walkers that fall (inference/recovery.py)")),
-            reacquire=bool(declare("reacquire", True, "re-acquire a lost track at the person seen in the images")))
+            reacquire=bool(declare("reacquire", True, "re-acquire a lost track at the person seen in the images")),
+            hold_still=bool(declare("hold_still", True, "hold the walkers while the person seen in the images stands "
+                                                        "still")))
         self.frame_rate = float(declare("frame_rate", 0.0, "frames/s; 0: from the first two frame stamps"))
         self.world_frame = declare("world_frame", "world", "world frame id of the outputs")
         ack_topic = declare("ack_topic", "/awalker/ack", "std_msgs/Header acks of processed frames")
@@ -116,6 +118,7 @@ class TrackerNode(Node):
         self.tracker: Tracker | None = None
         self.summaries: list[CoreSummary] = []
         self.keep_summaries = False
+        self._person_still = False     # the last summary said the person stands still (logged on change)
         self._pending: list[_Pending] = []
         self._frame_counter = 0                     # frame index = distinct stamps seen, dropped ones included
         self._arrivals: dict[int, float] = {}       # stamp -> arrival time of its first camera message
@@ -336,6 +339,12 @@ class TrackerNode(Node):
             if s.reacquired:
                 self.get_logger().info(f"frame {s.frame_index}: track lost, {s.reacquired} particles re-seeded "
                                        "at the person seen in the images")
+            if s.person_still != self._person_still:
+                self._person_still = s.person_still
+                self.get_logger().info(
+                    f"frame {s.frame_index}: the person stands still; the walkers are held where they stand (the "
+                    "walker model only walks) until the person walks on" if s.person_still
+                    else f"frame {s.frame_index}: the person walks on")
             if self.keep_summaries:
                 self.summaries.append(s)
 
