@@ -66,31 +66,6 @@ def test_robust_background_ignores_a_moving_person():
     assert mask[~person].mean() < 0.01
 
 
-def test_extractor_refits_the_median_background_once_the_person_moved_on():
-    """A person stands where the first median_frames frames see them, then walks away: the first
-    background keeps them (a ghost); re-fitted from all frames at 3 x median_frames it does not."""
-    from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
-
-    rng = np.random.default_rng(7)
-    clean = background_image(CAM)
-    truth = measurements(clean, 2)[..., :3]
-    spot = (slice(40, 90), slice(30, 50))
-    extractor = FeatureExtractor(FeatureConfig(downsample=2, median_frames=5, median_refit_frames=15))
-    models = []
-    for f in range(16):
-        image = noisy(clean, rng)
-        x = 60 if f < 5 else 60 + 25 * (f - 4)                 # still, then walking right
-        image[80:180, x : x + 40] = (200, 40, 40)
-        extractor.process(image)
-        models.append((extractor.background, extractor.foreground))
-    ghost = np.abs(models[4][0].mean[..., :3] - truth)[spot]
-    refitted = np.abs(models[14][0].mean[..., :3] - truth)[spot]
-    assert np.median(ghost) > 50.0 and np.percentile(refitted, 99) < 3.0
-    assert models[9][0] is not models[8][0] and models[14][0] is not models[13][0]      # re-fitted at 10 and 15 frames
-    assert models[15][0] is models[14][0]                                                  # then no more
-    assert models[14][1] is not models[13][1]                                              # foreground re-learned
-
-
 def test_adaptation_moves_background_but_not_foreground_pixels():
     rng = np.random.default_rng(2)
     clean = background_image(CAM)

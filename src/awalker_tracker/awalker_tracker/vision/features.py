@@ -10,12 +10,8 @@ Learning, in order of preference (all automatic, no hand labels needed):
 1. Background: frames known to be background-only (``background_frames`` > 0, e.g. the
    frames before the start description's ``frame``) give the per-pixel mean and pooled
    covariance. Otherwise the first ``median_frames`` frames are buffered and the background
-   is learned robustly from them (``fit_background_robust``); until then the maps are
-   zero (no appearance information). A person who stands or walks slowly in those frames can
-   stay in that background (a ghost: a still foreground blob where they were); so the frames
-   are kept, and every ``median_frames`` frames until ``median_refit_frames`` the background is
-   re-fitted from all of them (the person has moved on) and the foreground re-learned at that
-   frame.
+   is their robust temporal median (``fit_background_robust``); until then the maps are
+   zero (no appearance information).
 2. Foreground: at the first frame after the background is known, the mixtures are fitted to
    the interior pixels of the foreground (``learn_foreground``), labelled by (a) a class-label image passed
    with that frame: a user's label mask, or the body projected at the start description's
@@ -54,8 +50,7 @@ class FeatureConfig:
 
     downsample: int = 4
     background_frames: int = 0        # known background-only frames at the start (0 = unknown)
-    median_frames: int = 20           # frames buffered for the robust background when none are known
-    median_refit_frames: int = 60     # then re-fitted every median_frames frames from all so far, up to this many
+    median_frames: int = 20           # frames buffered for the robust median when none are known
     outlier_probability: float = 0.02  # uniform outlier share of both appearance densities
     llr_clip: float = 25.0            # |log-likelihood ratio| bound per pixel (a safety net)
     adapt_rate: float = 0.0           # background adaptation per frame (0 = frozen)
@@ -64,7 +59,7 @@ class FeatureConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if not 0 < self.outlier_probability < 1 or self.downsample < 1 or self.background_frames < 0 or self.median_frames < 1 or self.llr_clip <= 0 or self.median_refit_frames < 0:
+        if not 0 < self.outlier_probability < 1 or self.downsample < 1 or self.background_frames < 0 or self.median_frames < 1 or self.llr_clip <= 0:
             raise ValueError(f"invalid FeatureConfig {self}")
         if not 0.0 <= self.adapt_rate <= 1.0:
             raise ValueError("FeatureConfig.adapt_rate must be in [0, 1]")
@@ -119,7 +114,6 @@ class FeatureExtractor:
         self.frame_index = 0
         self.background_frames = config.background_frames
         self._buffer: list[np.ndarray] = []
-        self._refitting = False           # robust median: still collecting frames to re-fit it from
         self._flow = GridFlow(config.flow)
         self._prev_grey: np.ndarray | None = None
 
@@ -184,20 +178,9 @@ class FeatureExtractor:
                 self._buffer.append(m)
                 if len(self._buffer) >= cfg.median_frames:
                     self.background = fit_background_robust(np.stack(self._buffer))
-                    self._refitting = len(self._buffer) < cfg.median_refit_frames
-                    if not self._refitting:
-                        self._buffer = []
+                    self._buffer = []
             if self.background is not None:
                 self._log(f"background learned at frame {self.frame_index}")
-        elif self._refitting:
-            self._buffer.append(m)
-            if len(self._buffer) % cfg.median_frames == 0 or len(self._buffer) >= cfg.median_refit_frames:
-                self.background = fit_background_robust(np.stack(self._buffer))
-                self.foreground = None         # re-learned below, against the new background
-                self._log(f"background re-fitted at frame {self.frame_index} from {len(self._buffer)} frames")
-                self._refitting = len(self._buffer) < cfg.median_refit_frames
-                if not self._refitting:
-                    self._buffer = []
         if self.background is not None and self.foreground is None and (
                 self.background_frames == 0 or self.frame_index >= self.background_frames):
             labels = None if class_labels is None else self._labels_at_map(class_labels, m.shape[:2])
