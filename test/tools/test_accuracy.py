@@ -210,7 +210,7 @@ def test_automatic_start_without_empty_frames(tmp_path):
                  "--seed", str(TRACK_SEED), "--no-overlay"]) == 0
     assert main(["eval", str(out), "--truth", str(seq / "ground_truth.csv")]) == 0
     run = yaml.safe_load((out / "run.yaml").read_text())
-    assert "robust background" in run["features"]["cam0"]["background"]
+    assert "robust temporal median" in run["features"]["cam0"]["background"]
     assert run["start_source"].startswith("found automatically")
     assert run["body_source"].startswith("scaled to the person's height")
     # issue 12 §3: the body from the silhouette's height (measured: legs 0.417 m, true 0.41)
@@ -226,8 +226,7 @@ def test_automatic_start_without_empty_frames(tmp_path):
     heading = yaml.safe_load((seq / "start.yaml").read_text())["start"]["heading"]
     assert abs(np.degrees(np.angle(np.exp(1j * (found["heading"] - heading))))) < 20.0
     result = json.loads((out / "eval.json").read_text())
-    # measured: absolute median 62 mm over 32 frames with the background re-fitted (71 without; a hand-written
-    # start: mono_straight bounds above)
+    # measured: absolute median 71 mm over 32 frames (a hand-written start: mono_straight bounds above)
     assert result["absolute_mm"]["median"] < BOUNDS["mono_straight"].absolute_mm
     assert result["walk"]["off_person_frames"] == 0 and result["walk"]["fallen_frames"] == 0
 
@@ -319,3 +318,59 @@ def test_a_person_who_stops_is_held_where_they_stand(dressed_stop, tmp_path, rec
     assert np.median(late_stop) < 350.0, np.median(late_stop)
     end = result["walk"]["end"]
     assert end["pelvis_ground_error_m"] < 0.5 and not end["fallen"], end
+
+
+@pytest.fixture(scope="module")
+def dressed_two_people(tmp_path_factory):
+    """CMU 07_01 walked by two people in different clothes, the second the other way 1.2 m further back
+    (they cross), two cameras; start and body of the first as a user would give them."""
+    seq = tmp_path_factory.mktemp("dressed_two_people")
+    assert main(["synth", "--out", str(seq), "--background-frames", str(BACKGROUND), "--size", *SIZE,
+                 "--seed", str(SYNTH_SEED), "--from-mocap", str(MOCAP / "07.asf"), str(MOCAP / "07_01.amc"),
+                 "--person", "dressed", "--second-person", "--frames", "120", "--cameras", "2", "--user-start",
+                 "--tape-measure"]) == 0
+    return seq
+
+
+@pytest.mark.parametrize("start", ["hand", "auto"])
+def test_two_people_in_view_do_not_mix(dressed_two_people, tmp_path, start: str):
+    """Issue 12 §2/§6: each camera's detection is the blob nearest to the person followed (before that,
+    its largest and the other cameras' blobs where its feet put the person), so a second person does not
+    capture a hand-started track, and an automatic start follows one of the two people throughout."""
+    import numpy as np
+    import yaml
+
+    from awalker_tools import evaluation
+
+    seq = dressed_two_people
+    out = tmp_path / "run"
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+        assert main(["track", str(seq / "synth.bag"), "--out", str(out), "--particles", str(PARTICLES),
+                     "--seed", str(TRACK_SEED), "--no-overlay", *(["--auto-start"] if start == "auto" else [])]) == 0
+    found = yaml.safe_load((out / "start.yaml").read_text())["start"]
+    gaps = {}
+    for truth in (seq / "ground_truth.csv", seq / "second_person.csv"):
+        poses = evaluation.read_poses_csv(truth)
+        row = int(np.flatnonzero(poses.frames == found["frame"])[0])
+        gaps[truth] = float(np.linalg.norm(np.array(found["position"]) - poses.markers[row, 0, :2]))
+    followed = min(gaps, key=gaps.get)
+    assert gaps[followed] < 0.5, gaps
+    assert main(["eval", str(out), "--truth", str(followed)]) == 0
+    result = json.loads((out / "eval.json").read_text())
+    summary = evaluation.read_summary_csv(out / "summary.csv")
+    # measured (500 particles, synthesis seed 1, tracker seeds 0-2): hand-started 178-206 mm absolute
+    # median, off the person on 0-2 of 120 frames, last frame 0.06-0.18 m off, 1-3 re-acquisitions;
+    # automatic start on the second person (the largest blob then; 0.41 m off it) at frame 34, 181-291 mm,
+    # off on 0-13 of 91 frames, last frame 0.07-0.22 m off. Before detections were gated on the track
+    # (synthesis seed 0): hand-started 251 mm, off the person on 37 of 120 frames, 19 frames wrongly held
+    # as standing (the two cameras' largest blobs were different people); the automatic start found a
+    # person where nobody was.
+    walk = result["walk"]
+    assert walk["end"]["pelvis_ground_error_m"] < 0.5 and not walk["end"]["off_person"], walk["end"]
+    assert not summary["person_still"].any()
+    if start == "hand":
+        assert followed.name == "ground_truth.csv"
+        assert walk["off_person_frames"] <= 6 and result["absolute_mm"]["median"] < 300.0
+    else:
+        assert walk["off_person_frames"] <= 25 and result["absolute_mm"]["median"] < 550.0

@@ -70,3 +70,51 @@ def test_no_person_no_detection():
     rng = np.random.default_rng(0)
     frames = [empty.process(noisy(background, rng)) for _ in range(CONFIG.background_frames + 2)]
     assert person_blob(frames[-1]) is None and detect_person([frames[-1]], [camera]) is None
+
+
+@pytest.fixture(scope="module")
+def two_people():
+    """Two people seen by the side and the front camera: A at x = 0.4 m; B at x = -0.5 m and 0.8 m nearer the
+    side camera (so B is the side camera's largest blob, A the front camera's). Features of each camera and
+    the two pelvis positions."""
+    from awalker_tracker.vision.render import render, render_rgb
+
+    a = walking_poses(3, x0=0.4)[-1]
+    b = walking_poses(3, x0=-0.5)[-1]
+    b.kin.contact_point = b.kin.contact_point + np.array([0.0, -0.8])
+    pelvis = [pose_body(BODY, PARAMS, p.walker, p.kin).markers[0, 0] for p in (a, b)]
+    cameras, features = [side_camera(), front_camera()], []
+    for k, camera in enumerate(cameras):
+        rng = np.random.default_rng(20 + k)
+        background = background_image(camera, seed=k)
+        image = background
+        for person in (b, a) if k == 0 else (a, b):          # the farther first
+            image = render_rgb(BODY, person.segments(), camera, image, result=render(BODY, person.segments(), camera))
+        extractor = FeatureExtractor(CONFIG)
+        for _ in range(CONFIG.background_frames):
+            extractor.process(noisy(background, rng))
+        extractor.process(noisy(image, rng))
+        features.append(extractor.process(noisy(image, rng)))
+    return cameras, features, pelvis
+
+
+def test_two_people_are_not_mixed_across_cameras(two_people):
+    from awalker_tracker.vision.detection import blob_near, person_blobs
+
+    cameras, features, (a, b) = two_people
+    largest = [person_blob(f, c.name) for f, c in zip(features, cameras)]
+    side_gap = [np.linalg.norm(ground_point(cameras[0], largest[0].feet_uv) - p[:2]) for p in (a, b)]
+    assert side_gap[1] < side_gap[0]                      # each camera's largest blob is another person
+    assert blob_near(person_blobs(features[1], "front"), cameras[1], a) == largest[1]
+    # nothing known: the largest blob of any camera (B, in the side camera) and the front camera's blob there
+    found = detect_person(features, cameras)
+    assert found is not None and found.triangulated
+    assert np.linalg.norm(found.position - b[:2]) < 0.25
+    # following A: each camera's blob nearest to A
+    found = detect_person(features, cameras, near=a)
+    assert found is not None and np.linalg.norm(found.position - a[:2]) < 0.25
+    # a point near nobody (behind the front camera, far right of the side camera's image): no blob is near
+    # it, so the detection is made as without it
+    far = np.array([6.0, 0.0, 0.9])
+    assert all(blob_near(person_blobs(f, c.name), c, far) is None for f, c in zip(features, cameras))
+    assert np.allclose(detect_person(features, cameras, near=far).position, detect_person(features, cameras).position)

@@ -70,6 +70,7 @@ class SynthConfig:
     user_start: bool = False         # start.yaml as a user would write it (position +-5 cm, heading +-5 deg, ...)
     tape_measure: bool = False       # body.yaml lengths with tape-measure errors (a few per cent)
     descriptions: bool = True        # False: a user's own video, no start/body description (file or topic)
+    second_person: bool = False      # dressed mocap walks: another person walks the other way, further back
 
     def __post_init__(self) -> None:
         if not 1 <= self.cameras <= 4:
@@ -87,6 +88,8 @@ class SynthConfig:
             raise InputError(f"synth: --person must be 'model' or 'dressed', got {self.person!r}")
         if self.variant not in VARIANTS:
             raise InputError(f"synth: --variant must be one of {', '.join(VARIANTS)}, got {self.variant!r}")
+        if self.second_person and self.person != "dressed":
+            raise InputError("synth: --second-person needs --person dressed (and --from-mocap)")
         if self.mocap is None and (self.person == "dressed" or self.variant != "straight" or self.tape_measure):
             raise InputError("synth: --person dressed, --variant and --tape-measure need a motion capture walk "
                              "(--from-mocap ASF AMC)")
@@ -108,6 +111,9 @@ VARIANTS: dict[str, tuple[float, tuple[float, float, float] | None, float]] = {
     "u-turn": (1.0, (180.0, 1.0, 2.0), 4.2),
     "stop": (1.0, None, 4.5),
 }
+# The second person (--second-person) walks the same mocap walk straight the other way, this far behind
+# the first person's start line as the cameras see it (m), in other clothes; the truth stays the first's.
+SECOND_PERSON_BEHIND_M = 1.2
 # Variants where the person stands still: (from s, for s)
 PAUSES: dict[str, tuple[float, float]] = {"stop": (1.5, 1.5)}
 
@@ -433,6 +439,12 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
         pelvis = motion.markers[:, 0, :2]
         path_centre = 0.5 * (pelvis.min(axis=0) + pelvis.max(axis=0))
     cameras = make_cameras(config.cameras, config.width, config.height, path_centre)
+    other = None
+    if config.second_person:
+        from dataclasses import replace
+
+        far_end = np.array([motion.markers[-1, 0, 0], start_xy[1] + SECOND_PERSON_BEHIND_M])
+        other = mocap_motion(replace(config, variant="straight"), far_end, heading + np.pi)
     textures = make_textures(rng)
     rooms = [render_room(cam, textures) for cam in cameras]
     occluders = {}
@@ -458,12 +470,16 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
     if config.person == "dressed":
         outfit = Outfit.random(rng)
         painters = {cam.name: PersonRenderer(cam, outfit) for cam in cameras}
+    if other is not None:
+        other_outfit = Outfit.random(rng)
+        other_painters = {cam.name: PersonRenderer(cam, other_outfit) for cam in cameras}
     save_calibration(cameras, out / "calibration.yaml")
     start_text = yaml.safe_dump(given_start, sort_keys=False)
     if config.descriptions:
         (out / "body.yaml").write_text(given_body.to_yaml_text())
         (out / "start.yaml").write_text(start_text)
     csv_lines = ["frame,stamp_ns,marker,x,y,z"]
+    other_lines = list(csv_lines)
     overlays: dict[str, Path] = {}
     with bagio.SequenceWriter(bag_path, cameras, storage=config.storage, compressed=config.compressed,
                               image_format=config.image_format) as writer:
@@ -476,7 +492,13 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
             for cam, room in zip(cameras, rooms):
                 base = room
                 if person >= 0 and painters:
-                    base, depth = painters[cam.name].render(motion.points[person], room)
+                    behind = room
+                    if other is not None:       # the second person first, then the first in front where nearer
+                        behind, other_depth = other_painters[cam.name].render(other.points[person], room)
+                    base, depth = painters[cam.name].render(motion.points[person], behind)
+                    if other is not None:
+                        nearer = other_depth < depth
+                        base[nearer] = behind[nearer]
                     if cam.name in occluders:
                         hidden = occluders[cam.name] < depth
                         base[hidden] = room[hidden]
@@ -508,9 +530,15 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
                     writer.write_ground_truth(int(stamps[frame]), markers)
                 for name, point in zip(MARKER_NAMES, markers):
                     csv_lines.append(f"{frame},{stamps[frame]},{name},{point[0]:.6f},{point[1]:.6f},{point[2]:.6f}")
+                if other is not None:
+                    for name, point in zip(MARKER_NAMES, other.markers[person]):
+                        other_lines.append(f"{frame},{stamps[frame]},{name},{point[0]:.6f},{point[1]:.6f},{point[2]:.6f}")
             if progress and (frame % 20 == 0 or frame == total - 1):
                 print(f"synth: frame {frame + 1}/{total}", file=sys.stderr, flush=True)
     (out / "ground_truth.csv").write_text("\n".join(csv_lines) + "\n")
     descriptions = {"body": out / "body.yaml", "start": out / "start.yaml"} if config.descriptions else {}
+    if other is not None:
+        (out / "second_person.csv").write_text("\n".join(other_lines) + "\n")
+        descriptions["second person's truth"] = out / "second_person.csv"
     return {"bag": bag_path, "calibration": out / "calibration.yaml", **descriptions, "ground_truth": out / "ground_truth.csv",
             **{f"overlay {name}": path for name, path in overlays.items()}}

@@ -43,6 +43,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "speed within 10 %%, no step length")
     parser.add_argument("--tape-measure", action="store_true",
                         help="body.yaml lengths off by a few per cent, as measured with a tape (mocap walks)")
+    parser.add_argument("--second-person", action="store_true",
+                        help="--person dressed: a second person (other clothes) walks the same walk the other way "
+                             "1.2 m further back, crossing behind the first; the truth and start are the first's (the second's "
+                             "truth: DIR/second_person.csv)")
     parser.add_argument("--no-descriptions", action="store_true",
                         help="a user's own video: no start.yaml, body.yaml or description topics (track it with the "
                              "automatic start; add --background-frames 0 for no empty frames either)")
@@ -64,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         noise_sigma=args.noise, storage=args.storage, compressed=args.image_format != "raw",
         image_format="png" if args.image_format == "raw" else args.image_format,
         person=args.person, variant=args.variant, user_start=args.user_start, tape_measure=args.tape_measure,
-        descriptions=not args.no_descriptions,
+        descriptions=not args.no_descriptions, second_person=args.second_person,
     )
     paths = synthesise(config)
     for kind, path in paths.items():

@@ -1,8 +1,8 @@
 """Starting without a start description: find the walking person in the first frames.
 
 ``StartFinder`` is fed each frame's image features. Per frame it detects the person
-(``vision.detection``: the largest foreground blob, placed on the ground through the calibrated
-cameras) and keeps the frames where the person is wholly in view of some camera. Once the
+(``vision.detection``: the largest foreground blob, after a first sighting the blob nearest to the
+last one, placed on the ground through the calibrated cameras) and keeps the frames where the person is wholly in view of some camera. Once the
 detections over ``window_s`` (at least ``min_fraction`` of its frames) form a ground track moving
 at ``min_speed_m_s`` or faster, the start is that frame, the straight-line fit of the track's
 positions at it, its direction (heading) and speed (clamped to ``speed_range_m_s``, the gaits the
@@ -63,7 +63,9 @@ class StartFinder:
     def push(self, frame: int, features: list[Any]) -> StartDescription | None:
         """The start description at ``frame`` if the person is found walking by then, else None."""
         self.frames_seen += 1
-        detection = detect_person(list(features), self.cameras)
+        # after a first sighting, the blobs nearest to it (a second person in view is not mixed in)
+        near = None if self.last_detection is None else np.append(self.last_detection.position, 0.9)
+        detection = detect_person(list(features), self.cameras, near=near)
         whole = detection is not None and wholly_in_view(detection, self.cameras)
         self.track.add(frame, detection.position if whole else None)
         if not whole:

@@ -7,8 +7,10 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   has fallen, the posterior is a body lying on the floor. With ``reseed_fallen`` each particle whose
   walker falls is replaced, in the frame it falls, by a walker on the cyclic gait of its recent
   speed (clamped to the gait table), standing on its current stance foot, with its heading.
-- **Lost tracks.** When the particles' weighted-mean pelvis projects outside the person's
-  foreground blob (``vision.detection``) in every camera that sees the person, or, where cameras
+- **Lost tracks.** The person followed is, in each camera, the foreground blob nearest to where the
+  particles' weighted-mean pelvis projects (``vision.detection``; a second person elsewhere in view
+  is not mixed in). When that pelvis projects outside every person-sized blob in every camera that
+  sees the person, or, where cameras
   at different angles place the person on the ground (``PersonDetection.triangulated``), lies more
   than ``lost_distance_m`` from that place over the ground, for ``lost_after_s``,
   the track is lost: a fraction of the particles (the lowest weights) are re-seeded around the
@@ -129,7 +131,7 @@ class LostTrackMonitor:
         if frame in self._orders:
             return self._orders[frame]
         cfg = self.config
-        detection = detect_person(list(features), self.cameras)
+        detection = detect_person(list(features), self.cameras, near=pelvis)
         reliable = detection is not None and wholly_in_view(detection, self.cameras)
         self.track.add(frame, detection.position if reliable else None)
         velocity = self.track.velocity(frame, cfg.track_window_s)

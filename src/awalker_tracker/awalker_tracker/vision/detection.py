@@ -3,8 +3,10 @@
 The features of every camera carry per-class log-likelihood ratios (foreground vs background,
 ``FrameFeatures.llr``). A pixel whose best class beats the background by ``threshold`` nats is
 foreground; the largest connected blob covering at least ``min_area_fraction`` of the image is the person
-(``person_blob``). Its image is placed in the world with the calibrated camera and the ground
-plane z = 0 (``detect_person``):
+(``person_blob``), or, when the caller knows roughly where the person followed is (``near``: a tracked
+pelvis), the blob nearest to where that point projects (``blob_near``), so that a second person in
+view is not mixed into the detection. Its image is placed in the world with the calibrated camera and
+the ground plane z = 0 (``detect_person``):
 
 - one camera: the ray through the blob's mean column at its lowest row (the feet) meets the ground
   at the near edge of the feet; the person stands ``near_edge_m`` (0.12 m: half a stride's width
@@ -83,6 +85,23 @@ def person_blob(features: FrameFeatures, camera_name: str = "", threshold: float
     return blobs[0] if blobs else None
 
 
+def blob_near(blobs: list[PersonBlob], camera: Camera, point: np.ndarray) -> PersonBlob | None:
+    """The blob whose box is nearest (px; 0 inside) to where the world ``point`` (3,) projects, the
+    larger on a tie, if that is within the blob's own height; else (or with no blobs, or the point
+    behind the camera) None."""
+    uv, depth = camera.project(np.asarray(point, float)[None])
+    if not blobs or depth[0] <= 0:
+        return None
+    u, v = uv[0]
+
+    def gap(blob: PersonBlob) -> float:
+        u0, v0, u1, v1 = blob.box
+        return float(np.hypot(max(u0 - u, 0.0, u - u1), max(v0 - v, 0.0, v - v1)))
+
+    best = min(blobs, key=lambda b: (gap(b), -b.area_px))
+    return best if gap(best) <= best.box[3] - best.box[1] else None
+
+
 def _ray(camera: Camera, uv: tuple[float, float]) -> np.ndarray:
     """World direction (3,) of the ray through pixel ``uv``."""
     xy = camera.pixels_to_normalised(np.asarray([uv], float))[0]
@@ -110,11 +129,26 @@ def _height_over(camera: Camera, uv: tuple[float, float], xy: np.ndarray) -> flo
 
 def detect_person(features: list[FrameFeatures], cameras: list[Camera], threshold: float = 2.0,
                   min_area_fraction: float = 0.0015, min_plane_angle_deg: float = 20.0,
-                  near_edge_m: float = 0.12) -> PersonDetection | None:
-    """The person's ground position and height from every camera's largest blob (module docstring)."""
+                  near_edge_m: float = 0.12, near: np.ndarray | None = None) -> PersonDetection | None:
+    """The person's ground position and height from every camera's largest blob, or with ``near`` (a world
+    point (3,) on the person followed) the blob nearest to it (module docstring); when no camera has a
+    blob near it, as without ``near``."""
+    seen = [person_blobs(feats, camera.name, threshold, min_area_fraction) for feats, camera in zip(features, cameras)]
+    if near is not None and all(blob_near(c, camera, near) is None for c, camera in zip(seen, cameras)):
+        near = None
+    if near is None and len(cameras) > 1:
+        # several cameras and nothing known: the largest blob of any camera is the person; the other
+        # cameras' blobs are those nearest to where its feet row puts them (not their own largest:
+        # with two people in view each camera's largest may be a different person)
+        largest = [(b.area_px, k) for k, bs in enumerate(seen) for b in bs[:1]]
+        if largest:
+            k = max(largest)[1]
+            ground = ground_point(cameras[k], seen[k][0].feet_uv)
+            if ground is not None:
+                near = np.append(ground, 0.9)
     blobs, planes = [], []
-    for feats, camera in zip(features, cameras):
-        blob = person_blob(feats, camera.name, threshold, min_area_fraction)
+    for candidates, camera in zip(seen, cameras):
+        blob = (candidates[0] if candidates else None) if near is None else blob_near(candidates, camera, near)
         if blob is None:
             continue
         blobs.append(blob)
