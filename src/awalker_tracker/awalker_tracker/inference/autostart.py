@@ -1,9 +1,9 @@
 """Starting without a start description: find the walking person in the first frames.
 
 ``StartFinder`` is fed each frame's image features. Per frame it detects the person
-(``vision.detection``: the largest foreground blob, after a first sighting the blob nearest to the
-last one, placed on the ground through the calibrated cameras) and keeps the frames where the person is wholly in view of some camera. Once the
-detections over ``window_s`` (at least ``min_fraction`` of its frames) form a ground track moving
+(``vision.detection``: the largest foreground blob, placed on the ground through the calibrated
+cameras; with several, the other cameras' blobs where its feet put the person) and keeps the
+frames where the person is wholly in view of some camera. Once the detections over ``window_s`` (at least ``min_fraction`` of its frames) form a ground track moving
 at ``min_speed_m_s`` or faster, the start is that frame, the straight-line fit of the track's
 positions at it, its direction (heading) and speed (clamped to ``speed_range_m_s``, the gaits the
 tracker knows); step length: the usual one at that speed; stance leg unknown (both sampled, at
@@ -63,9 +63,9 @@ class StartFinder:
     def push(self, frame: int, features: list[Any]) -> StartDescription | None:
         """The start description at ``frame`` if the person is found walking by then, else None."""
         self.frames_seen += 1
-        # after a first sighting, the blobs nearest to it (a second person in view is not mixed in)
-        near = None if self.last_detection is None else np.append(self.last_detection.position, 0.9)
-        detection = detect_person(list(features), self.cameras, near=near)
+        # not gated on the last sighting: that follows the ghost a median background leaves where the
+        # person walked in its first frames, once it splits off the person's blob
+        detection = detect_person(list(features), self.cameras)
         whole = detection is not None and wholly_in_view(detection, self.cameras)
         self.track.add(frame, detection.position if whole else None)
         if not whole:
