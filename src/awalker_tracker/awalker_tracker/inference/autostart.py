@@ -3,8 +3,9 @@
 ``StartFinder`` is fed each frame's image features. Per frame it detects the person
 (``vision.detection``: the largest foreground blob, placed on the ground through the calibrated
 cameras; with several, the other cameras' blobs where its feet put the person) and keeps the
-frames where the person is wholly in view of some camera. Once the detections over ``window_s`` (at least ``min_fraction`` of its frames) form a ground track moving
-at ``min_speed_m_s`` or faster, the start is that frame, the straight-line fit of the track's
+frames where the person is wholly in view of some camera. Once the detections over ``window_s``
+(at least ``min_fraction`` of its frames) form a ground track moving at ``min_speed_m_s`` or
+faster, the start is that frame, the straight-line fit of the track's
 positions at it, its direction (heading) and speed (clamped to ``speed_range_m_s``, the gaits the
 tracker knows); step length: the usual one at that speed; stance leg unknown (both sampled, at
 any phase). Before that it answers None: a person standing still, half out of view, or nobody,
