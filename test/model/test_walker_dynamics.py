@@ -314,3 +314,52 @@ def test_fallen_walkers_flagged_and_frozen() -> None:
             assert not ev.heel_strike[i]
         fallen_ever |= ev.fallen
     assert fallen_ever.tolist() == [True, False, True]
+
+
+# ---------------------------------------------------------------------------------------------
+# compiled kernels against straightforward references
+# ---------------------------------------------------------------------------------------------
+def test_compiled_integration_matches_an_adaptive_reference() -> None:
+    """advance's RK4 kernel against scipy's DOP853 on eq. (17) (accelerations: checked with sympy above)."""
+    from scipy.integrate import solve_ivp
+
+    rng = np.random.default_rng(11)
+    n = 12
+    state = random_states(rng, n)
+    state = WalkerState.from_arrays(0.5 * state.stance_angle, 0.5 * state.swing_angle, state.stance_rate,
+                                    state.swing_rate)
+    kappa = rng.uniform(0.0, 2.0, n)
+    duration = 0.05
+    ours, events = dynamics.advance(PARAMS, state, kappa, 0.0, duration, substeps=32)
+    for i in np.flatnonzero(~events.heel_strike & ~events.fallen):
+        def rhs(_t, y, i=i):
+            s = WalkerState.from_arrays(*y)
+            return np.concatenate([y[2:], dynamics.accelerations(PARAMS, s, kappa[i])[0]])
+        y0 = [state.stance_angle[i], state.swing_angle[i], state.stance_rate[i], state.swing_rate[i]]
+        ref = solve_ivp(rhs, (0.0, duration), y0, method="DOP853", rtol=1e-12, atol=1e-12).y[:, -1]
+        got = [ours.stance_angle[i], ours.swing_angle[i], ours.stance_rate[i], ours.swing_rate[i]]
+        np.testing.assert_allclose(got, ref, atol=1e-8)
+
+
+def _reference_impact_rates(params: WalkerParams, pre: WalkerState, iota: np.ndarray) -> np.ndarray:
+    """The impact map written with the body Jacobians and a linear solve (module docstring of dynamics)."""
+    p1, p2 = pre.stance_angle, pre.swing_angle
+    masses = np.array([[params.leg_mass] * 2 + [params.leg_inertia]] * 2
+                      + [[params.torso_mass] * 2 + [params.torso_inertia]])
+    pre_vel = dynamics.body_jacobians(params, p1, p2) @ np.stack([pre.stance_rate, pre.swing_rate], -1)[:, None, :, None]
+    post_jac = dynamics.body_jacobians(params, p2, p1)          # new stance (= old swing), new swing, torso
+    momentum = masses[None] * pre_vel[..., 0][:, [1, 0, 2]]
+    rhs = np.einsum("nbik,nbi->nk", post_jac, momentum)
+    push = iota[:, None] * np.stack([-np.sin(p1), np.cos(p1)], -1)
+    rhs = rhs + np.einsum("nik,ni->nk", post_jac[:, 2, :2, :], push)
+    return np.linalg.solve(dynamics.mass_matrix(params, p2, p1), rhs[..., None])[..., 0]
+
+
+@pytest.mark.parametrize("params", [PARAMS, PARAMS_TORSO])
+def test_compiled_impact_matches_the_jacobian_form(params: WalkerParams) -> None:
+    rng = np.random.default_rng(12)
+    pre = _pre_impact_states(rng, 200)
+    iota = rng.uniform(0.0, 0.6, 200)
+    post = dynamics.heel_strike(params, pre, iota)
+    np.testing.assert_allclose(np.stack([post.stance_rate, post.swing_rate], -1),
+                               _reference_impact_rates(params, pre, iota), rtol=1e-11, atol=1e-12)

@@ -41,12 +41,18 @@ of phi1 + phi2 going down with phi1 < 0) is located inside the sub-step by Newto
 the fraction of the sub-step, the impact applied there, and the rest of the sub-step integrated
 from the post-impact state. At most one heel strike per walker per call: a step of the walker
 lasts > 0.3 s, far longer than a 1/30 s or 1/60 s frame.
+
+Compiled: the per-walker work (RK4 sub-steps, strike location, impact map, accelerations) runs in
+serial numba kernels (``_integrate``, ``_impact_rates``, ``_accelerations``) that loop over the
+walkers; the Python functions below prepare arrays and call them. Kernels are cached on disk
+(``cache=True``): the first import in a fresh checkout compiles them (a few seconds).
 """
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from .walker import WalkerParams, WalkerState
@@ -103,37 +109,175 @@ def _consts(params: WalkerParams) -> _Consts:
     return consts
 
 
-def _acc(k: _Consts, p1: np.ndarray, p2: np.ndarray, w1: np.ndarray, w2: np.ndarray,
-         kappa: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
-    """q'' (rad/s^2) of eq. (17) on raw arrays."""
-    return _acc_trig(k, np.sin(p1), np.cos(p1), np.sin(p2), np.cos(p2), p2 - p1, w1, w2, kappa)
+# ---- compiled per-walker kernels (numba, serial) ------------------------------------------
+# Constants of the equations of motion, as the float tuple the kernels take (see _Consts).
+KernelConsts = tuple[float, ...]
 
 
-def _acc_trig(k: _Consts, s1, c1, s2, c2, gap, w1, w2, kappa) -> tuple[np.ndarray, np.ndarray]:
-    """q'' from sin/cos of phi1, phi2 and gap = phi2 - phi1; the hot loop of the tracker."""
+def _kernel_consts(k: _Consts) -> KernelConsts:
+    """(R, a, c, b, A, B, m_l b, M22, G1, G2, m_l, m_t, I_l, I_t) for the kernels."""
+    return (k.R, k.a, k.c, k.b, k.A, k.B, k.mlb, k.M22, k.G1, k.G2, k.m_l, k.m_t, k.I_l, k.I_t)
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _acc(kc, s1, c1, s2, c2, gap, w1, w2, kappa):
+    """q'' (rad/s^2) of eq. (17) for one walker, from sin/cos of phi1, phi2 and gap = phi2 - phi1."""
+    R, a, _, _, A, B, mlb, M22, G1, G2 = kc[:10]
     sd = s1 * c2 - c1 * s2                 # sin(phi1 - phi2)
     cd = c1 * c2 + s1 * s2                 # cos(phi1 - phi2)
-    m11 = k.A + k.B * c1
-    m12 = -k.mlb * (k.R * c2 + k.a * cd)
+    m11 = A + B * c1
+    m12 = -mlb * (R * c2 + a * cd)
     spring = kappa * gap
     w1sq = w1 * w1
-    r1 = (0.5 * k.B * w1sq + k.G1) * s1 - k.mlb * (w2 * w2) * (k.R * s2 - k.a * sd) + spring
-    r2 = -k.mlb * k.a * sd * w1sq - k.G2 * s2 - spring
-    inv_det = 1.0 / (m11 * k.M22 - m12 * m12)
-    return (k.M22 * r1 - m12 * r2) * inv_det, (m11 * r2 - m12 * r1) * inv_det
+    r1 = (0.5 * B * w1sq + G1) * s1 - mlb * (w2 * w2) * (R * s2 - a * sd) + spring
+    r2 = -mlb * a * sd * w1sq - G2 * s2 - spring
+    inv_det = 1.0 / (m11 * M22 - m12 * m12)
+    return (M22 * r1 - m12 * r2) * inv_det, (m11 * r2 - m12 * r1) * inv_det
 
 
-def _rotate(s: np.ndarray, c: np.ndarray, delta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+@numba.njit(cache=True, error_model="numpy")
+def _rotate(s, c, delta):
     """(sin, cos) of angle + delta from (sin, cos) of angle, with Taylor series for delta.
 
     RK4 stage angles differ from the sub-step's start by |delta| = |h phi'| (< 0.1 rad when walking
     at h = 1/120 s); the series to delta^10 is exact to < 1e-15 there (< 3e-8 even at |delta| = 1)
-    and is ~20x cheaper than numpy's sin/cos on the stage angles.
+    and saves two of every three sin/cos evaluations of a sub-step.
     """
-    d2 = delta * delta
-    sin_d = delta * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0 * (1.0 - d2 / 42.0 * (1.0 - d2 / 72.0 * (1.0 - d2 / 110.0)))))
-    cos_d = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0 * (1.0 - d2 / 56.0 * (1.0 - d2 / 90.0))))
+    d2 = delta * delta   # (1 / k) constants are folded at compile time: multiplications, no divisions
+    sin_d = delta * (1.0 - d2 * (1 / 6) * (1.0 - d2 * (1 / 20) * (1.0 - d2 * (1 / 42) * (
+        1.0 - d2 * (1 / 72) * (1.0 - d2 * (1 / 110))))))
+    cos_d = 1.0 - d2 * 0.5 * (1.0 - d2 * (1 / 12) * (1.0 - d2 * (1 / 30) * (1.0 - d2 * (1 / 56) * (
+        1.0 - d2 * (1 / 90)))))
     return s * cos_d + c * sin_d, c * cos_d - s * sin_d
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _rk4(kc, p1, p2, w1, w2, kappa, h):
+    """One classical RK4 step of size h for one walker: (phi1, phi2, phi1', phi2') after it.
+
+    Stage angles are q + delta; their sines/cosines come from the step start's by :func:`_rotate`.
+    """
+    s1, c1, s2, c2 = np.sin(p1), np.cos(p1), np.sin(p2), np.cos(p2)
+    gap = p2 - p1
+    hh = 0.5 * h
+    a1, a2 = _acc(kc, s1, c1, s2, c2, gap, w1, w2, kappa)
+    # stage 2: q + h/2 q'
+    d1, d2 = hh * w1, hh * w2
+    t1, u1 = _rotate(s1, c1, d1)
+    t2, u2 = _rotate(s2, c2, d2)
+    v1, v2 = w1 + hh * a1, w2 + hh * a2
+    b1, b2 = _acc(kc, t1, u1, t2, u2, gap + (d2 - d1), v1, v2, kappa)
+    # stage 3: q + h/2 (q' + h/2 a)
+    e1, e2 = hh * v1, hh * v2
+    t1, u1 = _rotate(s1, c1, e1)
+    t2, u2 = _rotate(s2, c2, e2)
+    x1, x2 = w1 + hh * b1, w2 + hh * b2
+    g1, g2 = _acc(kc, t1, u1, t2, u2, gap + (e2 - e1), x1, x2, kappa)
+    # stage 4: q + h (q' + h/2 b)
+    f1, f2 = h * x1, h * x2
+    t1, u1 = _rotate(s1, c1, f1)
+    t2, u2 = _rotate(s2, c2, f2)
+    z1, z2 = w1 + h * g1, w2 + h * g2
+    j1, j2 = _acc(kc, t1, u1, t2, u2, gap + (f2 - f1), z1, z2, kappa)
+    h6 = h / 6.0
+    return (p1 + h6 * (w1 + 2.0 * (v1 + x1) + z1), p2 + h6 * (w2 + 2.0 * (v2 + x2) + z2),
+            w1 + h6 * (a1 + 2.0 * (b1 + g1) + j1), w2 + h6 * (a2 + 2.0 * (b2 + g2) + j2))
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _locate_strike(kc, p1, p2, w1, w2, kappa, h, s0, s1):
+    """Fraction theta in [0, 1] of a sub-step at which phi1 + phi2 = 0 (Newton from the secant guess)."""
+    theta = min(max(s0 / (s0 - s1), 0.0), 1.0)
+    for _ in range(8):
+        q1, q2, v1, v2 = _rk4(kc, p1, p2, w1, w2, kappa, theta * h)
+        f = q1 + q2
+        slope = min(h * (v1 + v2), -1e-12)
+        theta = min(max(theta - f / slope, 0.0), 1.0)
+        if abs(f) < 1e-11:  # the step just taken brings |f| to ~1e-16 (rate ~5e-4 per step)
+            break
+    return theta
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _integrate(kc, p1, p2, w1, w2, kappa, first_step, steps, h, detect):
+    """Integrate each walker i by one RK4 step of ``first_step[i]`` (if > 0) and ``steps[i]`` steps of h.
+
+    With ``detect`` a walker stops at its first regular heel strike (a downward zero crossing of
+    phi1 + phi2 with phi1 < 0 and phi1' + phi2' < 0 at the root, located by Newton inside the
+    step): its returned state is the pre-impact state there, ``strike_step`` the index of the step
+    and ``theta`` the fraction of it (strike_step = -1 where none). Walkers whose state stops
+    being finite stop there. Returns (phi1, phi2, phi1', phi2', strike_step, theta).
+    """
+    n = p1.shape[0]
+    q1, q2, r1, r2 = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    strike_step = np.full(n, -1, np.int64)
+    theta = np.zeros(n)
+    for i in range(n):
+        a1, a2, b1, b2, kap = p1[i], p2[i], w1[i], w2[i], kappa[i]
+        if first_step[i] > 0.0:
+            a1, a2, b1, b2 = _rk4(kc, a1, a2, b1, b2, kap, first_step[i])
+        for s in range(steps[i]):
+            n1, n2, m1, m2 = _rk4(kc, a1, a2, b1, b2, kap, h)
+            if detect:
+                s0, s1 = a1 + a2, n1 + n2
+                if s0 > 0.0 and s1 <= 0.0:
+                    th = _locate_strike(kc, a1, a2, b1, b2, kap, h, s0, s1)
+                    c1, c2, d1, d2 = _rk4(kc, a1, a2, b1, b2, kap, th * h)
+                    if c1 < 0.0 and d1 + d2 < 0.0:
+                        a1, a2, b1, b2 = c1, c2, d1, d2
+                        strike_step[i], theta[i] = s, th
+                        break
+            a1, a2, b1, b2 = n1, n2, m1, m2
+            if not (np.isfinite(a1) and np.isfinite(a2) and np.isfinite(b1) and np.isfinite(b2)):
+                break
+        q1[i], q2[i], r1[i], r2[i] = a1, a2, b1, b2
+    return q1, q2, r1, r2, strike_step, theta
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _accelerations(kc, p1, p2, w1, w2, kappa):
+    """Eq. (17)'s q'' (rad/s^2) of N walkers, (N, 2)."""
+    out = np.empty((p1.shape[0], 2))
+    for i in range(p1.shape[0]):
+        out[i, 0], out[i, 1] = _acc(kc, np.sin(p1[i]), np.cos(p1[i]), np.sin(p2[i]), np.cos(p2[i]),
+                                    p2[i] - p1[i], w1[i], w2[i], kappa[i])
+    return out
+
+
+@numba.njit(cache=True, error_model="numpy")
+def _impact_rates(kc, p1, p2, w1, w2, iota):
+    """Post-impact (new stance, new swing) rates of N walkers from pre-impact angles/rates and toe-off iota.
+
+    M(q+) q'+ = sum_b J+_b^T M_b V-_b + J+_hip^T iota e (module docstring), written out per body:
+    pre-impact velocities V- of the old stance leg's CoM, the old swing leg's CoM and the torso
+    (at the hip); after the impact the old swing leg is the new stance leg (angle P1 = phi2-) and
+    the old stance leg the new swing leg (P2 = phi1-).
+    """
+    R, a, c, b, A, B, mlb, M22 = kc[:8]
+    m_l, m_t, I_l, I_t = kc[10], kc[11], kc[12], kc[13]
+    n = p1.shape[0]
+    new_stance, new_swing = np.empty(n), np.empty(n)
+    for i in range(n):
+        sp1, cp1, sp2, cp2 = np.sin(p1[i]), np.cos(p1[i]), np.sin(p2[i]), np.cos(p2[i])
+        # pre-impact body velocities (x', y') and angular rates
+        hip_x, hip_y = -(R + a * cp1) * w1[i], -a * sp1 * w1[i]
+        old_stance_x, old_stance_y, old_stance_w = -(R + c * cp1) * w1[i], -c * sp1 * w1[i], w1[i]
+        old_swing_x, old_swing_y, old_swing_w = hip_x + b * cp2 * w2[i], hip_y + b * sp2 * w2[i], w2[i]
+        # post-impact Jacobian columns (P1 = phi2-, P2 = phi1-): d/dP1' of each body, and d/dP2' of the new swing leg
+        j_stance_x, j_stance_y = -(R + c * cp2), -c * sp2        # new stance leg CoM (rotates with P1)
+        j_hip_x, j_hip_y = -(R + a * cp2), -a * sp2              # hip: torso and the new swing leg's hip end
+        rhs1 = (m_l * (j_stance_x * old_swing_x + j_stance_y * old_swing_y) + I_l * old_swing_w
+                + m_l * (j_hip_x * old_stance_x + j_hip_y * old_stance_y)
+                + m_t * (j_hip_x * hip_x + j_hip_y * hip_y) + I_t * w1[i]
+                + iota[i] * (j_hip_x * -sp1 + j_hip_y * cp1))   # toe-off along the old stance leg, at the hip
+        rhs2 = m_l * b * (cp1 * old_stance_x + sp1 * old_stance_y) + I_l * old_stance_w
+        # M(P1, P2) rates = rhs
+        m11 = A + B * cp2
+        m12 = -mlb * (R * cp1 + a * (cp2 * cp1 + sp2 * sp1))
+        det = m11 * M22 - m12 * m12
+        new_stance[i] = (M22 * rhs1 - m12 * rhs2) / det
+        new_swing[i] = (m11 * rhs2 - m12 * rhs1) / det
+    return new_stance, new_swing
 
 
 def mass_matrix(params: WalkerParams, stance_angle: np.ndarray, swing_angle: np.ndarray) -> np.ndarray:
@@ -144,16 +288,6 @@ def mass_matrix(params: WalkerParams, stance_angle: np.ndarray, swing_angle: np.
     m12 = -k.mlb * (k.R * np.cos(p2) + k.a * np.cos(p1 - p2))
     m22 = np.full_like(m11, k.M22)
     return np.stack([np.stack([m11, m12], -1), np.stack([m12, m22], -1)], -2)
-
-
-def accelerations(params: WalkerParams, state: WalkerState, stiffness: np.ndarray | float) -> np.ndarray:
-    """Angular accelerations (phi1'', phi2'') in rad/s^2 of eq. (17), shape (N, 2).
-
-    ``stiffness`` kappa: hip spring stiffness, N m/rad per kg, scalar or (N,).
-    """
-    a1, a2 = _acc(_consts(params), state.stance_angle, state.swing_angle, state.stance_rate,
-                  state.swing_rate, np.asarray(stiffness, float))
-    return np.stack([a1, a2], axis=1)
 
 
 def potential_energy(params: WalkerParams, state: WalkerState, stiffness: np.ndarray | float) -> np.ndarray:
@@ -196,27 +330,19 @@ def body_jacobians(params: WalkerParams, stance_angle: np.ndarray, swing_angle: 
     return np.moveaxis(np.array([stance, swing, torso], dtype=float), -1, 0)
 
 
-def _body_masses(params: WalkerParams) -> np.ndarray:
-    """diag(M_b) per body (stance leg, swing leg, torso), shape (3, 3)."""
-    k = _consts(params)
-    return np.array([[k.m_l, k.m_l, k.I_l], [k.m_l, k.m_l, k.I_l], [k.m_t, k.m_t, k.I_t]])
+def _per_walker(value: np.ndarray | float, n: int) -> np.ndarray:
+    """A scalar or (n,) value as a contiguous float (n,) array for the kernels."""
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(value, float), (n,)))
 
 
-def _impact_rates(params: WalkerParams, p1: np.ndarray, p2: np.ndarray, w1: np.ndarray, w2: np.ndarray,
-                  iota: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Post-impact (new stance, new swing) rates from pre-impact angles/rates and toe-off iota."""
-    masses = _body_masses(params)
-    pre_jac = body_jacobians(params, p1, p2)                    # bodies: old stance, old swing, torso
-    pre_vel = pre_jac @ np.stack([w1, w2], -1)[:, None, :, None]  # (N, 3, 3, 1)
-    post_jac = body_jacobians(params, p2, p1)                   # bodies: new stance (= old swing), new swing, torso
-    pre_matched = pre_vel[..., 0][:, [1, 0, 2]]                 # reorder to the post-impact bodies
-    momentum = masses[None] * pre_matched                       # (N, 3, 3)
-    rhs = np.einsum("nbik,nbi->nk", post_jac, momentum)
-    # toe-off impulse along the old stance leg, applied through the hip (torso row of post_jac)
-    push = iota[:, None] * np.stack([-np.sin(p1), np.cos(p1)], -1)
-    rhs = rhs + np.einsum("nik,ni->nk", post_jac[:, 2, :2, :], push)
-    rates = np.linalg.solve(mass_matrix(params, p2, p1), rhs[..., None])[..., 0]
-    return rates[:, 0], rates[:, 1]
+def accelerations(params: WalkerParams, state: WalkerState, stiffness: np.ndarray | float) -> np.ndarray:
+    """Angular accelerations (phi1'', phi2'') in rad/s^2 of eq. (17), shape (N, 2).
+
+    ``stiffness`` kappa: hip spring stiffness, N m/rad per kg, scalar or (N,).
+    """
+    n = len(state)
+    return _accelerations(_kernel_consts(_consts(params)), *(_per_walker(v, n) for v in (
+        state.stance_angle, state.swing_angle, state.stance_rate, state.swing_rate, stiffness)))
 
 
 def heel_strike(params: WalkerParams, state: WalkerState, toe_off_impulse: np.ndarray | float) -> WalkerState:
@@ -228,9 +354,10 @@ def heel_strike(params: WalkerParams, state: WalkerState, toe_off_impulse: np.nd
     flipped and ``contact_origin`` moved to where the new stance foot rolls from, so that the
     new contact point is the old swing foot's lowest point.
     """
+    n = len(state)
     p1, p2 = state.stance_angle, state.swing_angle
-    iota = np.broadcast_to(np.asarray(toe_off_impulse, float), p1.shape)
-    w1n, w2n = _impact_rates(params, p1, p2, state.stance_rate, state.swing_rate, iota)
+    w1n, w2n = _impact_rates(_kernel_consts(_consts(params)), *(_per_walker(v, n) for v in (
+        p1, p2, state.stance_rate, state.swing_rate, toe_off_impulse)))
     k = _consts(params)
     # new contact x = hip x + (L-R) sin phi2 = origin - R phi1 - a sin phi1 + a sin phi2; new origin = contact + R phi2
     new_origin = state.contact_origin - k.R * p1 - k.a * np.sin(p1) + k.a * np.sin(p2) + k.R * p2
@@ -248,9 +375,12 @@ def impulse_for_stance_rate(params: WalkerParams, pre_state: WalkerState,
     (the impulse enters the momentum balance linearly), so two impacts (iota = 0 and 1) give it.
     May be negative when even iota = 0 leaves the new stance leg faster than asked.
     """
-    p1, p2, w1, w2 = pre_state.stance_angle, pre_state.swing_angle, pre_state.stance_rate, pre_state.swing_rate
-    zero, _ = _impact_rates(params, p1, p2, w1, w2, np.zeros_like(p1))
-    one, _ = _impact_rates(params, p1, p2, w1, w2, np.ones_like(p1))
+    n = len(pre_state)
+    kc = _kernel_consts(_consts(params))
+    angles_rates = [_per_walker(v, n) for v in (pre_state.stance_angle, pre_state.swing_angle,
+                                                 pre_state.stance_rate, pre_state.swing_rate)]
+    zero, _ = _impact_rates(kc, *angles_rates, np.zeros(n))
+    one, _ = _impact_rates(kc, *angles_rates, np.ones(n))
     return (np.asarray(stance_rate, float) - zero) / (one - zero)
 
 
@@ -271,73 +401,23 @@ class StepEvents:
 ImpulseSampler = Callable[[np.ndarray, WalkerState], np.ndarray]
 
 
-def _rk4(k: _Consts, p1, p2, w1, w2, kappa, h):
-    """One classical RK4 step of size h (scalar or array) for the raw state arrays.
-
-    Stage angles are q + delta; their sines/cosines come from the step start's by :func:`_rotate`.
-    Both angles (and rates) are stacked in (2, N) arrays so that each numpy call serves both
-    legs (the arrays are small: the cost is mostly per call). Returns rows of (2, N) arrays.
-    """
-    q = np.stack(np.broadcast_arrays(p1, p2))          # (phi1, phi2)
-    w = np.stack(np.broadcast_arrays(w1, w2))          # (phi1', phi2')
-    sin, cos = np.sin(q), np.cos(q)
-    gap = q[1] - q[0]
-    hh = 0.5 * h
-    a = np.stack(_acc_trig(k, sin[0], cos[0], sin[1], cos[1], gap, w[0], w[1], kappa))
-    # stage 2: q + h/2 q'
-    d = hh * w
-    s_, c_ = _rotate(sin, cos, d)
-    v = w + hh * a
-    b = np.stack(_acc_trig(k, s_[0], c_[0], s_[1], c_[1], gap + (d[1] - d[0]), v[0], v[1], kappa))
-    # stage 3: q + h/2 (q' + h/2 a)
-    e = hh * v
-    s_, c_ = _rotate(sin, cos, e)
-    u = w + hh * b
-    g = np.stack(_acc_trig(k, s_[0], c_[0], s_[1], c_[1], gap + (e[1] - e[0]), u[0], u[1], kappa))
-    # stage 4: q + h (q' + h/2 b)
-    f = h * u
-    s_, c_ = _rotate(sin, cos, f)
-    z = w + h * g
-    j = np.stack(_acc_trig(k, s_[0], c_[0], s_[1], c_[1], gap + (f[1] - f[0]), z[0], z[1], kappa))
-    h6 = h / 6.0
-    new_q = q + h6 * (w + 2.0 * (v + u) + z)
-    new_w = w + h6 * (a + 2.0 * (b + g) + j)
-    return new_q[0], new_q[1], new_w[0], new_w[1]
+def integrate(params: WalkerParams, state: WalkerState, stiffness: np.ndarray | float, step: float,
+              steps: int) -> WalkerState:
+    """``steps`` RK4 steps of ``step`` seconds for N walkers, ignoring heel strikes (kappa scalar or (N,))."""
+    n = len(state)
+    q1, q2, r1, r2, _, _ = _integrate(
+        _kernel_consts(_consts(params)), *(_per_walker(v, n) for v in (
+            state.stance_angle, state.swing_angle, state.stance_rate, state.swing_rate, stiffness)),
+        np.zeros(n), np.full(n, int(steps), np.int64), float(step), False)
+    return WalkerState(q1, q2, r1, r2, state.contact_origin.copy(), state.stance_leg.copy())
 
 
-def _locate_strike(k: _Consts, p1, p2, w1, w2, kappa, h, s0, s1, iterations: int = 8):
-    """Fraction theta in [0, 1] of a sub-step at which phi1 + phi2 = 0 (Newton from the secant guess)."""
-    theta = np.clip(s0 / (s0 - s1), 0.0, 1.0)
-    for _ in range(iterations):
-        q1, q2, v1, v2 = _rk4(k, p1, p2, w1, w2, kappa, theta * h)
-        f = q1 + q2
-        slope = h * (v1 + v2)
-        safe = np.where(slope < -1e-12, slope, -1e-12)
-        step = f / safe
-        theta = np.clip(theta - step, 0.0, 1.0)
-        if np.all(np.abs(f) < 1e-11):  # the step just taken brings |f| to ~1e-16 (rate ~5e-4 per step)
-            break
-    return theta
-
-
-def _impact_at_root(params: WalkerParams, k: _Consts, walker_idx: np.ndarray, p1, p2, w1, w2, origin, leg,
-                    kappa, iota, h, s0, s1):
-    """Locate the strike inside a sub-step of size h starting at (p1..w2) (arrays of the candidates) and apply it.
-
-    ``walker_idx`` are the candidates' indices among all walkers (for an impulse sampler); ``kappa``
-    and ``iota`` are already restricted to the candidates (or scalars / a sampler). Returns (valid,
-    theta, post-impact state, strike x, pre-impact rates (v1, v2), iota used); entries where
-    ``valid`` is False (no regular strike: phi1 >= 0 at the root) must be ignored.
-    """
-    theta = _locate_strike(k, p1, p2, w1, w2, kappa, h, s0, s1)
-    q1, q2, v1, v2 = _rk4(k, p1, p2, w1, w2, kappa, theta * h)
-    valid = (q1 < 0.0) & (v1 + v2 < 0.0)
-    pre = WalkerState(q1, q2, v1, v2, origin, leg)
-    used = np.asarray(iota(walker_idx, pre), float) if callable(iota) else iota
-    used = np.broadcast_to(used, walker_idx.shape)
-    post = heel_strike(params, pre, used)
-    strike_x = post.contact_origin - k.R * post.stance_angle
-    return valid, theta, post, strike_x, (v1, v2), used
+def _strike(params: WalkerParams, indices: np.ndarray, pre: WalkerState,
+            toe_off_impulse: np.ndarray | ImpulseSampler) -> tuple[WalkerState, np.ndarray]:
+    """Apply heel strikes to the walkers ``indices`` in their pre-impact states: (post states, iota used)."""
+    iota = toe_off_impulse(indices, pre) if callable(toe_off_impulse) else toe_off_impulse[indices]
+    iota = _per_walker(iota, indices.size)
+    return heel_strike(params, pre, iota), iota
 
 
 def fallen_mask(params: WalkerParams, state: WalkerState, time_since_strike: np.ndarray | None = None,
@@ -376,69 +456,44 @@ def advance(
     ``substeps`` defaults to :func:`substeps_for` (4 per 1/30 s). ``time_since_strike`` (s, (N,))
     carries the no-strike fall criterion between calls; it is returned updated in the events.
     Fallen walkers keep their input state (frozen, never NaN) and are flagged in the events.
+
+    Compiled: one kernel call integrates every walker to the frame's end or to its heel strike;
+    the strikers get their impact (and iota) here, and a second call integrates them on.
     """
     n = len(state)
-    k = _consts(params)
+    kc = _kernel_consts(_consts(params))
     substeps = substeps_for(dt) if substeps is None else int(substeps)
     if substeps < 1:
         raise ValueError("substeps must be >= 1")
     h = dt / substeps
-    kappa = np.asarray(stiffness, float)
-    if kappa.ndim:
-        kappa = np.broadcast_to(kappa, (n,))
-    iota = toe_off_impulse if callable(toe_off_impulse) else np.asarray(toe_off_impulse, float)
-    if not callable(iota) and iota.ndim:
-        iota = np.broadcast_to(iota, (n,))
+    kappa = _per_walker(stiffness, n)
+    iota = toe_off_impulse if callable(toe_off_impulse) else _per_walker(toe_off_impulse, n)
     tss = np.zeros(n) if time_since_strike is None else np.asarray(time_since_strike, float)
 
-    p1, p2 = state.stance_angle.astype(float), state.swing_angle.astype(float)
-    w1, w2 = state.stance_rate.astype(float), state.swing_rate.astype(float)
+    p1, p2, w1, w2, strike_step, theta = _integrate(
+        kc, *(_per_walker(v, n) for v in (state.stance_angle, state.swing_angle, state.stance_rate,
+                                          state.swing_rate)),
+        kappa, np.zeros(n), np.full(n, substeps, np.int64), h, True)
     origin, leg = state.contact_origin.astype(float), state.stance_leg.astype(np.int8)
-    struck = np.zeros(n, bool)
+    struck = strike_step >= 0
     fraction = np.zeros(n)
     strike_x = np.full(n, np.nan)
     used_iota = np.full(n, np.nan)
     pre_rates = np.full((n, 2), np.nan)
-    # integrate all walkers ignoring impacts, remembering where each first crosses phi1 + phi2 = 0 downwards
-    found: list[tuple[int, np.ndarray, tuple[np.ndarray, ...]]] = []
-    seen = np.zeros(n, bool)
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        for i in range(substeps):
-            s0 = p1 + p2
-            n1, n2, nw1, nw2 = _rk4(k, p1, p2, w1, w2, kappa, h)
-            s1 = n1 + n2
-            cand = (s0 > 0.0) & (s1 <= 0.0) & ((p1 < 0.0) | (n1 < 0.0)) & ~seen
-            if cand.any():
-                idx = np.flatnonzero(cand)
-                seen[idx] = True
-                found.append((i, idx, (p1[idx], p2[idx], w1[idx], w2[idx], s0[idx], s1[idx])))
-            p1, p2, w1, w2 = n1, n2, nw1, nw2
-        if found:
-            # one batch for all strikes of the frame: locate, impact, integrate the rest of the frame
-            sub = np.concatenate([np.full(f[1].size, f[0]) for f in found])
-            idx = np.concatenate([f[1] for f in found])
-            sp1, sp2, sw1, sw2, ss0, ss1 = (np.concatenate([f[2][j] for f in found]) for j in range(6))
-            kap = kappa[idx] if np.ndim(kappa) else kappa
-            iot = iota if callable(iota) else (iota[idx] if np.ndim(iota) else iota)
-            valid, theta, post, sx, (r1, r2), ui = _impact_at_root(
-                params, k, idx, sp1, sp2, sw1, sw2, origin[idx], leg[idx], kap, iot, h, ss0, ss1)
-            sel = np.flatnonzero(valid)
-            idx, sub, theta = idx[sel], sub[sel], theta[sel]
-            kap = kap[sel] if np.ndim(kap) else kap
-            a1, a2, b1, b2 = _rk4(k, post.stance_angle[sel], post.swing_angle[sel], post.stance_rate[sel],
-                                  post.swing_rate[sel], kap, (1.0 - theta) * h)
-            remaining = substeps - 1 - sub
-            for r in range(int(remaining.max(initial=0))):
-                m = remaining > r
-                km = kap[m] if np.ndim(kap) else kap
-                a1[m], a2[m], b1[m], b2[m] = _rk4(k, a1[m], a2[m], b1[m], b2[m], km, h)
-            p1[idx], p2[idx], w1[idx], w2[idx] = a1, a2, b1, b2
-            origin[idx], leg[idx] = post.contact_origin[sel], post.stance_leg[sel]
-            struck[idx] = True
-            fraction[idx] = (sub + theta) / substeps
-            strike_x[idx] = sx[sel]
-            used_iota[idx] = ui[sel]
-            pre_rates[idx, 0], pre_rates[idx, 1] = r1[sel], r2[sel]
+    idx = np.flatnonzero(struck)
+    if idx.size:
+        pre = WalkerState(p1[idx], p2[idx], w1[idx], w2[idx], origin[idx], leg[idx])
+        post, used = _strike(params, idx, pre, iota)
+        sub, th = strike_step[idx], theta[idx]
+        # the rest of the strike's sub-step from the post-impact state, then the frame's remaining sub-steps
+        p1[idx], p2[idx], w1[idx], w2[idx], _, _ = _integrate(
+            kc, post.stance_angle, post.swing_angle, post.stance_rate, post.swing_rate, kappa[idx],
+            (1.0 - th) * h, substeps - 1 - sub, h, False)
+        origin[idx], leg[idx] = post.contact_origin, post.stance_leg
+        fraction[idx] = (sub + th) / substeps
+        strike_x[idx] = post.contact_origin - params.foot_radius * post.stance_angle
+        used_iota[idx] = used
+        pre_rates[idx, 0], pre_rates[idx, 1] = pre.stance_rate, pre.swing_rate
     new_tss = np.where(struck, (1.0 - fraction) * dt, tss + dt)
     out = WalkerState(p1, p2, w1, w2, origin, leg)
     fallen = fallen_mask(params, out, new_tss, max_strike_interval)
@@ -469,43 +524,21 @@ def simulate_to_strike(
     get time NaN and their last state. ``step`` is the RK4 step (s).
     """
     n = len(state)
-    k = _consts(params)
-    kappa = np.broadcast_to(np.asarray(stiffness, float), (n,))
-    iota = toe_off_impulse if callable(toe_off_impulse) else np.broadcast_to(np.asarray(toe_off_impulse, float), (n,))
-    p1, p2 = state.stance_angle.astype(float), state.swing_angle.astype(float)
-    w1, w2 = state.stance_rate.astype(float), state.swing_rate.astype(float)
-    origin, leg = state.contact_origin.astype(float).copy(), state.stance_leg.astype(np.int8).copy()
-    out = [p1.copy(), p2.copy(), w1.copy(), w2.copy()]
+    iota = toe_off_impulse if callable(toe_off_impulse) else _per_walker(toe_off_impulse, n)
+    steps = max(1, int(np.ceil(max_time / step - 1e-9)))
+    q1, q2, r1, r2, strike_step, theta = _integrate(
+        _kernel_consts(_consts(params)), *(_per_walker(v, n) for v in (
+            state.stance_angle, state.swing_angle, state.stance_rate, state.swing_rate, stiffness)),
+        np.zeros(n), np.full(n, steps, np.int64), float(step), True)
+    out = WalkerState(q1, q2, r1, r2, state.contact_origin.astype(float).copy(), state.stance_leg.astype(np.int8).copy())
     times = np.full(n, np.nan)
     pre_rates = np.full((n, 2), np.nan)
-    active = np.ones(n, bool)
-    t = 0.0
-    with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-        while active.any() and t < max_time:
-            s0 = p1 + p2
-            n1, n2, nw1, nw2 = _rk4(k, p1, p2, w1, w2, kappa, step)
-            s1 = n1 + n2
-            cand = active & (s0 > 0.0) & (s1 <= 0.0)
-            if cand.any():
-                idx = np.flatnonzero(cand)
-                kap = kappa[idx]
-                iot = iota if callable(iota) else iota[idx]
-                valid, theta, post_state, _, (v1, v2), _ = _impact_at_root(
-                    params, k, idx, p1[idx], p2[idx], w1[idx], w2[idx], origin[idx], leg[idx], kap, iot, step,
-                    s0[idx], s1[idx])
-                post = (post_state.stance_angle, post_state.swing_angle, post_state.stance_rate, post_state.swing_rate)
-                idx, sel = idx[valid], valid
-                for arr, val in zip(out, post):
-                    arr[idx] = val[sel]
-                origin[idx], leg[idx] = post_state.contact_origin[sel], post_state.stance_leg[sel]
-                times[idx] = t + theta[sel] * step
-                pre_rates[idx, 0], pre_rates[idx, 1] = v1[sel], v2[sel]
-                active[idx] = False
-            p1, p2, w1, w2 = n1, n2, nw1, nw2
-            t += step
-            lost = active & ~np.isfinite(p1 + p2 + w1 + w2)
-            active &= ~lost
-    still = np.isnan(times)
-    for arr, val in zip(out, (p1, p2, w1, w2)):
-        arr[still] = val[still]
-    return WalkerState(out[0], out[1], out[2], out[3], origin, leg), times, pre_rates
+    idx = np.flatnonzero(strike_step >= 0)
+    if idx.size:
+        pre = out.take(idx)
+        post, _ = _strike(params, idx, pre, iota)
+        for name in ("stance_angle", "swing_angle", "stance_rate", "swing_rate", "contact_origin", "stance_leg"):
+            getattr(out, name)[idx] = getattr(post, name)
+        times[idx] = (strike_step[idx] + theta[idx]) * step
+        pre_rates[idx, 0], pre_rates[idx, 1] = pre.stance_rate, pre.swing_rate
+    return out, times, pre_rates

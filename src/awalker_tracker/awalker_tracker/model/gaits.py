@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from .dynamics import _consts, _rk4, heel_strike, simulate_to_strike  # _rk4: the same fixed-step integrator
+from .dynamics import heel_strike, integrate, simulate_to_strike
 from .walker import LEFT, WalkerParams, WalkerState
 
 TABLE_VERSION = 2
@@ -175,12 +175,8 @@ def symmetric_residual(params: WalkerParams, speed: float, step_length: float, u
     a = float(double_support_angle(params, step_length))
     half = 0.5 * step_length / speed
     n = max(1, int(np.ceil(half / step)))
-    k = _consts(params)
-    p1, p2 = np.full(len(x), a), np.full(len(x), -a)
-    w1, w2 = x[:, 0].copy(), x[:, 1].copy()
-    with np.errstate(invalid="ignore", over="ignore"):
-        for _ in range(n):
-            p1, p2, w1, w2 = _rk4(k, p1, p2, w1, w2, x[:, 2], half / n)
+    mid = integrate(params, WalkerState.from_arrays(np.full(len(x), a), -a, x[:, 0], x[:, 1]), x[:, 2], half / n, n)
+    p1, p2 = mid.stance_angle, mid.swing_angle
     pre = WalkerState.from_arrays(-a, a, x[:, 0], x[:, 1])
     post = heel_strike(params, pre, x[:, 3])
     return np.stack([p1, p2, post.stance_rate - x[:, 0], post.swing_rate - x[:, 1]], axis=1)
@@ -326,6 +322,11 @@ class GaitTable:
             solver_step=self.solver_step * time_)
 
     # ---- queries -----------------------------------------------------------------------
+    @functools.cached_property
+    def _lookup_values(self) -> np.ndarray:
+        """(4, S, L) stance rate, swing rate, kappa, iota with 0 where not converged (weights are 0 there)."""
+        return np.nan_to_num(np.stack([self.stance_rate, self.swing_rate, self.stiffness, self.toe_off_impulse]))
+
     def _corners(self, speed: np.ndarray | float, step_length: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, list]:
         """Clamped (speed, step length) and the four grid corners (i, j, bilinear weight, 0 where not converged)."""
         v = np.clip(np.asarray(speed, float), self.speeds[0], self.speeds[-1])
@@ -355,15 +356,14 @@ class GaitTable:
         v, s, corners = self._corners(speed, step_length)
         shape = np.broadcast_shapes(np.shape(v), np.shape(s))
         weight_sum = np.zeros(shape)
-        outputs = [np.zeros(shape) for _ in range(4)]
+        outputs = np.zeros((4,) + shape)
         for ci, cj, w in corners:
             weight_sum = weight_sum + w
-            for out, name in zip(outputs, ("stance_rate", "swing_rate", "stiffness", "toe_off_impulse")):
-                out += w * np.nan_to_num(getattr(self, name)[ci, cj])
+            outputs += w * self._lookup_values[:, ci, cj]
         if np.any(weight_sum <= 1e-12):
             raise InputError(f"gait table: no converged gait near speed {np.ravel(v)[0]:.3f} m/s, "
                              f"step length {np.ravel(s)[0]:.3f} m")
-        return tuple(out / weight_sum for out in outputs)  # type: ignore[return-value]
+        return tuple(outputs / weight_sum)  # type: ignore[return-value]
 
     def gait_for_stiffness(self, stiffness: np.ndarray | float, step_length: np.ndarray | float
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
