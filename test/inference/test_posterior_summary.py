@@ -13,7 +13,7 @@ NAMES = ("pelvis", "thorax", "head", "left_hip", "right_hip", "left_knee", "righ
 def outputs(n: int, rng) -> ParticleOutputs:
     return ParticleOutputs(
         markers=rng.normal(size=(n, 13, 3)), joint_angles=rng.normal(size=(n, 5)),
-        torso_position=rng.normal(size=(n, 3)), torso_orientation=np.tile([0, 0, 0, 1.0], (n, 1)),
+        torso_position=rng.normal(size=(n, 3)), torso_rotation=np.tile(np.eye(3), (n, 1, 1)),
         speed=rng.uniform(1, 2, n), stance_leg=rng.integers(0, 2, n).astype(np.int8),
         contact_point=rng.normal(size=(n, 3)), heel_strike=np.zeros(n, bool), strike_point=np.zeros((n, 3)),
         walker={k: rng.normal(size=n) for k in WALKER_FIELDS}, reseeded=np.zeros(n, np.int8))

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 LEFT, RIGHT = 0, 1
 CLOUD_MARKERS = ("head", "pelvis", "left_knee", "right_knee", "left_ankle", "right_ankle")
@@ -24,7 +25,7 @@ class ParticleOutputs:
     markers: np.ndarray            # (N, M, 3) world (m), M = len(marker_names)
     joint_angles: np.ndarray       # (N, J) rad
     torso_position: np.ndarray     # (N, 3) pelvis position, world (m)
-    torso_orientation: np.ndarray  # (N, 4) pelvis orientation quaternion (x, y, z, w), world_from_pelvis
+    torso_rotation: np.ndarray     # (N, 3, 3) pelvis orientation, world_from_pelvis (columns forward, left, up)
     speed: np.ndarray              # (N,) walking speed (m/s), averaged over about one step
     stance_leg: np.ndarray         # (N,) LEFT / RIGHT
     contact_point: np.ndarray      # (N, 3) stance foot's ground contact, world (m)
@@ -123,7 +124,7 @@ def summarize(frame_index: int, stamp_ns: int, log_weights: np.ndarray, outputs:
         joint_names=tuple(joint_names), map_markers=outputs.markers[best].copy(), mean_markers=mean_markers,
         map_joint_angles=outputs.joint_angles[best].copy(),
         map_torso_position=outputs.torso_position[best].copy(),
-        map_torso_orientation=outputs.torso_orientation[best].copy(),
+        map_torso_orientation=Rotation.from_matrix(outputs.torso_rotation[best]).as_quat(),
         map_stance_leg=int(outputs.stance_leg[best]),
         map_walker={k: float(v[best]) for k, v in outputs.walker.items()},
         speed=speed, speed_std=speed_std, stance_left_probability=float(np.sum(w[left])),

@@ -24,7 +24,6 @@ from typing import Any
 
 import numpy as np
 import yaml
-from scipy.spatial.transform import Rotation
 
 from awalker_tracker.errors import InputError
 from awalker_tracker.inference.posterior import ParticleOutputs, PosteriorSummary, summarize
@@ -408,7 +407,7 @@ class TrackerModel:
         return ParticleOutputs(
             markers=states.pose.markers, joint_angles=states.pose.joint_angles,
             torso_position=states.pose.markers[:, MARKER_NAMES.index("pelvis")],
-            torso_orientation=Rotation.from_matrix(states.pose.segments.rotation[:, 0]).as_quat(),
+            torso_rotation=states.pose.segments.rotation[:, 0],
             speed=states.speed, stance_leg=states.walker.stance_leg, contact_point=contact,
             heel_strike=struck, strike_point=contact, walker=walker_fields, reseeded=states.reseeded)
 
