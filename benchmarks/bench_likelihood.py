@@ -2,7 +2,7 @@
 default features: 4x downsampled maps, 16 px flow cells). Prints JSON; ``ms_per_camera`` is the
 figure to compare with the issue's target (20000 states in <= 30 ms per camera); wall-clock
 minimum over repeats, plus the process CPU time (less sensitive to other jobs on the host;
-the likelihood is single-threaded numpy).
+the likelihood is single-threaded: a serial numba loop).
 
     .venv/bin/python benchmarks/bench_likelihood.py [--repeats 3]
 

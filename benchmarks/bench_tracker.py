@@ -106,6 +106,21 @@ def image_sequence(cameras: int, frames: int, folder: Path):
                                   start.stance_leg), cams, observations
 
 
+def warm_up_likelihood(body, cameras, observations) -> float:
+    """Load the image likelihood's compiled (numba) kernels from their disk cache, or compile
+    them, before anything is timed; returns the seconds that took (once per process)."""
+    from awalker_tracker.model.body import BodySegments
+    from awalker_tracker.vision.likelihood import log_likelihood
+
+    parts = len(body.parts)
+    segments = BodySegments(np.zeros((1, parts, 3)), np.broadcast_to(np.eye(3), (1, parts, 3, 3)).copy())
+    moved = BodySegments(segments.origin + 0.01, segments.rotation)
+    started = time.perf_counter()
+    for obs in observations[:2]:      # the second frame has flow: the previous poses get projected too
+        log_likelihood(body.parts, segments, moved, cameras, list(obs.features))
+    return time.perf_counter() - started
+
+
 def end_to_end(particles: int, folder: Path) -> dict:
     """`awalker track` on the sample bag (replay, features, tracker, pose publisher, recording)."""
     from awalker_tools.pipeline import TrackOptions, run_tracking
@@ -143,6 +158,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for cams in args.cameras:
             body_i, start_i, cameras, observations = image_sequence(cams, args.frames + 5, Path(tmp))
+            results.setdefault("likelihood_warm_up_s", []).append(
+                round(warm_up_likelihood(body_i, cameras, observations), 3))
             for n in args.particles:
                 r = run_filter(body_i, start_i, image_likelihood(body_i, cameras), observations, n)
                 r["cameras"] = cams

@@ -1,0 +1,316 @@
+"""Numpy reference of the image likelihood (test oracle only, not part of the package).
+
+The vectorised numpy implementation of ``awalker_tracker.vision.likelihood`` as it was before
+the per-state loops were compiled with numba (same model: see that module's docstring),
+float32, all N states at once. ``test_likelihood_kernel.py`` checks the compiled likelihood
+against it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from awalker_tracker.errors import InputError
+from awalker_tracker.model.body import BodySegments, PartShape
+from awalker_tracker.vision.camera import Camera
+from awalker_tracker.vision.features import FrameFeatures, occlusion_cell_mask, occlusion_map_mask
+from awalker_tracker.vision.flow import STUDENT_T_DOF
+from awalker_tracker.vision.likelihood import LikelihoodConfig, occluder_pairs
+
+
+def _project(camera: Camera, points: np.ndarray, component_first: bool = False
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """float32 projection of world points (..., 3) (or (3, ...) if ``component_first``): u, v
+    (px; -1e6 behind the camera) and depth (m)."""
+    R = camera.rotation.astype(np.float32)
+    c = camera.position.astype(np.float32)
+    px, py, pz = points if component_first else (points[..., 0], points[..., 1], points[..., 2])
+    dx, dy, dz = px - c[0], py - c[1], pz - c[2]
+    x = dx * R[0, 0] + dy * R[1, 0] + dz * R[2, 0]
+    y = dx * R[0, 1] + dy * R[1, 1] + dz * R[2, 1]
+    z = dx * R[0, 2] + dy * R[1, 2] + dz * R[2, 2]
+    front = z > 1e-6
+    inv = np.float32(1) / np.where(front, z, np.float32(1))
+    x *= inv
+    y *= inv
+    if np.any(camera.distortion):
+        x, y = camera._distort(x, y)
+    K = camera.K.astype(np.float32)
+    far = np.float32(-1e6)
+    u = np.where(front, K[0, 0] * x + K[0, 1] * y + K[0, 2], far)
+    v = np.where(front, K[1, 1] * y + K[1, 2], far)
+    return u, v, z
+
+
+@dataclass
+class _Silhouettes:
+    """Projected parts of N states: axis ends (px), half-widths (px), depths (m), all (P, N)."""
+
+    ax: np.ndarray
+    ay: np.ndarray
+    bx: np.ndarray
+    by: np.ndarray
+    ha: np.ndarray
+    hb: np.ndarray
+    da: np.ndarray
+    db: np.ndarray
+
+    def take(self, chunk: slice) -> "_Silhouettes":
+        """The states in ``chunk`` (views)."""
+        return _Silhouettes(*(getattr(self, f)[:, chunk] for f in ("ax", "ay", "bx", "by", "ha", "hb", "da", "db")))
+
+
+def _silhouettes(parts: tuple[PartShape, ...], segments: BodySegments, camera: Camera,
+                 widths: bool = True) -> _Silhouettes:
+    """Projected axis ends, half-widths (px) and end depths of every part, (P, N) float32 each."""
+    rot = np.asarray(segments.rotation, np.float32)
+    origin = np.asarray(segments.origin, np.float32).transpose(2, 1, 0)      # (3, P, N)
+    axis = rot[..., :, 2].transpose(2, 1, 0)
+    lengths = np.array([p.length for p in parts], np.float32)[:, None]
+    end = origin + lengths * axis
+    u, v, depth = _project(camera, np.stack([origin, end], axis=-1), component_first=True)   # (P, N, 2)
+    da, db = depth[..., 0], depth[..., 1]
+    if not widths:
+        zero = np.zeros_like(da)
+        return _Silhouettes(u[..., 0], v[..., 0], u[..., 1], v[..., 1], zero, zero, da, db)
+    r_start = np.array([p.radii_start for p in parts], np.float32)[:, :, None]   # (P, 2, 1)
+    r_end = np.array([p.radii_end for p in parts], np.float32)[:, :, None]
+    cam = camera.position.astype(np.float32)
+    vx, vy, vz = (cam[k] - 0.5 * (origin[k] + end[k]) for k in range(3))    # towards the camera
+    ax, ay, az = axis
+    lx, ly, lz = ay * vz - az * vy, az * vx - ax * vz, ax * vy - ay * vx     # lateral = axis x view
+    e0 = rot[..., :, 0].transpose(2, 1, 0)
+    e1 = rot[..., :, 1].transpose(2, 1, 0)
+    c0 = lx * e0[0] + ly * e0[1] + lz * e0[2]
+    c1 = lx * e1[0] + ly * e1[1] + lz * e1[2]
+    norm = np.sqrt(c0 * c0 + c1 * c1)            # lateral lies in the e0-e1 plane
+    degenerate = norm < 1e-9                     # looking along the axis: any lateral direction
+    inv = np.float32(1) / np.where(degenerate, np.float32(1), norm)
+    c0 = np.where(degenerate, np.float32(1), c0 * inv)
+    c1 = np.where(degenerate, np.float32(0), c1 * inv)
+    h0 = np.sqrt((r_start[:, 0] * c0) ** 2 + (r_start[:, 1] * c1) ** 2)
+    h1 = np.sqrt((r_end[:, 0] * c0) ** 2 + (r_end[:, 1] * c1) ** 2)
+    focal = np.float32(0.5 * (camera.K[0, 0] + camera.K[1, 1]))
+    ha = focal * h0 / np.maximum(da, np.float32(1e-6))
+    hb = focal * h1 / np.maximum(db, np.float32(1e-6))
+    return _Silhouettes(u[..., 0], v[..., 0], u[..., 1], v[..., 1], ha, hb, da, db)
+
+
+def _check_inputs(parts: tuple[PartShape, ...], segments: BodySegments, camera: Camera,
+                  features: FrameFeatures) -> None:
+    p = segments.origin.shape[1]
+    if p != len(parts):
+        raise ValueError(f"likelihood: segments have {p} parts, body has {len(parts)}")
+    if (features.image_width, features.image_height) != (camera.width, camera.height):
+        raise InputError(f"likelihood: features of camera {camera.name} are {features.image_width}x"
+                         f"{features.image_height}, calibration says {camera.width}x{camera.height}")
+
+
+def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, prev_segments: BodySegments,
+                          camera: Camera, features: FrameFeatures, occlusion_mask: np.ndarray | None = None,
+                          config: LikelihoodConfig = LikelihoodConfig(), silhouettes: _Silhouettes | None = None,
+                          prev_silhouettes: _Silhouettes | None = None) -> np.ndarray:
+    """Log-likelihood (N,) of one camera's features (see the module docstring).
+
+    ``silhouettes`` / ``prev_silhouettes``: the poses already projected into this camera
+    (``_silhouettes``), if known. The states are processed in chunks of ``config.chunk_states``
+    so that the per-sample arrays stay in the CPU cache; arrays are laid out (A, P, n) and
+    (J, A, P, n) so that sums over the few sample rows and columns add contiguous blocks."""
+    _check_inputs(parts, segments, camera, features)
+    n = segments.origin.shape[0]
+    sil = _silhouettes(parts, segments, camera) if silhouettes is None else silhouettes
+    appearance = _AppearanceTable(parts, features, occlusion_mask)
+    flow = _FlowTable(features.flow, occlusion_mask) if config.flow_weight > 0 else None
+    if flow is not None and not flow.any:
+        flow = None
+    prev = None
+    if flow is not None:
+        prev = prev_silhouettes if prev_silhouettes is not None else _silhouettes(parts, prev_segments, camera,
+                                                                                  widths=False)
+    total = np.empty(n)
+    step = max(int(config.chunk_states), 1)
+    for start in range(0, n, step):
+        chunk = slice(start, min(start + step, n))
+        total[chunk] = _chunk_log_likelihood(parts, sil.take(chunk), None if prev is None else prev.take(chunk),
+                                             appearance, flow, config)
+    return total
+
+
+class _AppearanceTable:
+    """Log-likelihood-ratio maps with a zero border (indices clipped into it contribute nothing),
+    flattened, and each part's class offset into them."""
+
+    def __init__(self, parts: tuple[PartShape, ...], features: FrameFeatures, occlusion_mask: np.ndarray | None):
+        llr = features.llr
+        mask_map = occlusion_map_mask(occlusion_mask, features.downsample, features.map_shape)
+        if mask_map is not None:
+            llr = np.where(mask_map[None], np.float32(0), llr)
+        self.h, self.w = features.map_shape
+        padded = np.zeros((len(features.classes), self.h + 2, self.w + 2), np.float32)
+        padded[:, 1:-1, 1:-1] = llr
+        self.values = padded.reshape(-1)
+        self.inv_ds = np.float32(1.0 / features.downsample)
+        classes = np.array([features.classes.index(q.part_class) for q in parts], np.int32)
+        self.offsets = (classes * ((self.h + 2) * (self.w + 2)))[:, None]
+
+
+class _FlowTable:
+    """Per-cell measured flow, inverse covariance and log(1 + e0^2) (the zero-motion term), as one
+    table with a trailing 'invalid' row; cells under the occlusion mask are invalid."""
+
+    def __init__(self, grid, occlusion_mask: np.ndarray | None):
+        valid = grid.valid
+        cell_mask = occlusion_cell_mask(occlusion_mask, *grid.shape, grid.cell_size)
+        if cell_mask is not None:
+            valid = valid & ~cell_mask
+        self.any = bool(valid.any())
+        self.rows, self.cols = grid.shape
+        self.inv_cell = np.float32(1.0 / grid.cell_size)
+        cov = grid.covariance.astype(np.float64)
+        det = cov[..., 0, 0] * cov[..., 1, 1] - cov[..., 0, 1] * cov[..., 1, 0]
+        i00, i01, i11 = cov[..., 1, 1] / det, -cov[..., 0, 1] / det, cov[..., 0, 0] / det
+        fx, fy = grid.flow[..., 0].astype(np.float64), grid.flow[..., 1].astype(np.float64)
+        e0 = (fx * (i00 * fx + 2 * i01 * fy) + i11 * fy * fy) / STUDENT_T_DOF
+
+        def padded(a: np.ndarray) -> np.ndarray:
+            return np.append(np.where(valid, a, 0).reshape(-1), 0).astype(np.float32)
+
+        self.fx, self.fy, self.i00, self.i01, self.i11, self.log0 = (
+            padded(a) for a in (fx, fy, i00, i01, i11, np.log1p(e0)))
+        self.valid = np.append(valid.reshape(-1), False)
+
+
+def _chunk_log_likelihood(parts: tuple[PartShape, ...], sil: "_Silhouettes", prev: "_Silhouettes | None",
+                          appearance: _AppearanceTable, flow: _FlowTable | None,
+                          config: LikelihoodConfig) -> np.ndarray:
+    """Appearance + flow log-likelihood of a chunk of states, (n,) float64."""
+    A, J = config.points_along, config.points_across
+    t = ((np.arange(A) + 0.5) / A).astype(np.float32)[:, None, None]      # row positions along the axis
+    s = (2 * (np.arange(J) + 0.5) / J - 1).astype(np.float32)              # across, in half-widths
+    dx, dy = sil.bx - sil.ax, sil.by - sil.ay
+    length = np.sqrt(dx * dx + dy * dy)
+    long_enough = length > 1e-3
+    inv_len = np.float32(1) / np.where(long_enough, length, np.float32(1))
+    nx = np.where(long_enough, -dy * inv_len, np.float32(1))              # unit normal of the axis in the image
+    ny = np.where(long_enough, dx * inv_len, np.float32(0))
+    # Row centres and half-widths (A, P, n).
+    cx = sil.ax + t * dx
+    cy = sil.ay + t * dy
+    half = sil.ha + t * (sil.hb - sil.ha)
+    in_front = (sil.da > 1e-6) & (sil.db > 1e-6)
+    row_ok = np.broadcast_to(in_front, cx.shape).copy()
+    if config.self_occlusion:
+        # The occlusion test at every other row (pairs of rows share it): it is the costliest step.
+        t_even = t[::2]
+        hidden = _hidden_rows(parts, sil, cx[::2], cy[::2], sil.da + t_even * (sil.db - sil.da))
+        row_ok &= ~np.repeat(hidden, 2, axis=0)[:A]
+    # Eq. 11 weights: each part in front of the camera counts its mean ratio (module docstring) (P, n).
+    scale = in_front.astype(np.float32)    # ---- appearance: sample points (J, A, P, n) --------------------------------------------
+    tab = appearance
+    # Map coordinates (+1 for the zero border) of the row centres and of the across-axis step.
+    # Pixel centres are at integer image coordinates (``Camera.project``, ``render``), so map
+    # pixel j averages image pixels d j .. d j + d - 1 and spans [d j - 0.5, d j + d - 0.5):
+    # floor((u + 0.5) / d). (floor(u / d) read every point half an image pixel up and left.)
+    base_col = (cx + np.float32(0.5)) * tab.inv_ds + np.float32(1)
+    base_row = (cy + np.float32(0.5)) * tab.inv_ds + np.float32(1)
+    step_col = half * nx * tab.inv_ds
+    step_row = half * ny * tab.inv_ds
+    flat = np.empty((J,) + cx.shape, np.int32)
+    for j in range(J):
+        col = np.clip(base_col + s[j] * step_col, 0, tab.w + 1)
+        row = np.clip(base_row + s[j] * step_row, 0, tab.h + 1)
+        np.multiply(row.astype(np.int32), tab.w + 2, out=flat[j])
+        flat[j] += col.astype(np.int32)
+        flat[j] += tab.offsets
+    values = np.take(tab.values, flat)   # take: ~2x faster than fancy indexing here
+    row_sums = values[0]
+    for j in range(1, J):
+        row_sums = row_sums + values[j]
+    row_sums *= row_ok
+    part_sums = row_sums[0]
+    for a in range(1, A):
+        part_sums = part_sums + row_sums[a]
+    total = config.appearance_weight / (A * J) * np.sum(scale * part_sums, axis=0, dtype=np.float64)
+    # ---- flow at the axis points of every flow_row_step-th row (rows, P, n) ---------------
+    if flow is not None and prev is not None:
+        pick = slice(None, None, config.flow_row_step)       # flow cells are coarser than the rows
+        tp, fx_, fy_, ok = t[pick], cx[pick], cy[pick], row_ok[pick]
+        mu = fx_ - (prev.ax + tp * (prev.bx - prev.ax))                    # predicted motion (px/frame)
+        mv = fy_ - (prev.ay + tp * (prev.by - prev.ay))
+        fcol = (fx_ + np.float32(0.5)) * flow.inv_cell      # cell k spans [k s - 0.5, k s + s - 0.5) px
+        frow = (fy_ + np.float32(0.5)) * flow.inv_cell
+        inside = (fcol >= 0) & (fcol < flow.cols) & (frow >= 0) & (frow < flow.rows) & ok
+        inside &= (prev.da > 1e-6) & (prev.db > 1e-6)
+        # (points behind the camera project to NaN: zeroed before the integer cast, then sent to the dummy cell)
+        frow, fcol = np.where(inside, frow, np.float32(0)), np.where(inside, fcol, np.float32(0))
+        cell = np.where(inside, frow.astype(np.int32) * flow.cols + fcol.astype(np.int32), flow.valid.size - 1)
+        du = flow.fx[cell] - mu
+        dv = flow.fy[cell] - mv
+        e2 = (du * (flow.i00[cell] * du + 2 * flow.i01[cell] * dv) + flow.i11[cell] * dv * dv) \
+            * np.float32(1 / STUDENT_T_DOF)
+        ratio = np.float32(-0.5 * (STUDENT_T_DOF + 2)) * (np.log1p(e2) - flow.log0[cell])
+        ratio = np.where(flow.valid[cell], ratio, np.float32(0))
+        total += config.flow_weight / ratio.shape[0] * np.sum(scale * ratio.sum(axis=0), axis=0, dtype=np.float64)
+    return total
+
+
+def _hidden_rows(parts: tuple[PartShape, ...], sil: _Silhouettes, cx: np.ndarray, cy: np.ndarray,
+                 depth: np.ndarray) -> np.ndarray:
+    """(A, P, n) True where a row's axis point is hidden by another part (module docstring).
+
+    All candidate (pair, state) combinations are tested at once: those whose image bounding
+    boxes meet and whose occludee is not wholly in front of the occluder."""
+    hidden = np.zeros(cx.shape, bool)
+    occludees, occluders = occluder_pairs(parts)
+    if occludees.size == 0:
+        return hidden
+    hmax = np.maximum(sil.ha, sil.hb)
+    x0, x1 = np.fmin(sil.ax, sil.bx) - hmax, np.fmax(sil.ax, sil.bx) + hmax
+    y0, y1 = np.fmin(sil.ay, sil.by) - hmax, np.fmax(sil.ay, sil.by) + hmax
+    near, far = np.fmin(sil.da, sil.db), np.fmax(sil.da, sil.db)
+    I, J = occludees, occluders
+    meet = (x0[I] < x1[J]) & (x0[J] < x1[I]) & (y0[I] < y1[J]) & (y0[J] < y1[I]) & (far[I] > near[J])  # (Q, n)
+    q, k = np.nonzero(meet)
+    if q.size == 0:
+        return hidden
+    i, j = I[q], J[q]
+    # gathers by flat index with np.take (several times faster than 2-D fancy indexing)
+    n = cx.shape[-1]
+    jk, ik = j * n + k, i * n + k
+
+    def at_occluder(a: np.ndarray) -> np.ndarray:      # a (P, n) -> (M,)
+        return np.take(a, jk)
+
+    def at_row(a: np.ndarray) -> np.ndarray:           # a (A, P, n) -> (A, M)
+        return np.take(a.reshape(a.shape[0], -1), ik, axis=1)
+
+    ax, ay = at_occluder(sil.ax), at_occluder(sil.ay)
+    sx, sy = at_occluder(sil.bx) - ax, at_occluder(sil.by) - ay
+    px, py = at_row(cx) - ax, at_row(cy) - ay                                 # (A, M)
+    tau = np.clip((px * sx + py * sy) / np.maximum(sx * sx + sy * sy, np.float32(1e-6)), 0, 1)
+    ex, ey = px - tau * sx, py - tau * sy
+    ha = at_occluder(sil.ha)
+    radius = ha + tau * (at_occluder(sil.hb) - ha)
+    da = at_occluder(sil.da)
+    behind = at_row(depth) > da + tau * (at_occluder(sil.db) - da)
+    covered = (ex * ex + ey * ey < radius * radius) & behind
+    for row in range(cx.shape[0]):       # set-only writes: repeated (part, state) entries are harmless
+        hit = covered[row]
+        hidden[row, i[hit], k[hit]] = True
+    return hidden
+
+
+def reference_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments,
+                             prev_segments: BodySegments | None, cameras: list[Camera],
+                             features: list[FrameFeatures], occlusion_masks: list[np.ndarray | None] | None = None,
+                             config: LikelihoodConfig = LikelihoodConfig()) -> np.ndarray:
+    """log p(z_t | s_t) (N,) summed over cameras (eq. 12), computed with numpy."""
+    masks = list(occlusion_masks) if occlusion_masks else [None] * len(cameras)
+    prev = segments if prev_segments is None else prev_segments
+    total = np.zeros(len(segments))
+    for camera, feats, mask in zip(cameras, features, masks):
+        sil = _silhouettes(parts, segments, camera)
+        prev_sil = sil if prev is segments else None
+        total += camera_log_likelihood(parts, segments, prev, camera, feats, mask, config, sil, prev_sil)
+    return total
