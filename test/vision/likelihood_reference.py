@@ -114,7 +114,7 @@ def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, 
     """Log-likelihood (N,) of one camera's features (see the module docstring).
 
     ``silhouettes`` / ``prev_silhouettes``: the poses already projected into this camera
-    (``_silhouettes``), if known. The states are processed in chunks of ``config.chunk_states``
+    (``_silhouettes``), if known. The states are processed in chunks of 4096
     so that the per-sample arrays stay in the CPU cache; arrays are laid out (A, P, n) and
     (J, A, P, n) so that sums over the few sample rows and columns add contiguous blocks."""
     _check_inputs(parts, segments, camera, features)
@@ -129,7 +129,7 @@ def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, 
         prev = prev_silhouettes if prev_silhouettes is not None else _silhouettes(parts, prev_segments, camera,
                                                                                   widths=False)
     total = np.empty(n)
-    step = max(int(config.chunk_states), 1)
+    step = 4096     # states per chunk (keeps the sample arrays in cache)
     for start in range(0, n, step):
         chunk = slice(start, min(start + step, n))
         total[chunk] = _chunk_log_likelihood(parts, sil.take(chunk), None if prev is None else prev.take(chunk),

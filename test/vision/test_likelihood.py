@@ -158,13 +158,6 @@ def test_bad_inputs(scene):
         log_likelihood(BODY.parts, seg, seg, [small, *cameras[1:]], features)
 
 
-def test_chunking_does_not_change_the_result(scene):
-    cameras, poses, features = scene
-    rng = np.random.default_rng(3)
-    batch = stacked([perturbed(poses[FRAME], GROUPS[i % len(GROUPS)], rng) for i in range(50)]).segments()
-    prev = repeat(poses[FRAME - 1].segments(), 50)
-    whole = log_likelihood(BODY.parts, batch, prev, cameras, features, config=LikelihoodConfig(chunk_states=4096))
-    chunked = log_likelihood(BODY.parts, batch, prev, cameras, features, config=LikelihoodConfig(chunk_states=7))
-    assert np.allclose(whole, chunked, rtol=1e-6, atol=1e-6)
-    with pytest.raises(ValueError):
-        LikelihoodConfig(chunk_states=0)
+def test_sampling_settings_are_validated():
+    with pytest.raises(ValueError, match="points_along"):
+        LikelihoodConfig(points_along=0)

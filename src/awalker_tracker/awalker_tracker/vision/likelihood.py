@@ -61,14 +61,13 @@ class LikelihoodConfig:
     points_along: int = 6           # sample rows along each part's axis
     points_across: int = 2          # samples per row across the silhouette
     flow_row_step: int = 3          # flow compared at every flow_row_step-th row (cells >> rows)
-    chunk_states: int = 4096        # no effect (kept for compatibility): the compiled loop scores one state at a time
     appearance_weight: float = 1.0  # multiplies each part's mean log-likelihood ratio
     flow_weight: float = 1.0        # multiplies each part's mean flow log-ratio
     self_occlusion: bool = True
 
     def __post_init__(self) -> None:
-        if min(self.points_along, self.points_across, self.flow_row_step, self.chunk_states) < 1:
-            raise ValueError("LikelihoodConfig: points_along, points_across, flow_row_step and chunk_states "
+        if min(self.points_along, self.points_across, self.flow_row_step) < 1:
+            raise ValueError("LikelihoodConfig: points_along, points_across and flow_row_step "
                              "must be >= 1")
 
 
