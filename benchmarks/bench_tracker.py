@@ -4,14 +4,22 @@ particles, (a) excluding the image likelihood (a 3D-marker likelihood stands in,
 on 1 and 3 cameras (synthetic 640x480 frames, features from vision.features computed beforehand),
 (c) end to end: `awalker track` on bags/walk.bag (replay, features, tracker, pose publisher,
 recording). Reports where the time goes per frame (dynamics + control, kinematics with pose_body,
-likelihood, filter bookkeeping and summaries). Prints JSON.
+likelihood, filter bookkeeping and summaries), and the same filter at 60 Hz input (dt = 1/60 s:
+2 RK4 sub-steps per frame, Table 1's alpha^(1/2); 1 camera). The compiled kernels are loaded (or
+compiled) by a short untimed run first; ``warm_up_s`` says how long that took.
+
+``--baseline REV`` also runs this benchmark's filter tables on the code of git revision REV (a
+temporary worktree, e.g. the last numpy implementation 831cccf) in the same session and reports
+the speed-up of each entry against it. Prints JSON.
 
     .venv/bin/python benchmarks/bench_tracker.py [--frames 20] [--particles 500 1000 5000] [--cameras 1 3]
+        [--rates 30 60] [--skip-end-to-end] [--baseline REV]
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from collections import defaultdict
@@ -55,9 +63,10 @@ def instrument(model: TrackerModel, totals: dict[str, float]) -> None:
     model.likelihood = Timed(totals, "likelihood", model.likelihood)
 
 
-def run_filter(body, start, likelihood, observations, n: int, seed: int = 0) -> dict:
+def run_filter(body, start, likelihood, observations, n: int, seed: int = 0, rate_hz: float = 30.0) -> dict:
     totals: dict[str, float] = defaultdict(float)
-    model = TrackerModel(body, start, likelihood, TrackerConfig(smc=SMCConfig(num_particles=n, seed=seed)))
+    config = TrackerConfig(smc=SMCConfig(num_particles=n, seed=seed), dt=1.0 / rate_hz)
+    model = TrackerModel(body, start, likelihood, config)
     instrument(model, totals)
     tracker = Tracker(model)
     started = time.perf_counter()
@@ -69,9 +78,17 @@ def run_filter(body, start, likelihood, observations, n: int, seed: int = 0) -> 
     frames = len(observations)
     stages = {k: round(1000 * v / frames, 2) for k, v in totals.items()}
     stages["filter+summaries"] = round(1000 * elapsed / frames - sum(stages.values()), 2)
-    return {"particles": n, "frames": frames, "frames_per_s": round(frames / elapsed, 2),
+    return {"particles": n, "frame_rate_hz": rate_hz, "frames": frames, "frames_per_s": round(frames / elapsed, 2),
             "ms_per_frame": round(1000 * elapsed / frames, 2), "ms_per_frame_by_stage": stages,
             "resamples": tracker.filter.num_resamples}
+
+
+def warm_up(body, start, likelihood, observations) -> float:
+    """Load the compiled (numba) kernels from their disk cache, or compile them, by filtering a few
+    frames with a few particles, untimed; returns the seconds that took."""
+    started = time.perf_counter()
+    run_filter(body, start, likelihood, observations[:6], 200)
+    return round(time.perf_counter() - started, 3)
 
 
 def image_sequence(cameras: int, frames: int, folder: Path):
@@ -106,21 +123,6 @@ def image_sequence(cameras: int, frames: int, folder: Path):
                                   start.stance_leg), cams, observations
 
 
-def warm_up_likelihood(body, cameras, observations) -> float:
-    """Load the image likelihood's compiled (numba) kernels from their disk cache, or compile
-    them, before anything is timed; returns the seconds that took (once per process)."""
-    from awalker_tracker.model.body import BodySegments
-    from awalker_tracker.vision.likelihood import log_likelihood
-
-    parts = len(body.parts)
-    segments = BodySegments(np.zeros((1, parts, 3)), np.broadcast_to(np.eye(3), (1, parts, 3, 3)).copy())
-    moved = BodySegments(segments.origin + 0.01, segments.rotation)
-    started = time.perf_counter()
-    for obs in observations[:2]:      # the second frame has flow: the previous poses get projected too
-        log_likelihood(body.parts, segments, moved, cameras, list(obs.features))
-    return time.perf_counter() - started
-
-
 def end_to_end(particles: int, folder: Path) -> dict:
     """`awalker track` on the sample bag (replay, features, tracker, pose publisher, recording)."""
     from awalker_tools.pipeline import TrackOptions, run_tracking
@@ -143,6 +145,10 @@ def main() -> None:
     parser.add_argument("--particles", type=int, nargs="+", default=[500, 1000, 5000])
     parser.add_argument("--cameras", type=int, nargs="+", default=[1, 3])
     parser.add_argument("--skip-end-to-end", action="store_true")
+    parser.add_argument("--rates", type=float, nargs="+", default=[30.0, 60.0],
+                        help="input frame rates (Hz); rates other than 30 are run with 1 camera")
+    parser.add_argument("--baseline", metavar="REV", help="also run the filter tables on git revision REV and "
+                        "report the speed-up against it")
     args = parser.parse_args()
     from test_tracker_model import simulate_walk
 
@@ -150,6 +156,8 @@ def main() -> None:
     start = StartDescription(0, tuple(markers[0, 0, :2]), 0.0, 1.3, 0.7, LEFT)
     obs = markers + 0.01 * np.random.default_rng(0).standard_normal(markers.shape)
     results: dict = {"lookahead": 3, "machine": "2 cores shared with other jobs",
+                     "load_average_1min": round(os.getloadavg()[0], 2),
+                     "warm_up_s": warm_up(body, start, marker_likelihood(0.03), obs),
                      "excluding_image_likelihood": [], "image_likelihood": [], "end_to_end": []}
     for n in args.particles:
         results["excluding_image_likelihood"].append(run_filter(body, start, marker_likelihood(0.03), obs, n))
@@ -158,18 +166,63 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for cams in args.cameras:
             body_i, start_i, cameras, observations = image_sequence(cams, args.frames + 5, Path(tmp))
-            results.setdefault("likelihood_warm_up_s", []).append(
-                round(warm_up_likelihood(body_i, cameras, observations), 3))
-            for n in args.particles:
-                r = run_filter(body_i, start_i, image_likelihood(body_i, cameras), observations, n)
-                r["cameras"] = cams
-                results["image_likelihood"].append(r)
-                print(f"image likelihood {cams} camera(s) N={n}: {r['frames_per_s']} frames/s", file=sys.stderr)
+            likelihood = image_likelihood(body_i, cameras)
+            results[f"warm_up_{cams}_cameras_s"] = warm_up(body_i, start_i, likelihood, observations)
+            for rate in args.rates:
+                if rate != 30.0 and cams != 1:
+                    continue
+                for n in args.particles:
+                    r = run_filter(body_i, start_i, likelihood, observations, n, rate_hz=rate)
+                    r["cameras"] = cams
+                    results["image_likelihood"].append(r)
+                    print(f"image likelihood {cams} camera(s) {rate:g} Hz N={n}: {r['frames_per_s']} frames/s",
+                          file=sys.stderr)
         if not args.skip_end_to_end:
             for n in (500, 5000):
                 results["end_to_end"].append(end_to_end(n, Path(tmp)))
                 print(f"end to end N={n}: {results['end_to_end'][-1]}", file=sys.stderr)
+    if args.baseline:
+        results["baseline"] = compare_with_baseline(args, results)
     print(json.dumps(results, indent=1))
+
+
+def compare_with_baseline(args, results: dict) -> dict:
+    """Run this benchmark's filter tables on git revision ``args.baseline`` (a temporary worktree, its
+    own benchmark script, no end-to-end) and return its figures with the speed-up of every entry
+    measured in both (frames/s here / frames/s there)."""
+    import subprocess
+    import tempfile
+
+    repo = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = Path(tmp) / "baseline"
+        subprocess.run(["git", "-C", str(repo), "worktree", "add", "--detach", str(tree), args.baseline],
+                       check=True, capture_output=True)
+        try:
+            env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+                str(tree / "src" / pkg) for pkg in ("awalker_tracker", "awalker_tools")))
+            command = [sys.executable, str(tree / "benchmarks" / "bench_tracker.py"), "--skip-end-to-end",
+                       "--frames", str(args.frames), "--particles", *map(str, args.particles),
+                       "--cameras", *map(str, args.cameras)]
+            print(f"baseline {args.baseline}: {' '.join(command[1:])}", file=sys.stderr)
+            done = subprocess.run(command, env=env, cwd=tree, check=True, capture_output=True, text=True)
+        finally:
+            subprocess.run(["git", "-C", str(repo), "worktree", "remove", "--force", str(tree)], check=False)
+    theirs = json.loads(done.stdout)
+
+    def key(table: str, entry: dict) -> tuple:
+        return table, entry["particles"], entry.get("cameras", 0), entry.get("frame_rate_hz", 30.0)
+
+    ours = {key(t, e): e for t in ("excluding_image_likelihood", "image_likelihood") for e in results[t]}
+    speedup = []
+    for table in ("excluding_image_likelihood", "image_likelihood"):
+        for entry in theirs.get(table, []):
+            mine = ours.get(key(table, entry))
+            if mine is not None:
+                speedup.append({"table": table, "particles": entry["particles"], "cameras": entry.get("cameras", 0),
+                                "frames_per_s": mine["frames_per_s"], "baseline_frames_per_s": entry["frames_per_s"],
+                                "speedup": round(mine["frames_per_s"] / entry["frames_per_s"], 2)})
+    return {"revision": args.baseline, "speedup": speedup, "figures": theirs}
 
 
 if __name__ == "__main__":
