@@ -1,0 +1,422 @@
+"""Test oracle: the vectorised numpy implementation of the conditional kinematics' pose
+computation as it was before the compiled kernels (``awalker_tracker.model.kinematics``),
+kept only to check the kernels against it. Same maths, same rng stream; not used by the package.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription, BodyPoseBatch, BodySegments
+from awalker_tracker.model.kinematics import (
+    DOF_NAMES,
+    KinematicConfig,
+    KinematicState,
+    leg_angles,
+    truncated_normal,
+)
+from awalker_tracker.model.walker import LEFT, WalkerParams, WalkerState, stance_contact_x
+
+_D = len(DOF_NAMES)
+_SIDE = np.array([1.0, -1.0])  # +1 left, -1 right: mirrors abduction, rotation, inversion
+
+
+# ---- rotations (vectorised) ---------------------------------------------------------------
+def _rot_z(angle: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) about z."""
+    c, s = np.cos(angle), np.sin(angle)
+    r = np.zeros(np.shape(angle) + (3, 3))
+    r[..., 0, 0] = c
+    r[..., 0, 1] = -s
+    r[..., 1, 0] = s
+    r[..., 1, 1] = c
+    r[..., 2, 2] = 1.0
+    return r
+
+
+def _turn(rotation: np.ndarray, axis: int, angle: np.ndarray) -> np.ndarray:
+    """rotation @ R_axis(angle) for stacks (..., 3, 3) and angles (...): only two columns change,
+    so this is much cheaper than a batched 3x3 matmul."""
+    return _turn_cs(rotation, axis, np.cos(angle)[..., None], np.sin(angle)[..., None])
+
+
+def _turn_cs(rotation: np.ndarray, axis: int, c: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """``_turn`` with the angle's cosine and sine given, shaped (..., 1)."""
+    i, j = ((1, 2), (2, 0), (0, 1))[axis]
+    col_i, col_j = rotation[..., :, i], rotation[..., :, j]
+    out = np.empty_like(rotation)
+    out[..., :, axis] = rotation[..., :, axis]
+    # written in place into the strided output columns: ~2.5x faster than assigning temporaries
+    np.multiply(c, col_i, out=out[..., :, i])
+    out[..., :, i] += s * col_j
+    np.multiply(c, col_j, out=out[..., :, j])
+    out[..., :, j] -= s * col_i
+    return out
+
+
+def _apply(rotation: np.ndarray, vector: np.ndarray) -> np.ndarray:
+    """rotation (..., 3, 3) @ constant vector (3,) -> (..., 3), as a sum of scaled columns."""
+    out = 0.0
+    for k in range(3):
+        if vector[k] != 0.0:
+            out = out + vector[k] * rotation[..., :, k]
+    return out if not np.isscalar(out) else np.zeros(rotation.shape[:-1])
+
+
+# Segment frames from joint frames (columns forward, left, up): legs (fwd, -left, down),
+# feet (up, -left, along the foot).
+_LEG_SEGMENT_SIGNS = np.array([1.0, -1.0, -1.0])
+_FOOT_SEGMENT_COLUMNS = np.array([2, 1, 0])
+_FOOT_SEGMENT_SIGNS = np.array([1.0, -1.0, 1.0])
+
+
+@dataclass
+class _LocalPose:
+    """Body posed with the pelvis at the origin (world orientation), arrays over N (and legs)."""
+
+    torso: np.ndarray   # (N, 3, 3) columns forward, left, up
+    hips: np.ndarray    # (N, 2, 3)
+    thigh: np.ndarray   # (N, 2, 3, 3) columns forward, left, up of each thigh
+    knees: np.ndarray   # (N, 2, 3)
+    shank: np.ndarray   # (N, 2, 3, 3)
+    ankles: np.ndarray  # (N, 2, 3)
+    foot: np.ndarray    # (N, 2, 3, 3) columns along the foot (heel->toe), left, up
+
+def _local_pose(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray) -> _LocalPose:
+    """Forward kinematics relative to the pelvis. legs (N, 2) sagittal leg angles, dofs (N, 13)."""
+    d = KinematicState.unpack(dofs)
+    heading = _rot_z(d["heading"])                                            # (N,3,3)
+    torso = _turn(_turn(heading, 1, d["torso_lean"][:, 0]), 0, d["torso_lean"][:, 1])
+    hips = (0.5 * body.hip_width) * _SIDE[None, :, None] * torso[:, None, :, 1]
+    # Leg angle phi about the lateral axis (foot ahead for phi > 0), then abduction, rotation.
+    thigh = np.repeat(heading[:, None], 2, axis=1)
+    thigh = _turn(_turn(_turn(thigh, 1, -legs), 0, _SIDE * d["hip_abduction"]), 2, -_SIDE * d["hip_rotation"])
+    knees = hips - body.upper_leg_length * thigh[..., :, 2]
+    shank, ankles, foot = _lower_legs(body, thigh, knees, dofs)
+    return _LocalPose(torso, hips, thigh, knees, shank, ankles, foot)
+
+
+def _lower_legs(body: BodyDescription, thigh: np.ndarray, knees: np.ndarray,
+                dofs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Shank frames, ankle positions and foot frames (N, 2, ...) below the given thighs and knees."""
+    shank = _turn(thigh, 1, dofs[:, 7:9])                         # knee flexion
+    ankles = knees - body.lower_leg_length * shank[..., :, 2]
+    foot = _turn(_turn(shank, 1, -dofs[:, 9:11]), 0, -_SIDE * dofs[:, 11:13])   # ankle flexion, inversion
+    return shank, ankles, foot
+
+
+def _sole_point(body: BodyDescription, ankles: np.ndarray, foot: np.ndarray, beta: np.ndarray) -> np.ndarray:
+    """Point at angle beta on the rocker sole (..., 3) for feet at ``ankles`` with frames ``foot``."""
+    along, up = _sole_offsets(body, beta)
+    return ankles + foot[..., :, 0] * along[..., None] + foot[..., :, 2] * up[..., None]
+
+
+def _sole_offsets(body: BodyDescription, beta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Foot-frame coordinates (along the foot, up; m) of the rocker sole's point at angle beta
+    (the circle's centre lies above the sole's middle; the lateral coordinate is 0)."""
+    rho = body.sole_radius
+    along = (body.foot_length / 2 - body.heel_offset) + rho * np.sin(beta)
+    up = (-body.ankle_height - body.sole_sag + rho) - rho * np.cos(beta)
+    return along, up
+
+
+def _lowest_roll(body: BodyDescription, foot: np.ndarray) -> np.ndarray:
+    """beta of the rocker sole's lowest point, clipped to the sole's ends (heel/toe pivots)."""
+    return _lowest_roll_from(body, foot[..., 2, 0], foot[..., 2, 2])
+
+
+def _lowest_roll_from(body: BodyDescription, along_z: np.ndarray, up_z: np.ndarray) -> np.ndarray:
+    """``_lowest_roll`` from the world z components of the foot's along and up axes."""
+    beta = np.arctan2(-along_z, up_z)
+    limit = body.sole_half_angle
+    return np.clip(beta, -limit, limit)
+
+
+def _pick(values: np.ndarray, leg: np.ndarray) -> np.ndarray:
+    """values (N, 2, ...) at the given leg index per particle -> (N, ...)."""
+    n = values.shape[0]   # flat take: several times faster than fancy indexing
+    return np.take(values.reshape((2 * n,) + values.shape[2:]), 2 * np.arange(n) + leg.astype(np.intp), axis=0)
+
+
+def _horizontal_direction(foot: np.ndarray) -> np.ndarray:
+    """Unit xy direction (N, 2) of a foot's heel->toe axis projected on the ground."""
+    xy = foot[:, :2, 0]
+    norm = np.linalg.norm(xy, axis=1, keepdims=True)
+    return xy / np.maximum(norm, 1e-9)
+
+def _eq6(config: KinematicConfig, walker: WalkerState, current: np.ndarray, previous: np.ndarray,
+         rng: np.random.Generator, turn_rates: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """One step of eq. (6) for all DOFs (N, 13) with truncated noise; knees by stance/swing role.
+
+    The heading runs eq. (6) on its deviation from the turn (``turn_rates``: omega of this frame and
+    of the previous one, rad/s): h_t = h_{t-1} + omega_t dt + alpha (h_{t-1} - h_{t-2} - omega_{t-1} dt)
+    + dt^2 eta, so the turn is not amplified by eq. (6)'s velocity term."""
+    n = current.shape[0]
+    p = {k: np.broadcast_to(v, (n, _D)).copy() for k, v in config.arrays().items()}
+    swing = config.table["swing_knee"]
+    knee_cols = np.array([7, 8])
+    is_swing = np.stack([walker.stance_leg != LEFT, walker.stance_leg == LEFT], axis=1)  # (N, 2) [left, right]
+    psi_hip = walker.stance_angle - walker.swing_angle
+    swing_values = {
+        "alpha": config.alpha("swing_knee"), "stiffness": swing.stiffness,
+        "rest": config.swing_knee_rest_gain * psi_hip[:, None], "sigma": swing.sigma * config.sigma_unit,
+        "lower": swing.lower, "upper": swing.upper,
+    }
+    for key, value in swing_values.items():
+        p[key][:, knee_cols] = np.where(is_swing, value, p[key][:, knee_cols])
+    dt2 = config.dt**2
+    rate, previous_rate = turn_rates
+    heading = DOF_NAMES.index("heading")
+    previous = previous.copy()
+    previous[:, heading] += previous_rate * config.dt
+    mean = current + p["alpha"] * (current - previous) + dt2 * p["stiffness"] * (p["rest"] - current)
+    mean[:, heading] += rate * config.dt
+    # psi_t = mean + dt^2 eta; truncate eta so that psi_t stays within the limits.
+    eta = truncated_normal(rng, 0.0, p["sigma"], (p["lower"] - mean) / dt2, (p["upper"] - mean) / dt2)
+    return np.clip(mean + dt2 * eta, p["lower"], p["upper"])
+
+
+def _contact_translation(body: BodyDescription, local: _LocalPose, leg: np.ndarray, beta: np.ndarray,
+                         ground_xy: np.ndarray) -> np.ndarray:
+    """Translation (N, 3) that puts the pelvis-relative sole point (leg, beta) on the ground at ground_xy."""
+    point = _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), beta)
+    return np.column_stack([ground_xy - point[:, :2], -point[:, 2]])
+
+
+def _plane_origin(params: WalkerParams, walker: WalkerState, contact_point: np.ndarray,
+                  heading: np.ndarray) -> np.ndarray:
+    along = np.stack([np.cos(heading), np.sin(heading)], axis=1)
+    return contact_point - stance_contact_x(params, walker)[:, None] * along
+
+
+def _swing_foot_lowest_z(body: BodyDescription, thigh_z: np.ndarray, knee_z: np.ndarray,
+                         knee: np.ndarray, ankle_turns: tuple[np.ndarray, ...], shift_z: np.ndarray) -> np.ndarray:
+    """World height (M,) of the lowest point of the swing foot's sole for a given swing knee angle.
+
+    thigh_z (M, 1, 3): the z row of the swing thigh's frame; knee_z (M,): the knee's height
+    (pelvis-relative); knee (M,) rad; ankle_turns: cos and sin (M, 1) of the foot's two turns
+    (flexion about y, inversion about x). Only the frames' z rows are turned (the height needs no more).
+    """
+    shank_z = _turn(thigh_z, 1, knee)
+    ankle_z = knee_z - body.lower_leg_length * shank_z[:, 0, 2]
+    c_flex, s_flex, c_inv, s_inv = ankle_turns
+    foot_z = _turn_cs(_turn_cs(shank_z, 1, c_flex, s_flex), 0, c_inv, s_inv)[:, 0]
+    along, up = _sole_offsets(body, _lowest_roll_from(body, foot_z[:, 0], foot_z[:, 2]))
+    return ankle_z + foot_z[:, 0] * along + foot_z[:, 2] * up + shift_z
+
+
+def _keep_swing_foot_above_ground(body: BodyDescription, local: _LocalPose, dofs: np.ndarray,
+                                  stance_leg: np.ndarray, shift_z: np.ndarray, iterations: int = 14) -> None:
+    """Ground clearance: where the swing foot would go below z = 0, bend the swing knee (in place
+    in ``dofs``) just enough, found by bisection. The knee-less walker's trailing leg sweeps
+    through the floor after toe-off; this pose-dependent lower knee limit keeps the body
+    physical (no penetration), like the joint limits of eq. (6)."""
+    swing = (1 - stance_leg).astype(np.intp)
+    rows = np.arange(dofs.shape[0])
+    knee_col = DOF_NAMES.index("left_knee") + swing
+    ankle_dofs = np.stack([dofs[rows, DOF_NAMES.index("left_ankle_flexion") + swing],
+                           dofs[rows, DOF_NAMES.index("left_ankle_inversion") + swing]], axis=1)
+    knee = dofs[rows, knee_col]
+    thigh_z = _pick(local.thigh, swing)[:, 2:3, :]
+    knee_z = _pick(local.hips, swing)[:, 2] - body.upper_leg_length * thigh_z[:, 0, 2]
+    flex, inversion = -ankle_dofs[:, 0], -_SIDE[swing] * ankle_dofs[:, 1]
+    turns = tuple(f(a)[:, None] for a in (flex, inversion) for f in (np.cos, np.sin))
+    low = np.flatnonzero(_swing_foot_lowest_z(body, thigh_z, knee_z, knee, turns, shift_z) < 0.0)
+    if low.size == 0:
+        return
+    # the bisection works on the low rows only, with everything but the knee angle fixed
+    thigh_z, knee_z, shift_low = thigh_z[low], knee_z[low], shift_z[low]
+    turns = tuple(t[low] for t in turns)
+    below, above = knee[low], np.full(low.size, np.pi)
+    for _ in range(iterations):
+        middle = 0.5 * (below + above)
+        clear = _swing_foot_lowest_z(body, thigh_z, knee_z, middle, turns, shift_low) >= 0.0
+        above = np.where(clear, middle, above)
+        below = np.where(clear, below, middle)
+    dofs[low, knee_col[low]] = above
+
+
+
+
+def sample_posed_kinematics_reference(
+    config: KinematicConfig,
+    body: BodyDescription,
+    params: WalkerParams,
+    walker: WalkerState,
+    kin: KinematicState,
+    rng: np.random.Generator,
+    heading: np.ndarray | float | None = None,
+) -> tuple[KinematicState, BodyPoseBatch]:
+    """Reference of ``sample_posed_kinematics`` (and, with ``heading``, of ``sample_kinematics``):
+    the sampled states and their posed bodies."""
+    current = kin.dofs()
+    struck = walker.stance_leg.astype(np.int8) != kin.contact_leg
+    turn_rate = kin.turn_rate
+    if np.any(struck):      # a new step: a new turn rate
+        turn_rate = np.where(struck, config.turning.sample(kin.turn_rate, rng), kin.turn_rate)
+    new = _eq6(config, walker, current, kin.previous, rng, (turn_rate, kin.turn_rate))
+    if heading is not None:
+        new[:, DOF_NAMES.index("heading")] = heading
+    legs = leg_angles(walker)
+    local = _local_pose(body, legs, new)
+    old_leg = kin.contact_leg
+    old_foot = _pick(local.foot, old_leg)
+    beta = _lowest_roll(body, old_foot)
+    # Roll without slip: the ground contact advances by the arc length rolled on the sole.
+    contact = kin.contact_point + (body.sole_radius * (beta - kin.contact_roll))[:, None] * _horizontal_direction(old_foot)
+    new_leg = walker.stance_leg.astype(np.int8)
+    switched = new_leg != old_leg
+    if np.any(switched):
+        shift = _contact_translation(body, local, old_leg, beta, contact)
+        new_beta = _lowest_roll(body, _pick(local.foot, new_leg))
+        new_point = _sole_point(body, _pick(local.ankles, new_leg), _pick(local.foot, new_leg), new_beta)
+        contact = np.where(switched[:, None], new_point[:, :2] + shift[:, :2], contact)
+        beta = np.where(switched, new_beta, beta)
+    shift = _contact_translation(body, local, new_leg, beta, contact)
+    before = new.copy()
+    # Clearance while the swing leg trails the stance leg (early swing); later the foot must be
+    # free to come down for heel strike, and is only kept out of the ground.
+    margin = np.where(walker.stance_angle > walker.swing_angle, config.swing_clearance, 0.0)
+    _keep_swing_foot_above_ground(body, local, new, new_leg, shift[:, 2] - margin)
+    # The clearance moves the knee without giving it velocity (a position projection): shift
+    # psi_{t-1} along, so that eq. (6) next frame sees the sampled velocity.
+    current = current + (new - before)
+    # The clearance bent some swing knees: pose those lower legs again (their contact foot and
+    # so ``shift`` are unchanged).
+    changed = np.flatnonzero(np.any(new != before, axis=1))
+    if changed.size:
+        local.shank[changed], local.ankles[changed], local.foot[changed] = _lower_legs(
+            body, local.thigh[changed], local.knees[changed], new[changed])
+    named = KinematicState.unpack(new)
+    state = KinematicState(
+        heading=named["heading"], torso_lean=named["torso_lean"], hip_abduction=named["hip_abduction"],
+        hip_rotation=named["hip_rotation"], knee=named["knee"], ankle=named["ankle"], previous=current,
+        contact_point=contact, contact_roll=beta, contact_leg=new_leg,
+        plane_origin=_plane_origin(params, walker, contact, named["heading"]), turn_rate=turn_rate,
+    )
+    return state, _posed_body(body, legs, new, local, shift)
+
+
+def pose_body_reference(body: BodyDescription, params: WalkerParams, walker: WalkerState, kin: KinematicState) -> BodyPoseBatch:
+    """World markers, joint angles and part poses of N bodies (vectorised).
+
+    The pelvis-relative pose comes from the walker's leg angles and the kinematic DOFs; the
+    body is then translated so that the contact foot's sole point at ``contact_roll`` sits on
+    the ground at ``contact_point``.
+    """
+    del params  # the sagittal leg angles come from the walker; the geometry from ``body``
+    legs = leg_angles(walker)
+    dofs = kin.dofs()
+    local = _local_pose(body, legs, dofs)
+    shift = _contact_translation(body, local, kin.contact_leg, kin.contact_roll, kin.contact_point)
+    return _posed_body(body, legs, dofs, local, shift)
+
+
+def _posed_body(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray, local: _LocalPose,
+                shift: np.ndarray) -> BodyPoseBatch:
+    """``pose_body`` from the pelvis-relative pose ``local`` and the pelvis world position ``shift`` (N, 3)."""
+    n = dofs.shape[0]
+    # written straight into the output arrays (MARKER_NAMES, PART_NAMES and JOINT_NAMES order)
+    markers = np.empty((n, len(MARKER_NAMES), 3))
+    torso_up = local.torso[:, :, 2]
+    markers[:, 0] = shift                                                           # pelvis
+    np.add(shift, body.torso_length * torso_up, out=markers[:, 1])                 # thorax
+    np.add(markers[:, 1], 0.5 * body.head_length * torso_up, out=markers[:, 2])    # head
+    np.add(local.hips, shift[:, None], out=markers[:, 3:5])
+    np.add(local.knees, shift[:, None], out=markers[:, 5:7])
+    ankles = markers[:, 7:9]
+    np.add(local.ankles, shift[:, None], out=ankles)
+    heel_local = (-body.heel_offset, 0.0, -body.ankle_height)
+    toe_local = (body.foot_length - body.heel_offset, 0.0, -body.ankle_height)
+    np.add(ankles, _apply(local.foot, heel_local), out=markers[:, 9:11])
+    np.add(ankles, _apply(local.foot, toe_local), out=markers[:, 11:13])
+
+    foot_axis_height = body.foot_radii_heel[0]  # the foot cylinder's bottom touches the heel end of the sole line
+    origin = np.empty((n, 8, 3))
+    origin[:, 0:2] = markers[:, 0:2]            # torso at the pelvis, head at the thorax
+    origin[:, 2:6] = markers[:, 3:7]            # upper legs at the hips, lower legs at the knees
+    np.add(ankles, _apply(local.foot, (heel_local[0], 0.0, heel_local[2] + foot_axis_height)), out=origin[:, 6:8])
+    rotation = np.empty((n, 8, 3, 3))
+    rotation[:, 0] = local.torso
+    rotation[:, 1] = local.torso
+    np.multiply(local.thigh, _LEG_SEGMENT_SIGNS, out=rotation[:, 2:4])
+    np.multiply(local.shank, _LEG_SEGMENT_SIGNS, out=rotation[:, 4:6])
+    for column, (source, sign) in enumerate(zip(_FOOT_SEGMENT_COLUMNS, _FOOT_SEGMENT_SIGNS)):
+        np.multiply(local.foot[..., source], sign, out=rotation[:, 6:8, :, column])
+
+    joints = np.empty((n, len(JOINT_NAMES)))
+    joints[:, 0:3] = dofs[:, 0:3]               # torso pitch, roll, yaw (heading)
+    for side in (0, 1):                         # hip flexion (walker leg angle), abduction, rotation, knee, ankle x2
+        joints[:, 3 + 6 * side] = legs[:, side]
+        joints[:, 4 + 6 * side: 9 + 6 * side] = dofs[:, 3 + side:13:2]
+    return BodyPoseBatch(markers=markers, joint_angles=joints, segments=BodySegments(origin, rotation))
+
+
+def sole_point_world_reference(body: BodyDescription, walker: WalkerState, kin: KinematicState,
+                     leg: np.ndarray, beta: np.ndarray) -> np.ndarray:
+    """World position (N, 3) of the material point at angle ``beta`` on the rocker sole of foot
+    ``leg`` (LEFT/RIGHT per particle) for the bodies posed by ``pose_body`` (used to check slip)."""
+    local = _local_pose(body, leg_angles(walker), kin.dofs())
+    shift = _contact_translation(body, local, kin.contact_leg, kin.contact_roll, kin.contact_point)
+    leg = np.broadcast_to(np.asarray(leg, np.int8), (len(kin),))
+    return _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), np.asarray(beta, float)) + shift
+
+
+def initial_kinematics_reference(
+    config: KinematicConfig,
+    walker: WalkerState,
+    start_position_xy: np.ndarray,
+    heading: float | np.ndarray,
+    n: int,
+    rng: np.random.Generator,
+    *,
+    body: BodyDescription | None = None,
+    params: WalkerParams | None = None,
+    position_spread: float = 0.0,
+    heading_spread: float = 0.0,
+    joint_spread: float = 0.0,
+    turn_rate_spread: float = 0.0,
+) -> KinematicState:
+    """N kinematic states near a rest pose: pelvis above ``start_position_xy`` ((2,) or (N, 2), m),
+    torso yaw ``heading`` (rad); Gaussian spreads (m, rad, rad; joints truncated to their limits; turn rate rad/s).
+
+    ``walker`` has N or 1 entries (broadcast). Zero joint velocities. The swing knee starts at
+    min(its rest angle 5 psi_hip, 0.6 rad) so the swing foot clears the ground.
+    """
+    body = body or BodyDescription.default()
+    params = params or body.walker_params()
+    if len(walker) == 1 and n > 1:
+        walker = walker.take(np.zeros(n, dtype=np.intp))
+    if len(walker) != n:
+        raise ValueError(f"initial_kinematics: walker has {len(walker)} entries, expected 1 or {n}")
+    p = config.arrays()
+    dofs = np.zeros((n, _D))
+    dofs[:, 2] = np.asarray(heading, float) + heading_spread * rng.standard_normal(n)
+    swing_knee = np.clip(config.swing_knee_rest_gain * (walker.stance_angle - walker.swing_angle), 0.05, 0.6)
+    stance_knee = np.full(n, 0.05)
+    left_stance = walker.stance_leg == LEFT
+    dofs[:, 7] = np.where(left_stance, stance_knee, swing_knee)
+    dofs[:, 8] = np.where(left_stance, swing_knee, stance_knee)
+    if joint_spread > 0:
+        cols = np.array([0, 1, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12])
+        lower = np.broadcast_to(p["lower"][cols], (n, cols.size))
+        upper = np.broadcast_to(p["upper"][cols], (n, cols.size))
+        dofs[:, cols] = truncated_normal(rng, dofs[:, cols], joint_spread, lower, upper)
+    legs = leg_angles(walker)
+    local = _local_pose(body, legs, dofs)
+    leg = walker.stance_leg.astype(np.int8)
+    beta = _lowest_roll(body, _pick(local.foot, leg))
+    pelvis_xy = np.broadcast_to(np.asarray(start_position_xy, float).reshape(-1, 2), (n, 2)) \
+        + position_spread * rng.standard_normal((n, 2))
+    point = _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), beta)
+    contact_point = pelvis_xy + point[:, :2]
+    named = KinematicState.unpack(dofs)
+    return KinematicState(
+        heading=named["heading"], torso_lean=named["torso_lean"], hip_abduction=named["hip_abduction"],
+        hip_rotation=named["hip_rotation"], knee=named["knee"], ankle=named["ankle"], previous=dofs.copy(),
+        contact_point=contact_point, contact_roll=beta, contact_leg=leg.copy(),
+        plane_origin=_plane_origin(params, walker, contact_point, named["heading"]),
+        turn_rate=turn_rate_spread * rng.standard_normal(n) if turn_rate_spread > 0 else np.zeros(n),
+    )
+
