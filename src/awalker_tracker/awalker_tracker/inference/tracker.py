@@ -323,8 +323,9 @@ class TrackerModel:
         pelvis = MARKER_NAMES.index("pelvis")
         moved = np.linalg.norm(pose.markers[:, pelvis, :2] - states.pose.markers[:, pelvis, :2], axis=1)
         gain = min(1.0, self.config.dt / self.config.speed_time_constant_s)
-        speed = states.speed + gain * (moved / self.config.dt - states.speed)
         fallen = states.fallen | np.asarray(events.fallen, bool)
+        # a fall is not walking: a fallen walker keeps its speed (re-seeding starts it on that speed's gait)
+        speed = np.where(fallen, states.speed, states.speed + gain * (moved / self.config.dt - states.speed))
         new = TrackerStates(walker, control, kin, pose, speed, fallen, np.zeros(len(states), np.int8))
         if self.config.recovery.reseed_fallen and fallen.any():
             new = self._reseed_fallen(new, np.flatnonzero(fallen), rng)
