@@ -104,7 +104,8 @@ class Camera:
     def pixels_to_normalised(self, uv: np.ndarray, iterations: int = 30) -> np.ndarray:
         """Pixels (..., 2) -> undistorted normalised coordinates (..., 2): the ray through a
         pixel is (x, y, 1) in the camera frame. Inverts the distortion by fixed-point iteration
-        (as OpenCV does, with more iterations); accurate to ~1e-9 for ordinary lenses."""
+        (as OpenCV does, with more iterations, stopping once no point moves by more than 1e-12);
+        accurate to ~1e-9 for ordinary lenses."""
         uv = np.asarray(uv, float)
         K = self.K
         yd = (uv[..., 1] - K[1, 2]) / K[1, 1]
@@ -120,8 +121,11 @@ class Camera:
             inverse_radial = (1 + r2 * (k4 + r2 * (k5 + r2 * k6))) / (1 + r2 * (k1 + r2 * (k2 + r2 * k3)))
             dx = 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
             dy = p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-            x = (xd - dx) * inverse_radial
-            y = (yd - dy) * inverse_radial
+            x_new, y_new = (xd - dx) * inverse_radial, (yd - dy) * inverse_radial
+            moved = max(np.max(np.abs(x_new - x), initial=0.0), np.max(np.abs(y_new - y), initial=0.0))
+            x, y = x_new, y_new
+            if moved < 1e-12:
+                break
         return np.stack([x, y], axis=-1)
 
     def _distort(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
