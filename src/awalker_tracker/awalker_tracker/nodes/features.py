@@ -65,9 +65,10 @@ IMAGE_ENCODINGS = ("rgb8", "bgr8", "mono8", "rgba8", "bgra8")
 
 # ---- message conversion -------------------------------------------------------------------
 def image_from_msg(msg: Image | CompressedImage, topic: str = "image") -> np.ndarray:
-    """RGB uint8 (H, W, 3) from sensor_msgs/Image or CompressedImage; InputError naming ``topic``."""
+    """RGB uint8 (H, W, 3) from sensor_msgs/Image or CompressedImage; InputError naming ``topic``.
+    An rgb8 image without row padding is a view of the message's data (not copied)."""
     if isinstance(msg, CompressedImage):
-        data = np.frombuffer(bytes(msg.data), np.uint8)
+        data = np.frombuffer(msg.data, np.uint8)
         decoded = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
         if decoded is None:
             raise InputError(f"{topic}: cannot decode CompressedImage format {msg.format!r}; expected jpeg or png")
@@ -77,7 +78,7 @@ def image_from_msg(msg: Image | CompressedImage, topic: str = "image") -> np.nda
         raise InputError(f"{topic}: unsupported encoding {msg.encoding!r}; expected one of {', '.join(IMAGE_ENCODINGS)}")
     channels = {"mono8": 1, "rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4}[encoding]
     height, width, step = int(msg.height), int(msg.width), int(msg.step)
-    data = np.frombuffer(bytes(msg.data), np.uint8)
+    data = np.frombuffer(msg.data, np.uint8)          # a view of the message's bytes, no copy
     if width <= 0 or height <= 0 or step < width * channels or data.size < step * height:
         raise InputError(f"{topic}: image {width}x{height} {encoding} with step {step} has {data.size} bytes; "
                          f"expected at least {max(step, width * channels) * height}")
@@ -97,7 +98,10 @@ def mono_from_msg(msg: Image, topic: str) -> np.ndarray:
 
 
 def _floats(values: np.ndarray) -> array.array:
-    return array.array("f", np.ascontiguousarray(values, np.float32).tobytes())
+    """float32 array.array of ``values`` (one copy)."""
+    out = array.array("f")
+    out.frombytes(np.ascontiguousarray(values, np.float32).reshape(-1).view(np.uint8))
+    return out
 
 
 def features_to_msg(features: FrameFeatures, hdr: Header, camera_name: str) -> ImageFeatures:

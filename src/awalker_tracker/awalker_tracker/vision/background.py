@@ -14,15 +14,29 @@ becoming over-confident on perfectly static synthetic frames. ``adapt`` blends i
 where it is classified as background (optional slow adaptation). ``illumination_gains``
 estimates a global per-channel gain between a frame and the background, so that lighting
 changes (camera auto-exposure, clouds) can be divided out before comparing.
+
+Measurements come from one serial numba kernel over the downsampled pixels (``_measurement_kernel``,
+no full-resolution float copy); densities from the compiled kernels of ``vision.densities``, with
+a model's Cholesky factors computed once per model, not per frame.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
-import cv2
+import numba
 import numpy as np
 
-MEASUREMENT_DIM = 5
+from awalker_tracker.vision.densities import (  # noqa: F401 (constants re-exported)
+    MEASUREMENT_DIM,
+    SHADOW_DARKEST,
+    SHADOW_PRIOR,
+    GaussianFactors,
+    as_channels,
+    background_kernel,
+    component_kernel,
+)
+
 # Per-dimension noise floor (grey levels): RGB, then gradients (grey levels / pixel).
 DEFAULT_FLOOR_STD = (3.0, 3.0, 3.0, 2.0, 2.0)
 # 99.9 % quantile of chi-square with 5 degrees of freedom: residuals beyond it are outliers.
@@ -31,32 +45,55 @@ CHI2_5_999 = 20.515
 
 def downsample_image(rgb: np.ndarray, downsample: int) -> np.ndarray:
     """Area-average an (H, W, 3) image by an integer factor -> (H // d, W // d, 3) float32."""
+    return measurements(rgb, downsample)[..., :3].copy()
+
+
+def measurements(rgb: np.ndarray, downsample: int = 1) -> np.ndarray:
+    """The 5-D measurement (R, G, B, dI/dx, dI/dy) per pixel of the downsampled image, (h, w, 5) float32."""
     image = np.asarray(rgb)
     if image.ndim != 3 or image.shape[2] != 3:
         raise ValueError(f"expected an (H, W, 3) RGB image, got shape {image.shape}")
     if downsample < 1:
         raise ValueError(f"downsample must be >= 1, got {downsample}")
-    h, w = image.shape[0] // downsample, image.shape[1] // downsample
-    image = image[: h * downsample, : w * downsample].astype(np.float32)
-    if downsample == 1:
-        return image
-    return cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
+    if image.dtype != np.uint8:
+        image = image.astype(np.float32)
+    height, width = image.shape[:2]
+    out = np.empty((height // downsample, width // downsample, MEASUREMENT_DIM), np.float32)
+    _measurement_kernel(np.ascontiguousarray(image).reshape(height, width * 3), downsample, out)
+    return out
 
 
-def measurements(rgb: np.ndarray, downsample: int = 1) -> np.ndarray:
-    """The 5-D measurement (R, G, B, dI/dx, dI/dy) per pixel of the downsampled image, (h, w, 5) float32."""
-    small = downsample_image(rgb, downsample)
-    grey = small.mean(axis=2)
-    # Central differences (grey levels per downsampled pixel); replicated border.
-    gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=1, borderType=cv2.BORDER_REPLICATE) * 0.5
-    gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=1, borderType=cv2.BORDER_REPLICATE) * 0.5
-    return np.concatenate([small, gx[..., None], gy[..., None]], axis=2)
-
-
-# Shadows: a background pixel darkened to between SHADOW_DARKEST and 1 times its brightness (a person's
-# shadow on the floor) is still background, with this prior probability.
-SHADOW_DARKEST = 0.4
-SHADOW_PRIOR = 0.1
+@numba.njit(cache=True, error_model="numpy")
+def _measurement_kernel(image: np.ndarray, d: int, out: np.ndarray) -> None:
+    """out (h, w, 5) = per d x d block of ``image`` (H, W * 3: RGB rows, channels interleaved)
+    its mean colour, then the central differences of the intensity I = (R + G + B) / 3 along x
+    and y (grey levels per block; replicated border), all float32."""
+    h, w = out.shape[0], out.shape[1]
+    inv_area = np.float32(1.0 / (d * d))
+    columns = np.empty(w * d * 3, np.float32)     # a row of blocks summed over its d image rows
+    for i in range(h):
+        columns[:] = 0.0
+        for y in range(i * d, (i + 1) * d):
+            row = image[y]
+            for q in range(w * d * 3):
+                columns[q] += row[q]
+        for j in range(w):
+            for ch in range(3):
+                total = np.float32(0.0)
+                for x in range(j * d, (j + 1) * d):
+                    total += columns[3 * x + ch]
+                out[i, j, ch] = total * inv_area
+    grey = np.empty((h, w), np.float32)
+    for i in range(h):
+        for j in range(w):
+            grey[i, j] = (out[i, j, 0] + out[i, j, 1] + out[i, j, 2]) / np.float32(3.0)
+    half = np.float32(0.5)
+    for i in range(h):
+        up, down = max(i - 1, 0), min(i + 1, h - 1)
+        for j in range(w):
+            left, right = max(j - 1, 0), min(j + 1, w - 1)
+            out[i, j, 3] = (grey[i, right] - grey[i, left]) * half
+            out[i, j, 4] = (grey[down, j] - grey[up, j]) * half
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,16 +113,23 @@ class BackgroundModel:
     def shape(self) -> tuple[int, int]:
         return int(self.mean.shape[0]), int(self.mean.shape[1])
 
+    @cached_property
+    def factors(self) -> GaussianFactors:
+        """Cholesky factors of ``covariance`` (computed once per model)."""
+        return GaussianFactors.of(self.covariance[None])
+
+    @cached_property
+    def channels(self) -> np.ndarray:
+        """``mean`` in the density kernels' layout, (5, h * w) float32 (computed once per model)."""
+        return as_channels(self.mean)
+
     def log_likelihood(self, m: np.ndarray) -> np.ndarray:
         """log p_bg(m) per pixel for measurements (h, w, 5) -> (h, w) float32 (with shadows, see the class)."""
-        lit = gaussian_log_density(m - self.mean, self.covariance)
-        if not self.shadows:
-            return lit
-        colour = self.mean[..., :3]
-        scale = np.sum(m[..., :3] * colour, axis=-1) / np.maximum(np.sum(colour * colour, axis=-1), 1e-6)
-        scale = np.clip(scale, SHADOW_DARKEST, 1.0)[..., None]
-        shaded = gaussian_log_density(m - scale * self.mean, self.covariance) + np.float32(np.log(SHADOW_PRIOR))
-        return np.logaddexp(lit, shaded).astype(np.float32)
+        x = as_channels(m)
+        out = np.empty(x.shape[1], np.float32)
+        f = self.factors
+        background_kernel(x, self.channels, f.inv_chol[0], float(f.log_norm[0]), self.shadows, out)
+        return out.reshape(m.shape[:-1])
 
     def mahalanobis2(self, m: np.ndarray) -> np.ndarray:
         """Squared Mahalanobis distance of each pixel's measurement from the background, (h, w)."""
@@ -109,28 +153,35 @@ def illumination_gains(m: np.ndarray, reference: np.ndarray, stride: int = 3) ->
     """Per-channel gains (5,) mapping ``reference`` measurements (h, w, 5) to ``m``: the median
     ratio of each colour channel over every ``stride``-th pixel (robust to the person, who covers
     a small part of the image), the mean colour gain for the two gradient channels."""
-    sample = m[::stride, ::stride, :3].reshape(-1, 3)
-    ref = reference[::stride, ::stride, :3].reshape(-1, 3)
     gains = np.ones(MEASUREMENT_DIM, np.float32)
-    for c in range(3):
-        bright = ref[:, c] > 8.0
-        if np.count_nonzero(bright) >= 16:
-            gains[c] = np.median(sample[bright, c] / ref[bright, c])
+    _colour_gains(np.asarray(m, np.float32), np.asarray(reference, np.float32), stride, gains)
     gains[3:] = gains[:3].mean()
     return np.clip(gains, 0.05, 20.0)
 
 
+@numba.njit(cache=True, error_model="numpy")
+def _colour_gains(m: np.ndarray, reference: np.ndarray, stride: int, gains: np.ndarray) -> None:
+    """gains[c] = median of m / reference in colour channel c over every ``stride``-th pixel per
+    axis where the reference is brighter than 8 grey levels (left as is below 16 such pixels)."""
+    ratios = np.empty(((m.shape[0] + stride - 1) // stride) * ((m.shape[1] + stride - 1) // stride), np.float32)
+    for c in range(3):
+        count = 0
+        for i in range(0, m.shape[0], stride):
+            for j in range(0, m.shape[1], stride):
+                if reference[i, j, c] > 8.0:
+                    ratios[count] = m[i, j, c] / reference[i, j, c]
+                    count += 1
+        if count >= 16:
+            gains[c] = np.median(ratios[:count])
+
+
 def gaussian_log_density(residual: np.ndarray, covariance: np.ndarray) -> np.ndarray:
     """log N(residual; 0, covariance) over the last axis (5-D), float32."""
-    chol = np.linalg.cholesky(covariance)
-    inv_chol = np.linalg.inv(chol).astype(np.float32)
-    dim = covariance.shape[0]
-    flat = np.ascontiguousarray(residual.reshape(-1, dim), np.float32)
-    z = cv2.gemm(flat, np.ascontiguousarray(inv_chol.T), 1.0, None, 0.0)    # single-threaded
-    quad = cv2.gemm(z * z, np.ones((dim, 1), np.float32), 1.0, None, 0.0)[:, 0]
-    log_det = 2.0 * np.sum(np.log(np.diag(chol)))
-    out = -0.5 * quad - np.float32(0.5 * (log_det + dim * np.log(2 * np.pi)))
-    return out.reshape(residual.shape[:-1]).astype(np.float32, copy=False)
+    f = GaussianFactors.of(np.asarray(covariance)[None])
+    x = as_channels(residual)
+    out = np.empty((1, x.shape[1]))
+    component_kernel(x, np.zeros((1, MEASUREMENT_DIM)), f.inv_chol, f.log_norm, out)
+    return out[0].astype(np.float32).reshape(residual.shape[:-1])
 
 
 def _floored(cov: np.ndarray, floor_std: tuple[float, ...]) -> np.ndarray:

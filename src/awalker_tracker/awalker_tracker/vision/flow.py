@@ -5,7 +5,12 @@ Dense flow from OpenCV's DIS (ultrafast preset) between consecutive grey frames,
 (``cell_size`` px square) then gets a robust M-estimate of its motion: starting at the
 texture-weighted mean, a few iterations of Cauchy-weighted means over the cell's dense vectors (scale
 ``robust_scale_px``), weighted also by the gradient magnitude (flow is only measured where
-there is texture).
+there is texture). Every 2nd vector per axis is used when the cell's side in the flow image is even.
+
+Per-cell work runs in two serial numba kernels, each one pass over the image with no
+temporaries: ``_gradient_tensors`` (3x3 Sobel gradients of the grey frame, the cell sums of the
+gradient tensor, the gradient magnitude where the M-estimator samples it) and
+``_robust_cell_means`` (all IRLS iterations of a cell while its vectors are in cache).
 
 Covariance (paper: "eigenvalues/vectors of the local gradient tensor in each region of
 support"): Sigma = noise_std^2 * T^-1 + floor_std^2 * I with T = sum over the cell of
@@ -19,9 +24,11 @@ Eq. (9), Student's t with n = 2 degrees of freedom:
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
 
 STUDENT_T_DOF = 2.0
@@ -74,6 +81,11 @@ class FlowGrid:
 
 def grid_centers(rows: int, cols: int, cell_size: int) -> np.ndarray:
     """Centres (rows, cols, 2) of cells [c*s, (c+1)*s) in pixel coordinates (pixel centres at integers)."""
+    return _grid_centers(rows, cols, cell_size).copy()
+
+
+@functools.lru_cache(maxsize=8)
+def _grid_centers(rows: int, cols: int, cell_size: int) -> np.ndarray:
     x = (np.arange(cols) + 0.5) * cell_size - 0.5
     y = (np.arange(rows) + 0.5) * cell_size - 0.5
     return np.stack(np.meshgrid(x, y), axis=-1).astype(np.float32)
@@ -95,6 +107,7 @@ class GridFlow:
         self._dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST)
 
     def estimate(self, prev_grey: np.ndarray, grey: np.ndarray) -> FlowGrid:
+        """Grid flow (px/frame, full-resolution pixels) from ``prev_grey`` to ``grey`` (uint8 (H, W))."""
         cfg = self.config
         if prev_grey.shape != grey.shape:
             raise ValueError(f"flow: frame sizes differ {prev_grey.shape} vs {grey.shape}")
@@ -107,64 +120,132 @@ class GridFlow:
             b = cv2.resize(grey, (sw, sh), interpolation=cv2.INTER_AREA)
         else:
             a, b = prev_grey, grey
-        dense = self._dis.calc(a, b, None)
+        dense = self._dis.calc(a, b, None)     # a flow passed in would be taken as the initial flow
         sub = max(int(round(size * cfg.scale)), 1)         # a cell in the flow image
-        factor = np.float32([width / a.shape[1], height / a.shape[0]])
         if dense.shape[0] < rows * sub or dense.shape[1] < cols * sub:
             dense = cv2.resize(dense, (cols * sub, rows * sub), interpolation=cv2.INTER_LINEAR)
-        dense = dense[: rows * sub, : cols * sub] * factor
-        # Gradient tensor per cell at full resolution (grey levels / px), summed over the cell.
-        g = grey[: rows * size, : cols * size].astype(np.float32)
-        gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3) * np.float32(1 / 8)
-        gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3) * np.float32(1 / 8)
-        area = np.float32(size * size)
-        txx = _cell_sums(gx * gx, rows, cols).astype(np.float64) * area
-        txy = _cell_sums(gx * gy, rows, cols).astype(np.float64) * area
-        tyy = _cell_sums(gy * gy, rows, cols).astype(np.float64) * area
-        # Texture weights of the dense vectors (gradient magnitude at the flow image's resolution).
-        magnitude = cv2.magnitude(gx, gy)
-        if sub != size:
-            magnitude = cv2.resize(magnitude, (cols * sub, rows * sub), interpolation=cv2.INTER_AREA)
         stride = 2 if sub % 2 == 0 else 1                 # every 2nd vector per axis is plenty
-        flow = self._robust_mean(dense[::stride, ::stride], magnitude[::stride, ::stride] + np.float32(1e-3),
-                                 rows, cols, sub // stride)
+        # Gradient tensor per cell at full resolution and the texture weights of the dense vectors
+        # (gradient magnitude at the flow image's resolution, sampled as the vectors are).
+        tensor = np.empty((rows, cols, 3))
+        direct = sub == size
+        step = stride if direct else 1
+        magnitude = np.empty((rows * size // step, cols * size // step), np.float32)
+        _gradient_tensors(np.ascontiguousarray(grey, np.uint8), size, step, tensor, magnitude)
+        if not direct:
+            magnitude = cv2.resize(magnitude, (cols * sub, rows * sub), interpolation=cv2.INTER_AREA)[::stride, ::stride]
+        flow = np.empty((rows, cols, 2))
+        _robust_cell_means(dense[: rows * sub : stride, : cols * sub : stride], magnitude, sub // stride,
+                           width / a.shape[1], height / a.shape[0], 1.0 / cfg.robust_scale_px ** 2,
+                           cfg.robust_iterations, flow)
         # Smallest eigenvalue per pixel and Sigma = noise^2 T^-1 + floor^2 I (2x2 in closed form).
+        txx, txy, tyy = tensor[..., 0], tensor[..., 1], tensor[..., 2]
+        area = size * size
         eig_min = (0.5 * (txx + tyy) - np.sqrt(0.25 * (txx - tyy) ** 2 + txy ** 2)) / area
         valid = (eig_min >= cfg.min_texture) & np.all(np.isfinite(flow), axis=-1)
         det = np.maximum(txx * tyy - txy * txy, 1e-12)
         scale = cfg.noise_std ** 2 / det
         floor = cfg.floor_std ** 2
-        cov = np.stack([np.stack([scale * tyy + floor, -scale * txy], -1),
-                        np.stack([-scale * txy, scale * txx + floor], -1)], -2)
-        cov = np.where(valid[..., None, None], cov, np.eye(2) * 1e4)
-        return FlowGrid(grid_centers(rows, cols, size), np.nan_to_num(flow).astype(np.float32),
-                        cov.astype(np.float32), valid, size)
-
-    def _robust_mean(self, dense: np.ndarray, weights: np.ndarray, rows: int, cols: int, sub: int) -> np.ndarray:
-        """Cauchy M-estimate (IRLS) of each cell's motion from its dense vectors; texture-weighted.
-
-        Cell sums by area averaging (cv2.resize INTER_AREA), so each iteration is a few passes
-        over the image; starts from the texture-weighted mean."""
-        inv_c2 = np.float32(1.0 / self.config.robust_scale_px ** 2)
-        u, v = np.ascontiguousarray(dense[..., 0]), np.ascontiguousarray(dense[..., 1])
-        w = weights
-        shape = (u.shape[1], u.shape[0])
-        for iteration in range(self.config.robust_iterations + 1):
-            total = _cell_sums(w, rows, cols)
-            est_u = _cell_sums(u * w, rows, cols) / total
-            est_v = _cell_sums(v * w, rows, cols) / total
-            if iteration == self.config.robust_iterations:
-                break
-            du = u - cv2.resize(est_u, shape, interpolation=cv2.INTER_NEAREST)
-            dv = v - cv2.resize(est_v, shape, interpolation=cv2.INTER_NEAREST)
-            w = weights / (np.float32(1) + (du * du + dv * dv) * inv_c2)
-        return np.stack([est_u, est_v], axis=-1)
+        cov = np.empty((rows, cols, 2, 2), np.float32)
+        cov[..., 0, 0] = np.where(valid, scale * tyy + floor, 1e4)
+        cov[..., 1, 1] = np.where(valid, scale * txx + floor, 1e4)
+        cov[..., 0, 1] = cov[..., 1, 0] = np.where(valid, -scale * txy, 0.0)
+        return FlowGrid(grid_centers(rows, cols, size), np.nan_to_num(flow).astype(np.float32), cov, valid, size)
 
 
-def _cell_sums(image: np.ndarray, rows: int, cols: int) -> np.ndarray:
-    """Mean of each cell of an (rows*s, cols*s[, C]) float32 image -> (rows, cols[, C]) (area averaging)."""
-    out = cv2.resize(image, (cols, rows), interpolation=cv2.INTER_AREA)
-    return out.reshape((rows, cols) + image.shape[2:])
+# ---- per-cell kernels (numba, serial) -------------------------------------------------------
+# Sums may be reassociated (vectorised): only their rounding changes.
+_SUMS = {"reassoc", "contract"}
+
+
+@numba.njit(cache=True, error_model="numpy", inline="always")
+def _sobel(top: np.ndarray, mid: np.ndarray, bottom: np.ndarray, left: int, x: int, right: int) -> tuple:
+    """3x3 Sobel (gx, gy) / 8 at column x of three uint8 image rows, float32 grey levels / px."""
+    tl, tc, tr = np.int32(top[left]), np.int32(top[x]), np.int32(top[right])
+    ml, mr = np.int32(mid[left]), np.int32(mid[right])
+    bl, bc, br = np.int32(bottom[left]), np.int32(bottom[x]), np.int32(bottom[right])
+    return (np.float32(tr - tl + 2 * (mr - ml) + br - bl) * np.float32(0.125),
+            np.float32(bl - tl + 2 * (bc - tc) + br - tr) * np.float32(0.125))
+
+
+@numba.njit(cache=True, error_model="numpy", fastmath=_SUMS)
+def _gradient_tensors(grey: np.ndarray, size: int, step: int, tensor: np.ndarray, magnitude: np.ndarray) -> None:
+    """Sobel 3x3 gradients gx, gy (grey levels / px: the kernel / 8) of ``grey`` (uint8 (H, W))
+    cropped to the cells (rows * size, cols * size), borders reflected without the edge pixel
+    (OpenCV's default). Writes tensor (rows, cols, 3) = per-cell sums of (gx^2, gx gy, gy^2) and
+    magnitude = sqrt(gx^2 + gy^2) at every ``step``-th pixel per axis (``step`` divides ``size``),
+    float32. Row by row: the row's gradients first (a vectorisable loop), then its cell sums."""
+    rows, cols = tensor.shape[0], tensor.shape[1]
+    height, width = rows * size, cols * size
+    if size % step != 0 or magnitude.shape[0] != height // step or magnitude.shape[1] != width // step:
+        raise ValueError("_gradient_tensors: magnitude must be (rows * size / step, cols * size / step)")
+    tensor[:] = 0.0
+    if height == 0 or width == 0:
+        return
+    gx = np.empty(width, np.float32)
+    gy = np.empty(width, np.float32)
+    for y in range(height):
+        top = grey[y - 1 if y > 0 else 1]
+        mid = grey[y]
+        bottom = grey[y + 1 if y < height - 1 else height - 2]
+        gx[0], gy[0] = _sobel(top, mid, bottom, 1, 0, 1)
+        for x in range(1, width - 1):
+            gx[x], gy[x] = _sobel(top, mid, bottom, x - 1, x, x + 1)
+        gx[width - 1], gy[width - 1] = _sobel(top, mid, bottom, width - 2, width - 1, width - 2)
+        r = y // size
+        for k in range(cols):
+            sxx = 0.0
+            sxy = 0.0
+            syy = 0.0
+            for x in range(k * size, (k + 1) * size):
+                sxx += gx[x] * gx[x]
+                sxy += gx[x] * gy[x]
+                syy += gy[x] * gy[x]
+            tensor[r, k, 0] += sxx
+            tensor[r, k, 1] += sxy
+            tensor[r, k, 2] += syy
+        if y % step == 0:
+            for x in range(0, width, step):
+                magnitude[y // step, x // step] = np.sqrt(gx[x] * gx[x] + gy[x] * gy[x])
+
+
+@numba.njit(cache=True, error_model="numpy", fastmath=_SUMS)
+def _robust_cell_means(dense: np.ndarray, magnitude: np.ndarray, n: int, scale_x: float, scale_y: float,
+                       inv_c2: float, iterations: int, out: np.ndarray) -> None:
+    """Cauchy M-estimate (IRLS) of each cell's motion from its n x n dense vectors.
+
+    dense (rows * n, cols * n, 2) flow vectors (flow-image px, scaled by scale_x, scale_y to
+    full-resolution px), magnitude (rows * n, cols * n) texture; a vector's weight is
+    (magnitude + 1e-3) / (1 + |v - estimate|^2 inv_c2), starting from the texture-weighted mean,
+    ``iterations`` reweightings. out (rows, cols, 2) px/frame. A cell's vectors are copied to
+    contiguous buffers once and iterated there."""
+    u = np.empty(n * n)
+    v = np.empty(n * n)
+    texture = np.empty(n * n)
+    for r in range(out.shape[0]):
+        for c in range(out.shape[1]):
+            for i in range(n):
+                for j in range(n):
+                    u[i * n + j] = dense[r * n + i, c * n + j, 0] * scale_x
+                    v[i * n + j] = dense[r * n + i, c * n + j, 1] * scale_y
+                    texture[i * n + j] = magnitude[r * n + i, c * n + j] + 1e-3
+            est_u = 0.0
+            est_v = 0.0
+            for iteration in range(iterations + 1):
+                total = 0.0
+                sum_u = 0.0
+                sum_v = 0.0
+                for i in range(n * n):
+                    w = texture[i]
+                    if iteration > 0:
+                        w /= 1.0 + ((u[i] - est_u) ** 2 + (v[i] - est_v) ** 2) * inv_c2
+                    total += w
+                    sum_u += w * u[i]
+                    sum_v += w * v[i]
+                est_u = sum_u / total
+                est_v = sum_v / total
+            out[r, c, 0] = est_u
+            out[r, c, 1] = est_v
 
 
 def student_t_log_likelihood(v: np.ndarray, u: np.ndarray, information: np.ndarray,

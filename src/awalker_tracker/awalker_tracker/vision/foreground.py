@@ -12,16 +12,30 @@ torso, legs, feet at the bottom) — adequate for an upright walker seen from th
 
 EM with full covariances, a ridge on the covariances (the background floor) so mixtures stay
 proper on few or uniform pixels, deterministic farthest-point initialisation.
+
+The per-frame maps (``ForegroundModel.log_likelihood_ratios``) come from one serial numba
+kernel over the map pixels (``densities.ratio_kernel``): per pixel the background density with
+shadows, every class's mixture (log-sum-exp over its components), the outlier mixing and the
+clip, a block of pixels at a time with no image-sized temporaries. The mixtures' Cholesky
+factors are computed once per model.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import cv2
 import numpy as np
 
 from awalker_tracker.model.body import PART_CLASSES, BodyDescription
-from awalker_tracker.vision.background import DEFAULT_FLOOR_STD, MEASUREMENT_DIM, BackgroundModel
+from awalker_tracker.vision.background import DEFAULT_FLOOR_STD, BackgroundModel
+from awalker_tracker.vision.densities import (
+    MEASUREMENT_DIM,
+    GaussianFactors,
+    as_channels,
+    component_kernel,
+    ratio_kernel,
+)
 
 NUM_COMPONENTS = 3
 # log of the uniform density over the measurement range: colour 0-255 (3 dims), gradients
@@ -37,44 +51,24 @@ class GaussianMixture:
     means: np.ndarray
     covariances: np.ndarray
 
+    @cached_property
+    def factors(self) -> GaussianFactors:
+        """Cholesky factors of the components (computed once per mixture)."""
+        return GaussianFactors.of(self.covariances)
+
     def log_likelihood(self, m: np.ndarray) -> np.ndarray:
         """log p(m) for measurements (..., 5) -> (...) float32 (log-sum-exp over components)."""
-        flat = m.reshape(-1, MEASUREMENT_DIM).astype(np.float32, copy=False)
-        comp = _component_log_densities(flat, self.means, self.covariances) + np.log(self.weights).astype(np.float32)
-        return _logsumexp_rows(comp).reshape(m.shape[:-1])
+        comp = _component_log_densities(m, self.means, self.factors) + np.log(self.weights)
+        top = comp.max(axis=1)
+        return (top + np.log(np.exp(comp - top[:, None]).sum(axis=1))).astype(np.float32).reshape(m.shape[:-1])
 
 
-def _logsumexp_rows(values: np.ndarray) -> np.ndarray:
-    """log sum exp over the (few) columns of (M, K), column by column (fast for small K)."""
-    columns = [values[:, j] for j in range(values.shape[1])]
-    top = columns[0]
-    for c in columns[1:]:
-        top = np.maximum(top, c)
-    total = np.zeros_like(top)
-    for c in columns:
-        total += np.exp(c - top)
-    return top + np.log(total)
-
-
-def _component_log_densities(x: np.ndarray, means: np.ndarray, covs: np.ndarray) -> np.ndarray:
-    """log N(x; mean_k, cov_k) for samples (M, 5) and K components -> (M, K) float32.
-
-    All components in one matrix product: z_k = L_k^-1 (x - mean_k) for every k at once."""
-    k = len(means)
-    inv_chol = np.empty((k, MEASUREMENT_DIM, MEASUREMENT_DIM))
-    log_det = np.empty(k)
-    for j in range(k):     # K small factorisations, not a loop over pixels
-        chol = np.linalg.cholesky(covs[j])
-        inv_chol[j] = np.linalg.inv(chol)
-        log_det[j] = 2.0 * np.sum(np.log(np.diag(chol)))
-    A = inv_chol.transpose(2, 0, 1).reshape(MEASUREMENT_DIM, k * MEASUREMENT_DIM).astype(np.float32)
-    offset = np.einsum("kij,kj->ki", inv_chol, means).reshape(-1).astype(np.float32)
-    # cv2.gemm: single-threaded, fast for these thin products (BLAS threads thrash on a busy host).
-    z = cv2.gemm(np.ascontiguousarray(x, np.float32), A, 1.0, None, 0.0) - offset        # (M, K*5)
-    z *= z
-    quad = cv2.gemm(z, np.kron(np.eye(k), np.ones((MEASUREMENT_DIM, 1))).astype(np.float32), 1.0, None, 0.0)
-    const = (-0.5 * (log_det + MEASUREMENT_DIM * np.log(2 * np.pi))).astype(np.float32)
-    return -0.5 * quad + const
+def _component_log_densities(x: np.ndarray, means: np.ndarray, factors: GaussianFactors) -> np.ndarray:
+    """log N(x; mean_k, cov_k) for samples (..., 5) and K components -> (M, K) float64."""
+    channels = as_channels(x)
+    out = np.empty((len(means), channels.shape[1]))
+    component_kernel(channels, np.ascontiguousarray(means, np.float64), factors.inv_chol, factors.log_norm, out)
+    return out.T
 
 
 def fit_mixture(samples: np.ndarray, components: int = NUM_COMPONENTS, iterations: int = 40,
@@ -99,7 +93,7 @@ def fit_mixture(samples: np.ndarray, components: int = NUM_COMPONENTS, iteration
     covs = np.repeat(cov0[None], k, axis=0)
     weights = np.full(k, 1.0 / k)
     for _ in range(iterations):
-        log_r = _component_log_densities(x.astype(np.float32), means, covs).astype(np.float64) + np.log(weights)
+        log_r = _component_log_densities(x, means, GaussianFactors.of(covs)) + np.log(weights)
         log_r -= log_r.max(axis=1, keepdims=True)
         r = np.exp(log_r)
         r /= r.sum(axis=1, keepdims=True)
@@ -129,22 +123,32 @@ class ForegroundModel:
         keeps discriminating between classes (a red torso pixel supports the torso class far
         more than the legs). Ratios are finally clipped to +-clip."""
         eps = float(outlier_probability)
-        floor = np.float32(np.log(eps) + OUTLIER_LOG_DENSITY)
-        keep = np.float32(np.log1p(-eps))
-        flat = m.reshape(-1, MEASUREMENT_DIM).astype(np.float32, copy=False)
-        means = np.concatenate([mix.means for mix in self.mixtures])
-        covs = np.concatenate([mix.covariances for mix in self.mixtures])
-        log_w = np.concatenate([np.log(mix.weights) for mix in self.mixtures]).astype(np.float32)
-        comp = _component_log_densities(flat, means, covs) + log_w                    # (M, sum K)
-        log_bg = np.logaddexp(background.log_likelihood(m).reshape(-1) + keep, floor)
-        out = np.empty((len(self.classes), flat.shape[0]), np.float32)
-        start = 0
-        for c, mixture in enumerate(self.mixtures):
-            stop = start + len(mixture.weights)
-            log_fg = _logsumexp_rows(comp[:, start:stop])
-            np.clip(np.logaddexp(log_fg + keep, floor) - log_bg, -clip, clip, out=out[c])
-            start = stop
+        floor = float(np.log(eps) + OUTLIER_LOG_DENSITY)
+        keep = float(np.log1p(-eps))
+        means, inv_chol, log_weight_norm, log_count = self._packed
+        bg = background.factors
+        x = as_channels(m)
+        out = np.empty((len(self.classes), x.shape[1]), np.float32)
+        ratio_kernel(x, background.channels, bg.inv_chol[0], float(bg.log_norm[0]), bool(background.shadows),
+                     means, inv_chol, log_weight_norm, log_count, keep, floor, float(clip), out)
         return out.reshape((len(self.classes),) + m.shape[:2])
+
+    @cached_property
+    def _packed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The classes' components for ``densities.ratio_kernel``, padded to the largest count K:
+        means (C, K, 5), inverse Cholesky factors (C, K, 5, 5), log weight + log normaliser
+        (C, K) (-inf = padding), log component count (C,)."""
+        classes, components = len(self.mixtures), max(len(mix.weights) for mix in self.mixtures)
+        means = np.zeros((classes, components, MEASUREMENT_DIM))
+        inv_chol = np.zeros((classes, components, MEASUREMENT_DIM, MEASUREMENT_DIM))
+        log_weight_norm = np.full((classes, components), -np.inf)
+        for c, mix in enumerate(self.mixtures):
+            k = len(mix.weights)
+            means[c, :k] = mix.means
+            inv_chol[c, :k] = mix.factors.inv_chol
+            log_weight_norm[c, :k] = np.log(mix.weights) + mix.factors.log_norm
+        log_count = np.log([float(len(mix.weights)) for mix in self.mixtures])
+        return means, inv_chol, log_weight_norm, log_count
 
 
 def band_labels(foreground: np.ndarray, body: BodyDescription | None = None) -> np.ndarray:
