@@ -39,6 +39,7 @@ def test_summary_message_roundtrip():
     assert back.map_walker == s.map_walker and back.map_stance_leg == RIGHT
     assert back.contacts[1].heel_strike and np.allclose(back.contacts[0].position, [0.1, 0.2, 0])
     assert np.allclose(back.clouds[0].weights, s.clouds[0].weights, atol=1e-7)
+    assert back.clouds[0].points.shape == (20, 3) and np.allclose(back.clouds[0].points, s.clouds[0].points, atol=1e-6)
     assert back.speed == 1.3 and back.resampled and back.effective_sample_size == 321.0
 
 
@@ -62,6 +63,11 @@ def test_cylinder_geometry():
     assert np.allclose([shin[0].pose.position.x, shin[0].pose.position.y, shin[0].pose.position.z], (knee + ankle) / 2)
     clouds = [m for m in array.markers if "/cloud/" in m.ns]
     assert len(clouds) == 1 and len(clouds[0].points) == 20 and len(clouds[0].colors) == 20
+    assert np.allclose([[p.x, p.y, p.z] for p in clouds[0].points], s.clouds[0].points, atol=1e-6)
+    # opacity follows the weight (quantised): the heaviest sample is opaque, lighter ones never more so
+    weights, alpha = s.clouds[0].weights, np.array([c.a for c in clouds[0].colors])
+    assert alpha[np.argmax(weights)] == 1.0 and np.all(np.diff(alpha[np.argsort(weights)]) >= 0)
+    assert np.allclose(alpha, np.clip(weights / weights.max(), 0.05, 1.0), atol=1.0 / 20)
     assert all(m.header.stamp.nanosec == 10 for m in array.markers)
 
 

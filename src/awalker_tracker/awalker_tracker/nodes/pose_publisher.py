@@ -27,7 +27,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from awalker_tracker.inference.gait import Step, StepCounter
 from awalker_tracker.model.body import BodyDescription
-from awalker_tracker.nodes.convert import points_from_msg, stamp_to_ns
+from awalker_tracker.nodes.convert import cloud_positions, points_from_msg, points_to_msg, stamp_to_ns
 from awalker_tracker.nodes.spin import run_node
 
 BONES = (("pelvis", "thorax"), ("thorax", "head"), ("pelvis", "left_hip"), ("pelvis", "right_hip"),
@@ -37,6 +37,8 @@ BONES = (("pelvis", "thorax"), ("thorax", "head"), ("pelvis", "left_hip"), ("pel
          ("right_heel", "right_toe"), ("right_ankle", "right_toe"))
 CLOUD_COLOURS = {"head": (0.2, 0.4, 1.0), "pelvis": (0.2, 0.4, 1.0), "left_knee": (0.1, 0.9, 0.1),
                  "right_knee": (1.0, 0.1, 0.1), "left_ankle": (1.0, 1.0, 1.0), "right_ankle": (1.0, 0.9, 0.1)}
+#: Opacity levels of the cloud samples (weight relative to the cloud's heaviest, floored at 0.05).
+CLOUD_ALPHA_LEVELS = 20
 
 
 def body_cylinders(body: BodyDescription) -> tuple[tuple[str, str, float], ...]:
@@ -117,10 +119,14 @@ def marker_array_from_summary(msg: PosteriorSummary, cylinders: tuple[tuple[str,
             weights = np.asarray(cloud.weights, float)
             rgb = CLOUD_COLOURS.get(cloud.marker_name, (0.8, 0.8, 0.8))
             pts = marker(f"cloud/{cloud.marker_name}", i, Marker.POINTS, (*rgb, 1.0), (0.01, 0.01, 0))
-            pts.points = list(cloud.points)
+            pts.points = points_to_msg(cloud_positions(cloud))
             top = weights.max() if weights.size else 1.0
             intensity = np.clip(weights / top, 0.05, 1.0) if top > 0 else np.ones_like(weights)
-            pts.colors = [ColorRGBA(r=rgb[0], g=rgb[1], b=rgb[2], a=float(a)) for a in intensity]
+            # opacity in 20 levels: one shared ColorRGBA per level instead of one per sample
+            palette = [ColorRGBA(r=rgb[0], g=rgb[1], b=rgb[2], a=(level + 1) / CLOUD_ALPHA_LEVELS)
+                       for level in range(CLOUD_ALPHA_LEVELS)]
+            levels = np.ceil(intensity * CLOUD_ALPHA_LEVELS).astype(int) - 1
+            pts.colors = [palette[level] for level in levels]
             out.append(pts)
     for i, contact in enumerate(msg.contacts):
         if not np.isfinite(contact.position.x):
