@@ -63,11 +63,17 @@ def test_cylinder_geometry():
     assert np.allclose([shin[0].pose.position.x, shin[0].pose.position.y, shin[0].pose.position.z], (knee + ankle) / 2)
     clouds = [m for m in array.markers if "/cloud/" in m.ns]
     assert len(clouds) == 1 and len(clouds[0].points) == 20 and len(clouds[0].colors) == 20
-    assert np.allclose([[p.x, p.y, p.z] for p in clouds[0].points], s.clouds[0].points, atol=1e-6)
-    # opacity follows the weight (quantised): the heaviest sample is opaque, lighter ones never more so
-    weights, alpha = s.clouds[0].weights, np.array([c.a for c in clouds[0].colors])
-    assert alpha[np.argmax(weights)] == 1.0 and np.all(np.diff(alpha[np.argsort(weights)]) >= 0)
+    assert np.allclose(np.sort([p.x for p in clouds[0].points]), np.sort(s.clouds[0].points[:, 0]), atol=1e-6)
+    # drawn heaviest first; opacity follows the weight (quantised): the heaviest sample is opaque
+    order = np.argsort(-s.clouds[0].weights, kind="stable")
+    weights, alpha = s.clouds[0].weights[order], np.array([c.a for c in clouds[0].colors])
+    assert np.allclose([[p.x, p.y, p.z] for p in clouds[0].points], s.clouds[0].points[order], atol=1e-6)
+    assert alpha[0] == 1.0 and np.all(np.diff(alpha) <= 0)
     assert np.allclose(alpha, np.clip(weights / weights.max(), 0.05, 1.0), atol=1.0 / 20)
+    # only the heaviest samples when asked for fewer
+    few = marker_array_from_summary(summary_to_msg(s), body_cylinders(body), cloud_points=5)
+    drawn = [m for m in few.markers if "/cloud/" in m.ns][0]
+    assert np.allclose([[p.x, p.y, p.z] for p in drawn.points], s.clouds[0].points[order[:5]], atol=1e-6)
     assert all(m.header.stamp.nanosec == 10 for m in array.markers)
 
 

@@ -39,6 +39,9 @@ CLOUD_COLOURS = {"head": (0.2, 0.4, 1.0), "pelvis": (0.2, 0.4, 1.0), "left_knee"
                  "right_knee": (1.0, 0.1, 0.1), "left_ankle": (1.0, 1.0, 1.0), "right_ankle": (1.0, 0.9, 0.1)}
 #: Opacity levels of the cloud samples (weight relative to the cloud's heaviest, floored at 0.05).
 CLOUD_ALPHA_LEVELS = 20
+#: Samples per particle cloud drawn in the MarkerArray (the heaviest; the posterior message carries all):
+#: 6 clouds of 200 samples as geometry_msgs/Point cost the pose publisher ~10 ms per frame.
+DEFAULT_CLOUD_POINTS = 50
 
 
 def body_cylinders(body: BodyDescription) -> tuple[tuple[str, str, float], ...]:
@@ -81,8 +84,10 @@ def joint_state_from_summary(msg: PosteriorSummary) -> JointState:
 
 
 def marker_array_from_summary(msg: PosteriorSummary, cylinders: tuple[tuple[str, str, float], ...],
-                              body_id: str = "walker", clouds: bool = True) -> MarkerArray:
-    """MarkerArray of one posterior summary (ids stable per namespace, so each frame replaces the last)."""
+                              body_id: str = "walker", clouds: bool = True,
+                              cloud_points: int = DEFAULT_CLOUD_POINTS) -> MarkerArray:
+    """MarkerArray of one posterior summary (ids stable per namespace, so each frame replaces the last);
+    each particle cloud drawn with its ``cloud_points`` heaviest samples."""
     hdr = msg.header
     names = list(msg.map_pose.marker_names)
     xyz = points_from_msg(msg.map_pose.markers)
@@ -117,9 +122,11 @@ def marker_array_from_summary(msg: PosteriorSummary, cylinders: tuple[tuple[str,
     if clouds:
         for i, cloud in enumerate(msg.clouds):
             weights = np.asarray(cloud.weights, float)
+            heaviest = np.argsort(-weights, kind="stable")[:max(int(cloud_points), 0)]
+            weights = weights[heaviest]
             rgb = CLOUD_COLOURS.get(cloud.marker_name, (0.8, 0.8, 0.8))
             pts = marker(f"cloud/{cloud.marker_name}", i, Marker.POINTS, (*rgb, 1.0), (0.01, 0.01, 0))
-            pts.points = points_to_msg(cloud_positions(cloud))
+            pts.points = points_to_msg(cloud_positions(cloud)[heaviest])
             top = weights.max() if weights.size else 1.0
             intensity = np.clip(weights / top, 0.05, 1.0) if top > 0 else np.ones_like(weights)
             # opacity in 20 levels: one shared ColorRGBA per level instead of one per sample
@@ -150,11 +157,14 @@ class PosePublisherNode(Node):
         self.declare_parameter("body_description", "",
                                descriptor_text("body YAML (segment sizes, m) for the cylinders; empty = default"))
         self.declare_parameter("publish_clouds", True, descriptor_text("publish posterior particle clouds"))
+        self.declare_parameter("cloud_points", DEFAULT_CLOUD_POINTS,
+                               descriptor_text("samples drawn per particle cloud marker (the heaviest)"))
         body_id = self.get_parameter("body_id").value
         body_path = self.get_parameter("body_description").value
         self.body_id = body_id
         self.cylinders = body_cylinders(BodyDescription.from_yaml(body_path) if body_path else BodyDescription.default())
         self.publish_clouds = bool(self.get_parameter("publish_clouds").value)
+        self.cloud_points = int(self.get_parameter("cloud_points").value)
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.joint_pub = self.create_publisher(JointState, "/awalker/joint_states", qos)
         self.rep155_pub = self.create_publisher(JointState, f"/humans/bodies/{body_id}/joint_states", qos)
@@ -173,7 +183,8 @@ class PosePublisherNode(Node):
         joints = joint_state_from_summary(msg)
         self.joint_pub.publish(joints)
         self.rep155_pub.publish(joints)
-        self.marker_pub.publish(marker_array_from_summary(msg, self.cylinders, self.body_id, self.publish_clouds))
+        self.marker_pub.publish(marker_array_from_summary(msg, self.cylinders, self.body_id, self.publish_clouds,
+                                                         self.cloud_points))
         stamp = stamp_to_ns(msg.header.stamp)
         if self._first_stamp_ns is None:
             self._first_stamp_ns = stamp
