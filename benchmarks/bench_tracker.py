@@ -151,6 +151,7 @@ def end_to_end(particles: int, folder: Path) -> dict:
                                        overlays=False, quiet=True))
     return {"bag": str(bag.name), "particles": particles, "frames": result.summaries,
             "end_to_end_frames_per_s": round(result.frames_per_second, 2),
+            "streaming_frames_per_s": round(result.streaming_frames_per_second, 2),
             "filter_frames_per_s": round(result.summaries / max(result.seconds_in_filter, 1e-9), 2)}
 
 
