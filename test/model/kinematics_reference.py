@@ -13,10 +13,13 @@ from awalker_tracker.model.kinematics import (
     DOF_NAMES,
     KinematicConfig,
     KinematicState,
+    _initial_dofs,
+    _initial_state,
+    _plane_origin,
     leg_angles,
     truncated_normal,
 )
-from awalker_tracker.model.walker import LEFT, WalkerParams, WalkerState, stance_contact_x
+from awalker_tracker.model.walker import LEFT, WalkerParams, WalkerState
 
 _D = len(DOF_NAMES)
 _SIDE = np.array([1.0, -1.0])  # +1 left, -1 right: mirrors abduction, rotation, inversion
@@ -182,12 +185,6 @@ def _contact_translation(body: BodyDescription, local: _LocalPose, leg: np.ndarr
     """Translation (N, 3) that puts the pelvis-relative sole point (leg, beta) on the ground at ground_xy."""
     point = _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), beta)
     return np.column_stack([ground_xy - point[:, :2], -point[:, 2]])
-
-
-def _plane_origin(params: WalkerParams, walker: WalkerState, contact_point: np.ndarray,
-                  heading: np.ndarray) -> np.ndarray:
-    along = np.stack([np.cos(heading), np.sin(heading)], axis=1)
-    return contact_point - stance_contact_x(params, walker)[:, None] * along
 
 
 def _swing_foot_lowest_z(body: BodyDescription, thigh_z: np.ndarray, knee_z: np.ndarray,
@@ -378,45 +375,15 @@ def initial_kinematics_reference(
     joint_spread: float = 0.0,
     turn_rate_spread: float = 0.0,
 ) -> KinematicState:
-    """N kinematic states near a rest pose: pelvis above ``start_position_xy`` ((2,) or (N, 2), m),
-    torso yaw ``heading`` (rad); Gaussian spreads (m, rad, rad; joints truncated to their limits; turn rate rad/s).
-
-    ``walker`` has N or 1 entries (broadcast). Zero joint velocities. The swing knee starts at
-    min(its rest angle 5 psi_hip, 0.6 rad) so the swing foot clears the ground.
-    """
+    """``kinematics.initial_kinematics`` with the sole geometry in numpy (same arguments)."""
     body = body or BodyDescription.default()
     params = params or body.walker_params()
-    if len(walker) == 1 and n > 1:
-        walker = walker.take(np.zeros(n, dtype=np.intp))
-    if len(walker) != n:
-        raise ValueError(f"initial_kinematics: walker has {len(walker)} entries, expected 1 or {n}")
-    p = config.arrays()
-    dofs = np.zeros((n, _D))
-    dofs[:, 2] = np.asarray(heading, float) + heading_spread * rng.standard_normal(n)
-    swing_knee = np.clip(config.swing_knee_rest_gain * (walker.stance_angle - walker.swing_angle), 0.05, 0.6)
-    stance_knee = np.full(n, 0.05)
-    left_stance = walker.stance_leg == LEFT
-    dofs[:, 7] = np.where(left_stance, stance_knee, swing_knee)
-    dofs[:, 8] = np.where(left_stance, swing_knee, stance_knee)
-    if joint_spread > 0:
-        cols = np.array([0, 1, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12])
-        lower = np.broadcast_to(p["lower"][cols], (n, cols.size))
-        upper = np.broadcast_to(p["upper"][cols], (n, cols.size))
-        dofs[:, cols] = truncated_normal(rng, dofs[:, cols], joint_spread, lower, upper)
-    legs = leg_angles(walker)
-    local = _local_pose(body, legs, dofs)
+    # the sampling and the state assembly are the package's (not compiled); the sole geometry is the reference's
+    walker, dofs = _initial_dofs(config, walker, heading, n, rng, heading_spread, joint_spread)
+    local = _local_pose(body, leg_angles(walker), dofs)
     leg = walker.stance_leg.astype(np.int8)
     beta = _lowest_roll(body, _pick(local.foot, leg))
-    pelvis_xy = np.broadcast_to(np.asarray(start_position_xy, float).reshape(-1, 2), (n, 2)) \
-        + position_spread * rng.standard_normal((n, 2))
     point = _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), beta)
-    contact_point = pelvis_xy + point[:, :2]
-    named = KinematicState.unpack(dofs)
-    return KinematicState(
-        heading=named["heading"], torso_lean=named["torso_lean"], hip_abduction=named["hip_abduction"],
-        hip_rotation=named["hip_rotation"], knee=named["knee"], ankle=named["ankle"], previous=dofs.copy(),
-        contact_point=contact_point, contact_roll=beta, contact_leg=leg.copy(),
-        plane_origin=_plane_origin(params, walker, contact_point, named["heading"]),
-        turn_rate=turn_rate_spread * rng.standard_normal(n) if turn_rate_spread > 0 else np.zeros(n),
-    )
+    return _initial_state(params, walker, dofs, beta, point, start_position_xy, rng, position_spread,
+                          turn_rate_spread)
 

@@ -11,12 +11,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import BodySegments, PartShape
 from awalker_tracker.vision.camera import Camera
-from awalker_tracker.vision.features import FrameFeatures, occlusion_cell_mask, occlusion_map_mask
+from awalker_tracker.vision.features import FrameFeatures
 from awalker_tracker.vision.flow import STUDENT_T_DOF
-from awalker_tracker.vision.likelihood import LikelihoodConfig, occluder_pairs
+# the look-up tables are prepared once per frame in Python, not in the kernel under test: shared
+from awalker_tracker.vision.likelihood import (LikelihoodConfig, _AppearanceTable, _check_inputs, _FlowTable,
+                                               occluder_pairs)
 
 
 def _project(camera: Camera, points: np.ndarray, component_first: bool = False
@@ -97,16 +98,6 @@ def _silhouettes(parts: tuple[PartShape, ...], segments: BodySegments, camera: C
     return _Silhouettes(u[..., 0], v[..., 0], u[..., 1], v[..., 1], ha, hb, da, db)
 
 
-def _check_inputs(parts: tuple[PartShape, ...], segments: BodySegments, camera: Camera,
-                  features: FrameFeatures) -> None:
-    p = segments.origin.shape[1]
-    if p != len(parts):
-        raise ValueError(f"likelihood: segments have {p} parts, body has {len(parts)}")
-    if (features.image_width, features.image_height) != (camera.width, camera.height):
-        raise InputError(f"likelihood: features of camera {camera.name} are {features.image_width}x"
-                         f"{features.image_height}, calibration says {camera.width}x{camera.height}")
-
-
 def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, prev_segments: BodySegments,
                           camera: Camera, features: FrameFeatures, occlusion_mask: np.ndarray | None = None,
                           config: LikelihoodConfig = LikelihoodConfig(), silhouettes: _Silhouettes | None = None,
@@ -135,50 +126,6 @@ def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, 
         total[chunk] = _chunk_log_likelihood(parts, sil.take(chunk), None if prev is None else prev.take(chunk),
                                              appearance, flow, config)
     return total
-
-
-class _AppearanceTable:
-    """Log-likelihood-ratio maps with a zero border (indices clipped into it contribute nothing),
-    flattened, and each part's class offset into them."""
-
-    def __init__(self, parts: tuple[PartShape, ...], features: FrameFeatures, occlusion_mask: np.ndarray | None):
-        llr = features.llr
-        mask_map = occlusion_map_mask(occlusion_mask, features.downsample, features.map_shape)
-        if mask_map is not None:
-            llr = np.where(mask_map[None], np.float32(0), llr)
-        self.h, self.w = features.map_shape
-        padded = np.zeros((len(features.classes), self.h + 2, self.w + 2), np.float32)
-        padded[:, 1:-1, 1:-1] = llr
-        self.values = padded.reshape(-1)
-        self.inv_ds = np.float32(1.0 / features.downsample)
-        classes = np.array([features.classes.index(q.part_class) for q in parts], np.int32)
-        self.offsets = (classes * ((self.h + 2) * (self.w + 2)))[:, None]
-
-
-class _FlowTable:
-    """Per-cell measured flow, inverse covariance and log(1 + e0^2) (the zero-motion term), as one
-    table with a trailing 'invalid' row; cells under the occlusion mask are invalid."""
-
-    def __init__(self, grid, occlusion_mask: np.ndarray | None):
-        valid = grid.valid
-        cell_mask = occlusion_cell_mask(occlusion_mask, *grid.shape, grid.cell_size)
-        if cell_mask is not None:
-            valid = valid & ~cell_mask
-        self.any = bool(valid.any())
-        self.rows, self.cols = grid.shape
-        self.inv_cell = np.float32(1.0 / grid.cell_size)
-        cov = grid.covariance.astype(np.float64)
-        det = cov[..., 0, 0] * cov[..., 1, 1] - cov[..., 0, 1] * cov[..., 1, 0]
-        i00, i01, i11 = cov[..., 1, 1] / det, -cov[..., 0, 1] / det, cov[..., 0, 0] / det
-        fx, fy = grid.flow[..., 0].astype(np.float64), grid.flow[..., 1].astype(np.float64)
-        e0 = (fx * (i00 * fx + 2 * i01 * fy) + i11 * fy * fy) / STUDENT_T_DOF
-
-        def padded(a: np.ndarray) -> np.ndarray:
-            return np.append(np.where(valid, a, 0).reshape(-1), 0).astype(np.float32)
-
-        self.fx, self.fy, self.i00, self.i01, self.i11, self.log0 = (
-            padded(a) for a in (fx, fy, i00, i01, i11, np.log1p(e0)))
-        self.valid = np.append(valid.reshape(-1), False)
 
 
 def _chunk_log_likelihood(parts: tuple[PartShape, ...], sil: "_Silhouettes", prev: "_Silhouettes | None",
@@ -212,17 +159,18 @@ def _chunk_log_likelihood(parts: tuple[PartShape, ...], sil: "_Silhouettes", pre
     # Pixel centres are at integer image coordinates (``Camera.project``, ``render``), so map
     # pixel j averages image pixels d j .. d j + d - 1 and spans [d j - 0.5, d j + d - 0.5):
     # floor((u + 0.5) / d). (floor(u / d) read every point half an image pixel up and left.)
-    base_col = (cx + np.float32(0.5)) * tab.inv_ds + np.float32(1)
-    base_row = (cy + np.float32(0.5)) * tab.inv_ds + np.float32(1)
-    step_col = half * nx * tab.inv_ds
-    step_row = half * ny * tab.inv_ds
+    inv_ds = np.float32(tab.inv_ds)
+    base_col = (cx + np.float32(0.5)) * inv_ds + np.float32(1)
+    base_row = (cy + np.float32(0.5)) * inv_ds + np.float32(1)
+    step_col = half * nx * inv_ds
+    step_row = half * ny * inv_ds
     flat = np.empty((J,) + cx.shape, np.int32)
     for j in range(J):
         col = np.clip(base_col + s[j] * step_col, 0, tab.w + 1)
         row = np.clip(base_row + s[j] * step_row, 0, tab.h + 1)
         np.multiply(row.astype(np.int32), tab.w + 2, out=flat[j])
         flat[j] += col.astype(np.int32)
-        flat[j] += tab.offsets
+        flat[j] += tab.offsets[:, None]
     values = np.take(tab.values, flat)   # take: ~2x faster than fancy indexing here
     row_sums = values[0]
     for j in range(1, J):
@@ -238,8 +186,9 @@ def _chunk_log_likelihood(parts: tuple[PartShape, ...], sil: "_Silhouettes", pre
         tp, fx_, fy_, ok = t[pick], cx[pick], cy[pick], row_ok[pick]
         mu = fx_ - (prev.ax + tp * (prev.bx - prev.ax))                    # predicted motion (px/frame)
         mv = fy_ - (prev.ay + tp * (prev.by - prev.ay))
-        fcol = (fx_ + np.float32(0.5)) * flow.inv_cell      # cell k spans [k s - 0.5, k s + s - 0.5) px
-        frow = (fy_ + np.float32(0.5)) * flow.inv_cell
+        inv_cell = np.float32(flow.inv_cell)
+        fcol = (fx_ + np.float32(0.5)) * inv_cell      # cell k spans [k s - 0.5, k s + s - 0.5) px
+        frow = (fy_ + np.float32(0.5)) * inv_cell
         inside = (fcol >= 0) & (fcol < flow.cols) & (frow >= 0) & (frow < flow.rows) & ok
         inside &= (prev.da > 1e-6) & (prev.db > 1e-6)
         # (points behind the camera project to NaN: zeroed before the integer cast, then sent to the dummy cell)

@@ -64,11 +64,11 @@ absolute against 46-64 over seeds 0-2).
 ``plane_origin`` maps the walker's sagittal x to the world: the walker's stance contact
 x (``walker.stance_contact_x``) lands on ``contact_point``, x grows along the heading.
 
-Computation: the random numbers (new turn rates at heel strikes, eq. 6's uniforms) are drawn
-with the numpy Generator, vectorised, so a seed gives the same stream as the numpy code did;
-everything else is per particle and deterministic and runs in serial numba kernels that loop
+Computation: the random numbers (new turn rates at heel strikes, eq. 6's noise: standard normals,
+and for joints near a limit inverse-CDF draws from uniforms) are drawn with the numpy Generator,
+vectorised, so a seed gives a fixed result; everything else is per particle and deterministic and runs in serial numba kernels that loop
 over the particles (``_eq6_mean_kernel``/``_eq6_draw_kernel``: eq. 6's means and truncation,
-around scipy's inverse normal CDF; ``_sample_kernel``: forward kinematics, rolling contact,
+around ``_standard_truncated_normal``; ``_sample_kernel``: forward kinematics, rolling contact,
 heel strike, swing-foot clearance and the posed body in one pass; ``_pose_kernel`` for
 ``pose_body``). They are compiled on first use and cached next to this file (``__pycache__``);
 ``test/model/kinematics_reference.py`` keeps the former vectorised numpy code as a test oracle.
@@ -247,7 +247,8 @@ def leg_angles(walker: WalkerState) -> np.ndarray:
 
 def truncated_normal(rng: np.random.Generator, mean: np.ndarray, sigma: np.ndarray,
                      lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
-    """Samples of N(mean, sigma^2) truncated to [lower, upper] (inverse CDF, broadcast shapes).
+    """Samples of N(mean, sigma^2) truncated to [lower, upper] (broadcast shapes; see
+    ``_standard_truncated_normal``).
 
     Sampled in the tail that keeps precision (mirror when the interval lies above the mean);
     bounds far in a tail fall back to the nearest bound.
@@ -364,6 +365,19 @@ def initial_kinematics(
     """
     body = body or BodyDescription.default()
     params = params or body.walker_params()
+    walker, dofs = _initial_dofs(config, walker, heading, n, rng, heading_spread, joint_spread)
+    leg = np.ascontiguousarray(walker.stance_leg, np.int8)
+    beta = np.empty(n)
+    point = np.empty((n, 3))
+    _sole_points_kernel(_geometry(body), leg_angles(walker), dofs, leg, beta, True, point)
+    return _initial_state(params, walker, dofs, beta, point, start_position_xy, rng, position_spread,
+                          turn_rate_spread)
+
+
+def _initial_dofs(config: KinematicConfig, walker: WalkerState, heading: float | np.ndarray, n: int,
+                  rng: np.random.Generator, heading_spread: float, joint_spread: float
+                  ) -> tuple[WalkerState, np.ndarray]:
+    """``initial_kinematics``' walker broadcast to n entries and its sampled DOFs (n, 13)."""
     if len(walker) == 1 and n > 1:
         walker = walker.take(np.zeros(n, dtype=np.intp))
     if len(walker) != n:
@@ -381,10 +395,15 @@ def initial_kinematics(
         lower = np.broadcast_to(p["lower"][cols], (n, cols.size))
         upper = np.broadcast_to(p["upper"][cols], (n, cols.size))
         dofs[:, cols] = truncated_normal(rng, dofs[:, cols], joint_spread, lower, upper)
-    leg = np.ascontiguousarray(walker.stance_leg, np.int8)
-    beta = np.empty(n)
-    point = np.empty((n, 3))
-    _sole_points_kernel(_geometry(body), leg_angles(walker), dofs, leg, beta, True, point)
+    return walker, dofs
+
+
+def _initial_state(params: WalkerParams, walker: WalkerState, dofs: np.ndarray, beta: np.ndarray, point: np.ndarray,
+                   start_position_xy: np.ndarray, rng: np.random.Generator, position_spread: float,
+                   turn_rate_spread: float) -> KinematicState:
+    """``initial_kinematics``' states from the DOFs, the stance foot's contact roll ``beta`` (N,) and its sole
+    point relative to the pelvis ``point`` (N, 3) m: the pelvis above the (spread) start position."""
+    n = dofs.shape[0]
     pelvis_xy = np.broadcast_to(np.asarray(start_position_xy, float).reshape(-1, 2), (n, 2)) \
         + position_spread * rng.standard_normal((n, 2))
     contact_point = pelvis_xy + point[:, :2]
@@ -392,7 +411,7 @@ def initial_kinematics(
     return KinematicState(
         heading=named["heading"], torso_lean=named["torso_lean"], hip_abduction=named["hip_abduction"],
         hip_rotation=named["hip_rotation"], knee=named["knee"], ankle=named["ankle"], previous=dofs.copy(),
-        contact_point=contact_point, contact_roll=beta, contact_leg=leg.copy(),
+        contact_point=contact_point, contact_roll=beta, contact_leg=walker.stance_leg.astype(np.int8),
         plane_origin=_plane_origin(params, walker, contact_point, named["heading"]),
         turn_rate=turn_rate_spread * rng.standard_normal(n) if turn_rate_spread > 0 else np.zeros(n),
     )
@@ -451,7 +470,7 @@ def _sample_kinematics(
     heading: np.ndarray | float | None,
 ) -> tuple[KinematicState, BodyPoseBatch]:
     """The sampled states and their posed bodies. The random numbers are drawn first with ``rng``,
-    vectorised (``TurnPrior.sample``, then eq. 6's uniforms in ``_eq6``); the per-particle geometry
+    vectorised (``TurnPrior.sample``, then eq. 6's noise in ``_eq6``); the per-particle geometry
     then runs in ``_sample_kernel``."""
     n = len(kin)
     current = kin.dofs()

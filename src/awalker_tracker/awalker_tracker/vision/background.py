@@ -43,11 +43,6 @@ DEFAULT_FLOOR_STD = (3.0, 3.0, 3.0, 2.0, 2.0)
 CHI2_5_999 = 20.515
 
 
-def downsample_image(rgb: np.ndarray, downsample: int) -> np.ndarray:
-    """Area-average an (H, W, 3) image by an integer factor -> (H // d, W // d, 3) float32."""
-    return measurements(rgb, downsample)[..., :3].copy()
-
-
 def measurements(rgb: np.ndarray, downsample: int = 1) -> np.ndarray:
     """The 5-D measurement (R, G, B, dI/dx, dI/dy) per pixel of the downsampled image, (h, w, 5) float32."""
     image = np.asarray(rgb)
