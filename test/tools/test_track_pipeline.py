@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from awalker_tools import evaluation
 from awalker_tools.cli import main
@@ -74,7 +75,10 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     assert summary["stamp_ns"].tolist() == tracked
     assert np.all((summary["stance_left_probability"] >= 0) & (summary["stance_left_probability"] <= 1))
     assert len(list((out / "overlay").glob("frame_*.png"))) == FRAMES and (out / "overlay.mp4").stat().st_size > 0
-    capsys.readouterr()
+    # timings: streaming is part of the whole command, the filter part of streaming
+    run = yaml.safe_load((out / "run.yaml").read_text())
+    assert 0 < run["seconds_in_filter"] < run["seconds_streaming"] < run["seconds"]
+    assert "while streaming" in capsys.readouterr().err
     assert main(["eval", str(out)]) == 0          # ground truth found beside the input bag
     assert "absolute" in capsys.readouterr().out
     # gait analytics of the MAP trajectory, and the one-page report
@@ -224,7 +228,6 @@ def test_track_is_isolated_from_other_publishers(synth_bag: Path, tmp_path: Path
 def test_start_and_body_files_act_like_the_bag_topics(synth_bag: Path, tmp_path: Path):
     """`awalker track --start S --body B` on a bag without description topics gives the features nodes the
     same start (background-only frames, start-pose labels) and body as the topics do: the same results."""
-    import yaml
 
     from awalker_tools.bagio import SequenceReader, SequenceWriter
 
