@@ -263,3 +263,18 @@ def test_stop_variant_stands_still_with_both_feet_down_then_walks_on(tmp_path):
     feet = walk[still[0], [M["left_heel"], M["left_toe"], M["right_heel"], M["right_toe"]], 2]
     assert feet.reshape(2, 2).min(axis=1).max() < 0.05                 # both feet on the floor
     assert speed[: still[0]].mean() > 1.0 and speed[still[-1] + 2:].mean() > 1.0     # walking before and after
+
+
+def test_start_heading_is_the_walking_direction_over_strides(tmp_path):
+    """The start description's heading is where the person walks, not where the pelvis sways in the first
+    few frames: within 1.5 degrees of the pelvis's direction over the first two seconds (the user's
+    start may then add up to 5 degrees, as the issue asks; a 0.3 s window was 3-6 degrees off on CMU 07)."""
+    for walk in ("07_01", "07_02"):
+        out = tmp_path / walk
+        assert cli.main(["synth", "--out", str(out), "--size", "80", "60", "--frames", "64", "--background-frames",
+                         "0", "--from-mocap", str(MOCAP_DIR / "07.asf"), str(MOCAP_DIR / f"{walk}.amc")]) == 0
+        _, _, _, markers, _, _ = read(out)
+        start = yaml.safe_load((out / "start.yaml").read_text())["start"]
+        path = markers[60, M["pelvis"], :2] - markers[0, M["pelvis"], :2]
+        walking = np.arctan2(path[1], path[0])
+        assert abs(np.degrees(start["heading"] - walking)) < 1.5, walk

@@ -278,11 +278,21 @@ def _turn_schedule(config: SynthConfig, heading0: float) -> np.ndarray:
     return heading0 + np.radians(config.turn_deg) * smooth
 
 
+# The walking direction is measured over one stride (about a second): the pelvis sways from side to side
+# within a stride, so over shorter windows its direction is off by several degrees.
+STRIDE_S = 1.0
+
+
+def walking_direction(pelvis: np.ndarray, rate: float) -> float:
+    """Walking direction (rad, from world +x about +z) over the first stride of a pelvis track (F, >= 2)."""
+    ahead = pelvis[min(len(pelvis) - 1, int(round(STRIDE_S * rate))), :2] - pelvis[0, :2]
+    return float(np.arctan2(ahead[1], ahead[0]))
+
+
 def _start_from_markers(markers: np.ndarray, rate: float, first_frame: int, speed: float,
                         step_length: float) -> dict:
     pelvis = markers[:, _M["pelvis"]]
-    ahead = pelvis[min(len(pelvis) - 1, int(0.3 * rate)), :2] - pelvis[0, :2]
-    heading = float(np.arctan2(ahead[1], ahead[0]))
+    heading = walking_direction(pelvis, rate)
     feet_z = markers[0, [_M["left_heel"], _M["right_heel"], _M["left_toe"], _M["right_toe"]], 2]
     stance = "left" if min(feet_z[0], feet_z[2]) <= min(feet_z[1], feet_z[3]) else "right"
     return {"start": {
@@ -336,10 +346,9 @@ def mocap_motion(config: SynthConfig, start_xy: np.ndarray, heading: float) -> M
     points = variants.loop_to_duration(points, rate, (config.frames - 1) / rate)
     if config.variant in PAUSES:
         points = variants.pause(points, rate, *PAUSES[config.variant])
-    # face the start heading: the direction of the first half second
+    # face the start heading: the walking direction over the first stride
     pelvis = points[:, _M["pelvis"], :2]
-    ahead = pelvis[min(len(pelvis) - 1, int(0.5 * rate))] - pelvis[0]
-    angle = heading - np.arctan2(ahead[1], ahead[0])
+    angle = heading - walking_direction(pelvis, rate)
     c, s = np.cos(angle), np.sin(angle)
     rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
     points = (points - np.append(pelvis[0], 0.0)) @ rotation.T + np.append(start_xy, 0.0)
