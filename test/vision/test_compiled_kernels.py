@@ -13,6 +13,7 @@ from scipy.stats import multivariate_normal
 
 from awalker_tracker.vision.background import (
     SHADOW_DARKEST,
+    SHADOW_EDGE_STD,
     SHADOW_PRIOR,
     BackgroundModel,
     gaussian_log_density,
@@ -66,7 +67,8 @@ def reference_background(model: BackgroundModel, m: np.ndarray) -> np.ndarray:
         return lit.reshape(m.shape[:2])
     scale = np.sum(x[:, :3] * mean[:, :3], axis=1) / np.maximum(np.sum(mean[:, :3] ** 2, axis=1), 1e-6)
     scale = np.clip(scale, SHADOW_DARKEST, 1.0)[:, None]
-    shaded = gauss.logpdf(x - scale * mean) + np.log(SHADOW_PRIOR)
+    widened = model.covariance + np.diag([0.0, 0.0, 0.0, SHADOW_EDGE_STD ** 2, SHADOW_EDGE_STD ** 2])
+    shaded = multivariate_normal(np.zeros(5), widened).logpdf(x - scale * mean) + np.log(SHADOW_PRIOR)
     return np.logaddexp(lit, shaded).reshape(m.shape[:2])
 
 

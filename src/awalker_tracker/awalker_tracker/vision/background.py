@@ -30,11 +30,13 @@ import numpy as np
 from awalker_tracker.vision.densities import (  # noqa: F401 (constants re-exported)
     MEASUREMENT_DIM,
     SHADOW_DARKEST,
+    SHADOW_EDGE_STD,
     SHADOW_PRIOR,
     GaussianFactors,
     as_channels,
     background_kernel,
     component_kernel,
+    shadow_covariance,
 )
 
 # Per-dimension noise floor (grey levels): RGB, then gradients (grey levels / pixel).
@@ -96,9 +98,10 @@ class BackgroundModel:
     """Per-pixel mean (h, w, 5) and shared covariance (5, 5) of the background measurement.
 
     ``log_likelihood`` also explains shadows: the background scaled by the factor in
-    [SHADOW_DARKEST, 1] that best matches the measurement (colour and gradients alike), mixed in with
-    prior SHADOW_PRIOR. A person's contact shadow is then not foreground, so it does not pull the
-    body's feet toward the camera; a real colour change still is."""
+    [SHADOW_DARKEST, 1] that best matches the measurement's colour, mixed in with prior SHADOW_PRIOR,
+    its gradient channels wider by SHADOW_EDGE_STD (a soft shadow's penumbra has gradients of its own).
+    A person's contact shadow is then not foreground, so it does not pull the body's feet toward the
+    camera; a real colour change still is."""
 
     mean: np.ndarray
     covariance: np.ndarray
@@ -114,6 +117,11 @@ class BackgroundModel:
         return GaussianFactors.of(self.covariance[None])
 
     @cached_property
+    def shadow_factors(self) -> GaussianFactors:
+        """Cholesky factors of the shadow component's covariance (``densities.shadow_covariance``)."""
+        return GaussianFactors.of(shadow_covariance(self.covariance)[None])
+
+    @cached_property
     def channels(self) -> np.ndarray:
         """``mean`` in the density kernels' layout, (5, h * w) float32 (computed once per model)."""
         return as_channels(self.mean)
@@ -123,7 +131,9 @@ class BackgroundModel:
         x = as_channels(m)
         out = np.empty(x.shape[1], np.float32)
         f = self.factors
-        background_kernel(x, self.channels, f.inv_chol[0], float(f.log_norm[0]), self.shadows, out)
+        g = self.shadow_factors
+        background_kernel(x, self.channels, f.inv_chol[0], float(f.log_norm[0]), self.shadows, g.inv_chol[0],
+                          float(g.log_norm[0]), out)
         return out.reshape(m.shape[:-1])
 
     def mahalanobis2(self, m: np.ndarray) -> np.ndarray:

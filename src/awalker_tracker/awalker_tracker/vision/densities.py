@@ -25,6 +25,13 @@ MEASUREMENT_DIM = 5               # (R, G, B, dI/dx, dI/dy), see ``background.me
 SHADOW_DARKEST = 0.4
 SHADOW_PRIOR = 0.1
 LOG_SHADOW_PRIOR = float(np.log(SHADOW_PRIOR))
+# A soft shadow's penumbra has intensity gradients of its own (background brightness times the gradient
+# of the darkening), which the background's gradients scaled by the darkening cannot explain: the shadow
+# component's gradient channels get this much more standard deviation (grey levels per pixel). Without it
+# the contact shadow around a person's feet (colour matched to 1-2 grey levels, gradients 7-18 standard
+# deviations off on dressed CMU renders) was neither background nor foreground, so a model foot could sit
+# on it, below the real foot: nearer a single camera.
+SHADOW_EDGE_STD = 12.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -95,13 +102,21 @@ def gauss_block(x: np.ndarray, start: int, n: int, mean: np.ndarray, inv_chol: n
                                        np.float64(x[4, p]) - mean[4])
 
 
+def shadow_covariance(covariance: np.ndarray) -> np.ndarray:
+    """The shadow component's covariance: the background's, gradient channels widened by SHADOW_EDGE_STD."""
+    return np.asarray(covariance, np.float64) + np.diag([0.0, 0.0, 0.0, SHADOW_EDGE_STD ** 2, SHADOW_EDGE_STD ** 2])
+
+
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def background_block(x: np.ndarray, mean: np.ndarray, start: int, n: int, inv_chol: np.ndarray, log_norm: float,
-                     shadows: bool, out: np.ndarray, shaded: np.ndarray) -> None:
+                     shadows: bool, shadow_inv_chol: np.ndarray, shadow_log_norm: float, out: np.ndarray,
+                     shaded: np.ndarray) -> None:
     """out[b] = log p_bg of pixel p = start + b (x, mean (5, M)): the Gaussian around the pixel's
     mean, mixed (prior SHADOW_PRIOR) with the one around the mean darkened by the colour scale in
-    [SHADOW_DARKEST, 1] closest to x. ``shaded``: scratch (>= n)."""
+    [SHADOW_DARKEST, 1] closest to x (covariance ``shadow_covariance``: factors ``shadow_inv_chol``,
+    ``shadow_log_norm``). ``shaded``: scratch (>= n)."""
     L = inv_chol
+    S = shadow_inv_chol
     for b in range(n):
         p = start + b
         out[b] = log_norm - _half_quad(L, np.float64(x[0, p]) - mean[0, p], np.float64(x[1, p]) - mean[1, p],
@@ -114,8 +129,8 @@ def background_block(x: np.ndarray, mean: np.ndarray, start: int, n: int, inv_ch
         num = np.float64(x[0, p]) * mean[0, p] + np.float64(x[1, p]) * mean[1, p] + np.float64(x[2, p]) * mean[2, p]
         den = np.float64(mean[0, p]) * mean[0, p] + np.float64(mean[1, p]) * mean[1, p] + np.float64(mean[2, p]) * mean[2, p]
         s = min(max(num / max(den, 1e-6), SHADOW_DARKEST), 1.0)
-        shaded[b] = log_norm + LOG_SHADOW_PRIOR - _half_quad(
-            L, np.float64(x[0, p]) - s * mean[0, p], np.float64(x[1, p]) - s * mean[1, p],
+        shaded[b] = shadow_log_norm + LOG_SHADOW_PRIOR - _half_quad(
+            S, np.float64(x[0, p]) - s * mean[0, p], np.float64(x[1, p]) - s * mean[1, p],
             np.float64(x[2, p]) - s * mean[2, p], np.float64(x[3, p]) - s * mean[3, p],
             np.float64(x[4, p]) - s * mean[4, p])
     for b in range(n):
@@ -124,14 +139,15 @@ def background_block(x: np.ndarray, mean: np.ndarray, start: int, n: int, inv_ch
 
 @numba.njit(cache=True, error_model="numpy")
 def background_kernel(x: np.ndarray, mean: np.ndarray, inv_chol: np.ndarray, log_norm: float, shadows: bool,
-                      out: np.ndarray) -> None:
+                      shadow_inv_chol: np.ndarray, shadow_log_norm: float, out: np.ndarray) -> None:
     """out (M,) float32 = log p_bg of measurements x with background means ``mean`` (5, M) float32."""
     size = x.shape[1]
     block = np.empty(BLOCK)
     shaded = np.empty(BLOCK)
     for start in range(0, size, BLOCK):
         n = min(BLOCK, size - start)
-        background_block(x, mean, start, n, inv_chol, log_norm, shadows, block, shaded)
+        background_block(x, mean, start, n, inv_chol, log_norm, shadows, shadow_inv_chol, shadow_log_norm, block,
+                         shaded)
         out[start: start + n] = block[:n]
 
 
@@ -145,7 +161,7 @@ def component_kernel(x: np.ndarray, means: np.ndarray, inv_chol: np.ndarray, log
 
 @numba.njit(cache=True, error_model="numpy")
 def ratio_kernel(x: np.ndarray, bg_mean: np.ndarray, bg_inv_chol: np.ndarray, bg_log_norm: float,
-                 shadows: bool, means: np.ndarray, inv_chol: np.ndarray, log_weight_norm: np.ndarray,
+                 shadows: bool, shadow_inv_chol: np.ndarray, shadow_log_norm: float, means: np.ndarray, inv_chol: np.ndarray, log_weight_norm: np.ndarray,
                  log_count: np.ndarray, keep: float, floor: float, clip: float, out: np.ndarray) -> None:
     """Clipped log p_fg,c - log p_bg per pixel and class (see ``ForegroundModel.log_likelihood_ratios``).
 
@@ -163,7 +179,8 @@ def ratio_kernel(x: np.ndarray, bg_mean: np.ndarray, bg_inv_chol: np.ndarray, bg
         for c in range(classes):
             for k in range(components):
                 gauss_block(x, start, n, means[c, k], inv_chol[c, k], log_weight_norm[c, k], comp[c, k])
-        background_block(x, bg_mean, start, n, bg_inv_chol, bg_log_norm, shadows, log_bg, shaded)
+        background_block(x, bg_mean, start, n, bg_inv_chol, bg_log_norm, shadows, shadow_inv_chol, shadow_log_norm,
+                         log_bg, shaded)
         for b in range(n):
             bg = logaddexp(log_bg[b] + keep, floor)
             for c in range(classes):
