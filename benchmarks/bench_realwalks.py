@@ -15,7 +15,7 @@ ankles), the facing-direction error one second after a turn ends (degrees), left
 fallen or off the person, whether the run ended on the person, and recovery counts. Summary: median
 and worst over seeds. Prints ONE JSON document; progress and tables on stderr.
 
-    .venv/bin/python benchmarks/bench_realwalks.py --out bench_rw/                 # everything (~40 min)
+    .venv/bin/python benchmarks/bench_realwalks.py --out bench_rw/                 # everything (~55 min on 2 cores)
     .venv/bin/python benchmarks/bench_realwalks.py --out bench_rw/ --walks 07_01 --variants straight u-turn \\
         --settings mono --seeds 0 1
     .venv/bin/python benchmarks/bench_realwalks.py --out bench_rw/ --hands-off     # after the line above
@@ -112,7 +112,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--variants", nargs="+", choices=VARIANT_NAMES, default=list(VARIANT_NAMES))
     parser.add_argument("--settings", nargs="+", choices=list(SETTINGS), default=list(SETTINGS))
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4], help="tracker seeds")
-    parser.add_argument("--particles", type=int, default=1000)
+    parser.add_argument("--particles", type=int, default=TrackOptions.particles,
+                        help="particles per run (default: awalker track's own default, what a user gets)")
     parser.add_argument("--size", nargs=2, type=int, default=(320, 240), metavar=("W", "H"))
     parser.add_argument("--rate", type=float, default=30.0, choices=(30.0, 60.0))
     parser.add_argument("--background-frames", type=int, default=15)
