@@ -15,7 +15,7 @@ ankles), the facing-direction error one second after a turn ends (degrees), left
 fallen or off the person, whether the run ended on the person, and recovery counts. Summary: median
 and worst over seeds. Prints ONE JSON document; progress and tables on stderr.
 
-    .venv/bin/python benchmarks/bench_realwalks.py --out bench_rw/                 # everything (~55 min on 2 cores)
+    .venv/bin/python benchmarks/bench_realwalks.py --out bench_rw/                 # everything (~25 min on 2 cores)
     .venv/bin/python benchmarks/bench_realwalks.py --out bench_rw/ --walks 07_01 --variants straight u-turn \\
         --settings mono --seeds 0 1
     .venv/bin/python benchmarks/bench_realwalks.py --out bench_rw/ --hands-off     # after the line above
