@@ -375,3 +375,35 @@ def test_two_people_in_view_do_not_mix(dressed_two_people, tmp_path):
     assert np.median(off[-10:]) < 0.6 and not walk["end"]["fallen"], walk["end"]
     assert not summary["person_still"].any()
     assert walk["off_person_frames"] <= 10 and result["absolute_mm"]["median"] < 350.0
+
+
+def test_one_camera_does_not_drift_toward_the_camera(tmp_path):
+    """Issue 10 §4 (depth with one camera): a dressed CMU walk with a soft contact shadow seen from the side.
+    The background explains the shadow (vision/densities.py), so the model's feet do not stand on it below
+    the person's feet, nearer the camera: over the last second the pelvis is within 0.25 m of the truth
+    along the camera's horizontal view. Measured (5000 particles, the default; synthesis seed 1): tracker
+    seeds 0-2 -0.08/-0.12/-0.14 m (whole walk -0.03..-0.06); before the shadow's penumbra counted as
+    background, -0.48 m at seed 0 (the benchmark's longer 07_01 straight walk, seeds 0-2: -0.41/+0.02/-0.43
+    m). At 500 particles one camera's depth is dominated by
+    the particles' spread (-0.25..+0.45 m over seeds 0-2 either way), hence the default here."""
+    import numpy as np
+
+    from awalker_tools import evaluation
+    from awalker_tracker.vision.camera import load_calibration
+
+    seq, out = tmp_path / "seq", tmp_path / "run"
+    assert main(["synth", "--out", str(seq), "--background-frames", str(BACKGROUND), "--size", *SIZE,
+                 "--seed", str(SYNTH_SEED), "--from-mocap", str(MOCAP / "07.asf"), str(MOCAP / "07_01.amc"),
+                 "--person", "dressed", "--frames", "90", "--cameras", "1", "--user-start", "--tape-measure"]) == 0
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+        assert main(["track", str(seq / "synth.bag"), "--out", str(out), "--particles", "5000",
+                     "--seed", str(TRACK_SEED), "--no-overlay"]) == 0
+    camera = load_calibration(seq / "calibration.yaml")[0]
+    view = camera.rotation[:, 2] * np.array([1.0, 1.0, 0.0])
+    view /= np.linalg.norm(view)
+    estimate, truth = evaluation.read_poses_csv(out / "poses.csv"), evaluation.read_poses_csv(seq / "ground_truth.csv")
+    rows, true_rows = evaluation.align_tracks(estimate, truth)
+    pelvis = estimate.marker_names.index("pelvis")
+    along_view = (estimate.markers[rows, pelvis] - truth.markers[true_rows, pelvis]) @ view
+    assert abs(along_view[-30:].mean()) < 0.25, f"last second {along_view[-30:].mean():+.2f} m along the view"
