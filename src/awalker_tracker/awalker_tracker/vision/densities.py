@@ -23,8 +23,7 @@ MEASUREMENT_DIM = 5               # (R, G, B, dI/dx, dI/dy), see ``background.me
 # Shadows: a background pixel darkened to between SHADOW_DARKEST and 1 times its brightness (a person's
 # shadow on the floor) is still background, with this prior probability. Darker than half the floor is
 # left to the foreground: dark shoes on a floor of their hue (0.3-0.45 of it on our renders) would
-# otherwise pass for shadow (with 0.4: one camera, dressed CMU walks, 07_01/07_02 straight and
-# veer-left, 1000 particles, tracker seeds 0-2: 144/130/135/104 mm absolute median; 0.5: 108/119/110/100).
+# otherwise pass for shadow.
 SHADOW_DARKEST = 0.5
 SHADOW_PRIOR = 0.1
 LOG_SHADOW_PRIOR = float(np.log(SHADOW_PRIOR))
@@ -34,8 +33,10 @@ LOG_SHADOW_PRIOR = float(np.log(SHADOW_PRIOR))
 # the contact shadow around a person's feet (colour matched to 1-2 grey levels, gradients 7-18 standard
 # deviations off on dressed CMU renders) was neither background nor foreground, so a model foot could sit
 # on it, below the real foot: nearer a single camera. Wider lets dark clothes with the floor's hue pass for
-# shadow, their own texture no longer telling them apart (same runs: 4 -> 136/149/257/161 mm, 6 ->
-# 108/119/110/100, 12 with SHADOW_DARKEST 0.4 -> 144/130/135/104).
+# shadow, their own texture no longer telling them apart. One camera, dressed CMU walks 07_01/07_02
+# straight and veer-left, 5000 particles, tracker seeds 0-2, absolute median (mm): no allowance (and
+# darkest 0.4) 225/178/212/-, 12 with darkest 0.4: 129/125/142/137, 6 with 0.5: 99/116/149/117, 4 with
+# 0.5: 136/149/257/161.
 SHADOW_EDGE_STD = 6.0
 
 
