@@ -112,28 +112,20 @@ class BackgroundModel:
         return int(self.mean.shape[0]), int(self.mean.shape[1])
 
     @cached_property
-    def factors(self) -> GaussianFactors:
-        """Cholesky factors of ``covariance`` (computed once per model)."""
-        return GaussianFactors.of(self.covariance[None])
-
-    @cached_property
-    def shadow_factors(self) -> GaussianFactors:
-        """Cholesky factors of the shadow component's covariance (``densities.shadow_covariance``)."""
-        return GaussianFactors.of(shadow_covariance(self.covariance)[None])
-
-    @cached_property
-    def channels(self) -> np.ndarray:
-        """``mean`` in the density kernels' layout, (5, h * w) float32 (computed once per model)."""
-        return as_channels(self.mean)
+    def kernel_arguments(self) -> tuple:
+        """The model as ``densities.background_block`` takes it (computed once per model): the mean in the
+        kernels' layout (5, h * w) float32, the inverse Cholesky factor and log normaliser of the
+        covariance, ``shadows``, and those of the shadow component (``densities.shadow_covariance``)."""
+        lit = GaussianFactors.of(self.covariance[None])
+        shaded = GaussianFactors.of(shadow_covariance(self.covariance)[None])
+        return (as_channels(self.mean), lit.inv_chol[0], float(lit.log_norm[0]), bool(self.shadows),
+                shaded.inv_chol[0], float(shaded.log_norm[0]))
 
     def log_likelihood(self, m: np.ndarray) -> np.ndarray:
         """log p_bg(m) per pixel for measurements (h, w, 5) -> (h, w) float32 (with shadows, see the class)."""
         x = as_channels(m)
         out = np.empty(x.shape[1], np.float32)
-        f = self.factors
-        g = self.shadow_factors
-        background_kernel(x, self.channels, f.inv_chol[0], float(f.log_norm[0]), self.shadows, g.inv_chol[0],
-                          float(g.log_norm[0]), out)
+        background_kernel(x, *self.kernel_arguments, out)
         return out.reshape(m.shape[:-1])
 
     def mahalanobis2(self, m: np.ndarray) -> np.ndarray:

@@ -166,12 +166,14 @@ def component_kernel(x: np.ndarray, means: np.ndarray, inv_chol: np.ndarray, log
 
 
 @numba.njit(cache=True, error_model="numpy")
-def ratio_kernel(x: np.ndarray, bg_mean: np.ndarray, bg_inv_chol: np.ndarray, bg_log_norm: float,
-                 shadows: bool, shadow_inv_chol: np.ndarray, shadow_log_norm: float, means: np.ndarray, inv_chol: np.ndarray, log_weight_norm: np.ndarray,
-                 log_count: np.ndarray, keep: float, floor: float, clip: float, out: np.ndarray) -> None:
+def ratio_kernel(x: np.ndarray, bg_mean: np.ndarray, bg_inv_chol: np.ndarray, bg_log_norm: float, shadows: bool,
+                 shadow_inv_chol: np.ndarray, shadow_log_norm: float, means: np.ndarray, inv_chol: np.ndarray,
+                 log_weight_norm: np.ndarray, log_count: np.ndarray, keep: float, floor: float, clip: float,
+                 out: np.ndarray) -> None:
     """Clipped log p_fg,c - log p_bg per pixel and class (see ``ForegroundModel.log_likelihood_ratios``).
 
-    x, bg_mean (5, M) float32: measurements and background means. Class c's components k:
+    x, bg_mean (5, M) float32: measurements and background means; the background arguments as
+    ``background.BackgroundModel.kernel_arguments`` gives them. Class c's components k:
     means (C, K, 5), inv_chol (C, K, 5, 5), log_weight_norm (C, K) = log weight + log
     normaliser (-inf pads classes with fewer than K), log_count (C,) = log of the real count.
     keep = log(1 - eps), floor = log eps + log uniform density. out (C, M) float32."""

@@ -126,13 +126,10 @@ class ForegroundModel:
         floor = float(np.log(eps) + OUTLIER_LOG_DENSITY)
         keep = float(np.log1p(-eps))
         means, inv_chol, log_weight_norm, log_count = self._packed
-        bg = background.factors
         x = as_channels(m)
         out = np.empty((len(self.classes), x.shape[1]), np.float32)
-        shadow = background.shadow_factors
-        ratio_kernel(x, background.channels, bg.inv_chol[0], float(bg.log_norm[0]), bool(background.shadows),
-                     shadow.inv_chol[0], float(shadow.log_norm[0]),
-                     means, inv_chol, log_weight_norm, log_count, keep, floor, float(clip), out)
+        ratio_kernel(x, *background.kernel_arguments, means, inv_chol, log_weight_norm, log_count, keep, floor,
+                     float(clip), out)
         return out.reshape((len(self.classes),) + m.shape[:2])
 
     @cached_property
