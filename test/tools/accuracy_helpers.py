@@ -19,3 +19,10 @@ def speed_error(run_dir: Path, truth_source: Path) -> float:
     errors = [abs(s - true_speed[t]) for t, s in zip(summary["stamp_ns"].tolist(), summary["speed"].tolist())
               if t in true_speed]
     return float(np.mean(errors)) if errors else float("nan")
+
+
+
+def pelvis_offsets(estimate: evaluation.PoseTrack, truth: evaluation.PoseTrack) -> np.ndarray:
+    """Estimated minus true pelvis position (F, 3) m over the frames both tracks have, in frame order."""
+    rows, true_rows = evaluation.align_tracks(estimate, truth)
+    return estimate.marker("pelvis")[rows] - truth.marker("pelvis")[true_rows]

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from accuracy_helpers import speed_error
+from accuracy_helpers import pelvis_offsets, speed_error
 from awalker_tools.cli import main
 
 MOCAP = Path(__file__).resolve().parents[1] / "data" / "mocap"
@@ -170,11 +170,9 @@ def test_a_track_started_beside_the_person_is_reacquired(runs, tmp_path, recover
     estimate = evaluation.read_poses_csv(out / "poses.csv")
     truth = evaluation.read_poses_csv(seq / "ground_truth.csv")
     absolute = evaluation.marker_errors(estimate, truth)["absolute_mm"]
-    est_rows, true_rows = evaluation.align_tracks(estimate, truth)
     # the pelvis's error along the walk: what the wrong start got wrong, and what one camera sees well
     # (its depth error is the monocular one, with or without a wrong start)
-    along = 1000.0 * np.abs((estimate.marker("pelvis")[est_rows] - truth.marker("pelvis")[true_rows])[:, :2]
-                            @ np.array([np.cos(heading), np.sin(heading)]))
+    along = 1000.0 * np.abs(pelvis_offsets(estimate, truth)[:, :2] @ np.array([np.cos(heading), np.sin(heading)]))
     last_half_along = float(np.median(along[FRAMES // 2:]))
     last_half = float(np.median(absolute[FRAMES // 2:]))
     # measured (synthesis seed 1, tracker seeds 0-4; last-half medians, along the walk / all markers, mm):
@@ -368,10 +366,9 @@ def test_two_people_in_view_do_not_mix(dressed_two_people, tmp_path):
     # detections were gated on the track (synthesis seed 0): 251 mm, off the person on 37 of 120 frames,
     # 19 frames wrongly held as standing (the two cameras' largest blobs were different people).
     walk = result["walk"]
-    estimate, truth = evaluation.read_poses_csv(out / "poses.csv"), evaluation.read_poses_csv(seq / "ground_truth.csv")
-    rows, true_rows = evaluation.align_tracks(estimate, truth)
-    pelvis = estimate.marker_names.index("pelvis")
-    off = np.linalg.norm(estimate.markers[rows, pelvis, :2] - truth.markers[true_rows, pelvis, :2], axis=1)
+    offsets = pelvis_offsets(evaluation.read_poses_csv(out / "poses.csv"),
+                             evaluation.read_poses_csv(seq / "ground_truth.csv"))
+    off = np.linalg.norm(offsets[:, :2], axis=1)
     assert np.median(off[-10:]) < 0.6 and not walk["end"]["fallen"], walk["end"]
     assert not summary["person_still"].any()
     assert walk["off_person_frames"] <= 10 and result["absolute_mm"]["median"] < 350.0
@@ -402,8 +399,6 @@ def test_one_camera_does_not_drift_toward_the_camera(tmp_path):
     camera = load_calibration(seq / "calibration.yaml")[0]
     view = camera.rotation[:, 2] * np.array([1.0, 1.0, 0.0])
     view /= np.linalg.norm(view)
-    estimate, truth = evaluation.read_poses_csv(out / "poses.csv"), evaluation.read_poses_csv(seq / "ground_truth.csv")
-    rows, true_rows = evaluation.align_tracks(estimate, truth)
-    pelvis = estimate.marker_names.index("pelvis")
-    along_view = (estimate.markers[rows, pelvis] - truth.markers[true_rows, pelvis]) @ view
+    along_view = pelvis_offsets(evaluation.read_poses_csv(out / "poses.csv"),
+                                evaluation.read_poses_csv(seq / "ground_truth.csv")) @ view
     assert abs(along_view[-30:].mean()) < 0.25, f"last second {along_view[-30:].mean():+.2f} m along the view"
