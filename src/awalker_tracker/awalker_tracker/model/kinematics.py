@@ -66,11 +66,11 @@ x (``walker.stance_contact_x``) lands on ``contact_point``, x grows along the he
 
 Computation: the random numbers (new turn rates at heel strikes, eq. 6's noise: standard normals,
 and for joints near a limit inverse-CDF draws from uniforms) are drawn with the numpy Generator,
-vectorised, so a seed gives a fixed result; everything else is per particle and deterministic and runs in serial numba kernels that loop
-over the particles (``_eq6_mean_kernel``/``_eq6_draw_kernel``: eq. 6's means and truncation,
-around ``_standard_truncated_normal``; ``_sample_kernel``: forward kinematics, rolling contact,
-heel strike, swing-foot clearance and the posed body in one pass; ``_pose_kernel`` for
-``pose_body``). They are compiled on first use and cached next to this file (``__pycache__``);
+vectorised, so a seed gives a fixed result; everything else is per particle and deterministic and
+runs in serial numba kernels that loop over the particles (``_eq6_mean_kernel``/``_eq6_draw_kernel``:
+eq. 6's means and truncation, around ``_standard_truncated_normal``; ``_sample_kernel``: forward
+kinematics, rolling contact, heel strike, swing-foot clearance and the posed body in one pass;
+``_pose_kernel`` for ``pose_body``). They are compiled on first use and cached next to this file (``__pycache__``);
 ``test/model/kinematics_reference.py`` keeps the former vectorised numpy code as a test oracle.
 """
 from __future__ import annotations
