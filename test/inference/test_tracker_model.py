@@ -172,3 +172,25 @@ def test_an_unknown_stance_leg_starts_half_the_particles_on_each_leg():
     known = TrackerModel(BodyDescription.default(), replace(s, stance_leg=LEFT), marker_likelihood(0.03),
                          TrackerConfig(dt=1 / 30))
     assert (known.initial(50, np.random.default_rng(0)).walker.stance_leg == LEFT).all()
+
+
+def test_a_zero_likelihood_scale_is_dead_reckoning(walk):
+    """likelihood_scale 0 never looks at the observations: the MAP trajectory is the same whatever they
+    are. A tiny positive scale is not dead reckoning: the weights still rank the particles by the
+    observations, so the MAP lineage changes with them (what the real-walks benchmark's baseline once was)."""
+    body, markers, _, _ = walk
+    start = StartDescription(0, tuple(markers[0, 0, :2]), 0.4, 1.3, 0.7, LEFT)
+    shifted = markers + np.array([0.0, 0.5, 0.0])        # a person half a metre to the side
+
+    def map_markers(scale: float, obs: np.ndarray) -> np.ndarray:
+        config = TrackerConfig(smc=SMCConfig(num_particles=200, seed=3), dt=1 / 30, likelihood_scale=scale)
+        tracker = Tracker(TrackerModel(body, start, marker_likelihood(0.03), config))
+        for k, o in enumerate(obs[:20]):
+            tracker.push(k, 1_000 + k * 33_333_333, o)
+        tracker.finish()
+        return tracker.map_trajectory().markers
+
+    np.testing.assert_array_equal(map_markers(0.0, markers), map_markers(0.0, shifted))
+    assert not np.array_equal(map_markers(1e-9, markers), map_markers(1e-9, shifted))
+    with pytest.raises(ValueError, match="likelihood_scale"):
+        TrackerConfig(likelihood_scale=-0.1)

@@ -258,9 +258,9 @@ def dressed_uturn(tmp_path_factory):
 @pytest.mark.parametrize("images", [True, False])
 def test_a_real_walk_turning_round_is_followed(dressed_uturn, tmp_path, images: bool):
     """Issue 10 §6: with the images the track follows the person round the turn and ends on them; with the
-    likelihood and recovery off (dead reckoning from the start description) it walks on straight, far off."""
+    likelihood and recovery off (dead reckoning from the start description) it ends far off the person."""
     out = tmp_path / "run"
-    extra = [] if images else ["--likelihood-scale", "1e-9", "--no-recovery"]
+    extra = [] if images else ["--likelihood-scale", "0", "--no-recovery"]
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
         assert main(["track", str(dressed_uturn / "synth.bag"), "--out", str(out), "--particles", str(PARTICLES),
@@ -269,14 +269,15 @@ def test_a_real_walk_turning_round_is_followed(dressed_uturn, tmp_path, images: 
     result = json.loads((out / "eval.json").read_text())
     absolute, end = result["absolute_mm"]["median"], result["walk"]["end"]
     # measured (500 particles, synthesis seed 1): tracker seeds 0-2 absolute median 147-238 mm, last frame
-    # 0.13-0.18 m off over the ground, heading 12-19 deg off (1-2 re-acquisitions); dead reckoning 748 mm,
-    # 5.3 m and 168 deg off at the end
+    # 0.13-0.18 m off over the ground, heading 12-19 deg off (1-2 re-acquisitions); dead reckoning (images
+    # unused, --likelihood-scale 0; seeds 0-2) 520/1667/755 mm, 5.1/2.1/3.7 m and 164/76/45 deg off at the end
+    # (the prior's own turns set its heading; a scale of 1e-9 still let the images pick the MAP lineage)
     if images:
         assert absolute < 450.0, f"absolute median {absolute:.0f} mm"
         assert end["pelvis_ground_error_m"] < 0.5 and not end["fallen"], end
         assert end["heading_error_deg"] < 45.0, end
     else:
-        assert end["pelvis_ground_error_m"] > 2.0 and end["heading_error_deg"] > 90.0, (absolute, end)
+        assert end["off_person"] and end["pelvis_ground_error_m"] > 1.5, (absolute, end)
 
 
 DRESSED_STOP = ["--from-mocap", str(MOCAP / "07.asf"), str(MOCAP / "07_01.amc"), "--person", "dressed",

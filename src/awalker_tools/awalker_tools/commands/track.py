@@ -12,8 +12,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.particles < 1:
         raise InputError(f"--particles must be >= 1, got {args.particles}")
-    if not args.likelihood_scale > 0:
-        raise InputError(f"--likelihood-scale must be > 0, got {args.likelihood_scale}")
+    if not args.likelihood_scale >= 0:
+        raise InputError(f"--likelihood-scale must be >= 0, got {args.likelihood_scale}")
     if not 0.0 <= args.trust <= 1.0:
         raise InputError(f"--trust (gamma) must lie in [0, 1], got {args.trust}")
     if args.lookahead < 0:
@@ -50,7 +50,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="gamma: trust in the look-ahead weights when resampling (default 0.9)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     parser.add_argument("--likelihood-scale", type=float, default=0.1,
-                        help="exponent on the image likelihood (tempering, default 0.1)")
+                        help="exponent on the image likelihood (tempering, default 0.1; 0: images unused, "
+                             "dead reckoning from the start description)")
     parser.add_argument("--no-recovery", action="store_true",
                         help="never re-seed fallen walkers, re-acquire a lost track or hold the walkers while the person "
                              "stands still (the exact filter of the paper)")

@@ -149,6 +149,9 @@ class TrackerConfig:
     # of 500) and the filter loses diversity. Measured on six synthetic sequences (500 particles):
     # relative error 200-250 mm at 1.0, 25-60 mm at 0.03-0.1; with the stable control prior and 5000
     # particles (bench_accuracy): two cameras 382 mm absolute at 1.0, 38-40 mm at 0.1-0.3.
+    # 0: the images are not used (dead reckoning: the motion prior alone, fallen walkers still dropped).
+    # A tiny positive scale is not the same: the weights then still rank the particles by the images,
+    # and the MAP lineage is the best prior walk by image evidence.
     likelihood_scale: float = 0.1
     recovery: RecoveryConfig = RecoveryConfig()
     cloud_size: int = 200
@@ -159,8 +162,8 @@ class TrackerConfig:
             raise ValueError(f"TrackerConfig.dt must be > 0 s, got {self.dt}")
         if not (np.isfinite(self.kappa_bar_variance) and self.kappa_bar_variance > 0):
             raise ValueError(f"TrackerConfig.kappa_bar_variance must be > 0, got {self.kappa_bar_variance}")
-        if not (np.isfinite(self.likelihood_scale) and self.likelihood_scale > 0):
-            raise ValueError(f"TrackerConfig.likelihood_scale must be > 0, got {self.likelihood_scale}")
+        if not (np.isfinite(self.likelihood_scale) and self.likelihood_scale >= 0):
+            raise ValueError(f"TrackerConfig.likelihood_scale must be >= 0, got {self.likelihood_scale}")
 
 
 # ----------------------------------------------------------------------------- particle states
@@ -391,8 +394,10 @@ class TrackerModel:
         return put_rows(states, rows[half:], fresh)
 
     def log_likelihood(self, prev: TrackerStates | None, states: TrackerStates, obs: Any) -> np.ndarray:
-        loglik = self.config.likelihood_scale * np.asarray(self.likelihood(prev, states, obs), float)
-        return loglik - self.config.fallen_log_penalty * states.fallen
+        penalty = self.config.fallen_log_penalty * states.fallen
+        if self.config.likelihood_scale == 0.0:     # dead reckoning: the observations are not looked at
+            return -penalty
+        return self.config.likelihood_scale * np.asarray(self.likelihood(prev, states, obs), float) - penalty
 
     # -- outputs --------------------------------------------------------------------------
     def outputs(self, states: TrackerStates, events: Any | None) -> ParticleOutputs:

@@ -85,7 +85,8 @@ class TrackerNode(Node):
         scheme = declare("resampling", "systematic", "systematic | stratified | multinomial")
         seed = declare("seed", 0, "random seed")
         self.likelihood_scale = float(declare("likelihood_scale", TrackerConfig.likelihood_scale,
-                                              "exponent (tempering) of the image likelihood"))
+                                              "exponent (tempering) of the image likelihood; 0: images unused "
+                                              "(dead reckoning)"))
         self.auto_start = bool(declare("auto_start", False, "no start description: find the walking person in the "
                                        "images (inference/autostart.py)"))
         self.start_output = str(declare("start_output", "", "write the start description used (given or found) "
