@@ -21,7 +21,6 @@ def speed_error(run_dir: Path, truth_source: Path) -> float:
     return float(np.mean(errors)) if errors else float("nan")
 
 
-
 def pelvis_offsets(estimate: evaluation.PoseTrack, truth: evaluation.PoseTrack) -> np.ndarray:
     """Estimated minus true pelvis position (F, 3) m over the frames both tracks have, in frame order."""
     rows, true_rows = evaluation.align_tracks(estimate, truth)
