@@ -154,6 +154,42 @@ def test_step_map_radius_predicts_growth_of_perturbations(table: gaits.GaitTable
         assert (growth < 1.0) == (radius < 1.0), (radius, deviations)
 
 
+def test_packaged_table_is_symmetric_and_unstable_from_5_kmh_where_an_asymmetric_gait_is_stable(
+        table: gaits.GaitTable) -> None:
+    """From 5 km/h eq. (3) has, beside the table's mirror-symmetric gait (radius > 1), an asymmetric one
+    that is stable (kappa as solved independently in issue 10); Newton finds it from that kappa."""
+    for speed, step, kappa in ((5 / 3.6, 0.7, 0.749), (6 / 3.6, 0.75, 1.086)):
+        i = int(np.argmin(np.abs(table.speeds - speed)))
+        j = int(np.argmin(np.abs(table.step_lengths - step)))
+        x = np.array([table.stance_rate[i, j], table.swing_rate[i, j], table.stiffness[i, j],
+                      table.toe_off_impulse[i, j]])
+        np.testing.assert_allclose([table.pre_stance_rate[i, j], table.pre_swing_rate[i, j]], x[:2], atol=1e-5)
+        assert gaits.step_map_radius(PARAMS, table.speeds[i], table.step_lengths[j], x) > 1.05
+        other = gaits.solve_point(PARAMS, table.speeds[i], table.step_lengths[j], np.array([*x[:2], kappa, x[3]]))
+        assert other.converged and not gaits.is_symmetric(other)
+        assert other.unknowns[2] == pytest.approx(kappa, abs=2e-3)
+        assert gaits.step_map_radius(PARAMS, table.speeds[i], table.step_lengths[j], other.unknowns) < 0.95
+
+
+def test_stable_family_reaches_the_asymmetric_gaits_from_a_symmetric_seed() -> None:
+    """Continuation from 4.5 km/h (symmetric, stable) into 5-5.5 km/h, where only the asymmetric gait is stable."""
+    speeds = np.array([4.5, 5.0, 5.5]) / 3.6
+    steps = np.array([0.65, 0.7])
+    kept = {}
+    for family in ("stable", "symmetric"):
+        kept[family] = gaits.solve_grid(PARAMS, speeds, steps, seed_point=(4.5 / 3.6, 0.65), family=family)
+        assert kept[family].converged.all() and np.all(kept[family].residual < 1e-8)
+    assert np.all(kept["stable"].step_map_radius[1:] < 1.0)
+    assert np.all(kept["symmetric"].step_map_radius[1:] > 1.0)
+    assert kept["stable"].stiffness[1, 1] == pytest.approx(0.749, abs=2e-3)      # 5 km/h, 0.7 m
+    assert kept["symmetric"].stiffness[1, 1] == pytest.approx(0.737, abs=2e-3)
+    # kappa still rises with speed in the stable family (gait_for_stiffness inverts it)
+    assert np.all(np.diff(kept["stable"].stiffness, axis=0) > 0)
+    np.testing.assert_allclose(kept["stable"].stiffness[0], kept["symmetric"].stiffness[0])   # same at 4.5 km/h
+    with pytest.raises(ValueError, match="family"):
+        gaits.solve_grid(PARAMS, speeds, steps, family="smooth")
+
+
 def test_table_scaled_to_another_leg_length_is_cyclic(table: gaits.GaitTable) -> None:
     """Dimensional analysis: the rescaled entries solve eq. (3) for the new walker, re-simulated."""
     child = WalkerParams(leg_length=0.62, gravity=9.8)

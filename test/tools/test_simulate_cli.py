@@ -118,6 +118,12 @@ def test_gaits_solve_and_plot(tmp_path, capsys) -> None:
     for name in ("gait_parameters.png", "impulse_fit.png"):
         assert (tmp_path / "plots" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert main(["gaits", "solve", "--speeds", "5:4", "--out", str(table)]) == 2
+    # --family stable keeps the asymmetric gaits at 5 km/h, where the symmetric ones are unstable
+    capsys.readouterr()
+    assert main(["gaits", "solve", "--speeds", "4.5:5:2", "--step-lengths", "0.65:0.7:2", "--family", "stable",
+                 "--out", str(tmp_path / "stable.json")]) == 0
+    stable = json.loads(capsys.readouterr().out)
+    assert summary["locally_stable_points"] == 2 and stable["locally_stable_points"] == 4
 
 
 def test_simulate_another_leg_length_walks_the_rescaled_gait(tmp_path, capsys) -> None:

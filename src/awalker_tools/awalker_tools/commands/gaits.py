@@ -108,7 +108,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     solve.add_argument("--leg-length", type=float, default=WalkerParams().leg_length, help="L in m")
     solve.add_argument("--gravity", type=float, default=WalkerParams().gravity, help="g in m/s^2")
     solve.add_argument("--family", choices=("symmetric", "stable"), default="symmetric",
-                       help="which cyclic gait to keep where several solve eq. (3) (default: symmetric)")
+                       help="which cyclic gait to keep where several solve eq. (3): the mirror-symmetric one "
+                            "(the default, the packaged table) or the most stable (smallest step-map radius)")
     solve.set_defaults(func=run_solve)
     plot = sub.add_parser("plot", help="PNG plots of kappa/iota over the grid (Fig. 3) and the iota fit (Fig. 4)")
     plot.add_argument("--out", required=True, help="output directory")

@@ -12,11 +12,16 @@ start state (legs swapped). The residual (4,) is
 speed x step-length grid with continuation from solved neighbours plus several fresh starting
 guesses; :class:`GaitTable` holds the result (``data/cyclic_gaits.json``).
 
-Eq. (3) has more than one solution family. The solver prefers the mirror-symmetric gaits (both
-legs vertical together at mid-step, pre-collision rates equal to the start rates; see
-:func:`symmetric_residual`), which exist over the whole 2-7 km/h x 0.5-1.2 m grid and give smooth
-kappa and iota maps (Fig. 3). Nearby asymmetric solutions exist too (e.g. 5 km/h, 0.7 m: kappa
-0.749 instead of 0.737); mixing families made the maps jump, so they are only a fallback.
+Eq. (3) has more than one solution family. The mirror-symmetric gaits (both legs vertical together
+at mid-step, pre-collision rates equal to the start rates; see :func:`symmetric_residual`) exist
+over the whole grid and give smooth kappa and iota maps (Fig. 3); the packaged table holds them.
+Up to 4.5 km/h they are locally stable (step-map radius < 1) except for slow, very long steps. From
+5 km/h they are unstable (radius 1.0-1.5: a perturbation grows step after step) and an asymmetric
+family beside them is stable (radius 0.83-1.0; e.g. 5 km/h, 0.7 m: kappa 0.749, radius 0.925 instead
+of kappa 0.737, radius 1.077; its swing leg retracts a little more before the strike). ``family=
+"stable"`` keeps the most stable solution at each point instead. It was measured and not adopted:
+the cyclic-gait toe-off already corrects the stance rate at every strike, and tracking real walks
+was worse with it (README, "Which cyclic gait").
 """
 from __future__ import annotations
 
@@ -477,6 +482,57 @@ def _best_solution(params: WalkerParams, v: float, s: float, continued: list[np.
     return best
 
 
+def _spread_stable_gaits(params: WalkerParams, speeds: np.ndarray, step_lengths: np.ndarray,
+                         solutions: dict[tuple[int, int], GaitSolution],
+                         progress: Callable[[str], None] | None, max_sweeps: int = 20) -> None:
+    """Carry more stable gaits into neighbouring points until no point improves (in place).
+
+    The first pass reaches each point from the side the continuation came from, so a locally
+    stable family that branches off elsewhere (the asymmetric gaits from ~5 km/h) is missed next
+    to where it starts. Each sweep re-solves every point from each neighbour whose step-map radius
+    is smaller, starting from the neighbour's gait and from this point's gait shifted by the
+    neighbour's offset from its own mirror-symmetric gait (near the branch point the two families
+    are close and plain continuation falls back onto the symmetric one), and keeps a result whose
+    radius is smaller.
+    """
+    def radius_of(sol: GaitSolution, i: int, j: int) -> GaitSolution:
+        return dataclasses.replace(sol, step_map_radius=step_map_radius(
+            params, float(speeds[i]), float(step_lengths[j]), sol.unknowns))
+
+    offsets: dict[tuple[int, int], np.ndarray] = {}
+
+    def offset_from_symmetric(key: tuple[int, int]) -> np.ndarray:
+        if key not in offsets:
+            sol = solutions[key]
+            partner = solve_symmetric_point(params, float(speeds[key[0]]), float(step_lengths[key[1]]), sol.unknowns)
+            offsets[key] = sol.unknowns - partner.unknowns if partner.converged else np.zeros(4)
+        return offsets[key]
+
+    for sweep in range(1, max_sweeps + 1):
+        improved = 0
+        for (i, j), current in sorted(solutions.items()):
+            for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+                key = (i + di, j + dj)
+                other = solutions.get(key)
+                if other is None or not other.converged or not other.step_map_radius < current.step_map_radius:
+                    continue
+                for guess in (other.unknowns, current.unknowns + offset_from_symmetric(key)):
+                    sol = solve_point(params, float(speeds[i]), float(step_lengths[j]), guess)
+                    if not sol.converged:
+                        continue
+                    sol = radius_of(sol, i, j)
+                    if sol.step_map_radius < current.step_map_radius - 1e-6:
+                        if not is_symmetric(sol):
+                            sol = dataclasses.replace(sol, reason=sol.reason + " (asymmetric gait)")
+                        solutions[(i, j)] = current = sol
+                        offsets.pop((i, j), None)
+                        improved += 1
+        if progress is not None:
+            progress(f"stable sweep {sweep}: {improved} points moved to a more stable gait")
+        if not improved:
+            return
+
+
 def solve_grid(
     params: WalkerParams,
     speeds: np.ndarray,
@@ -521,6 +577,9 @@ def solve_grid(
             progress(f"[{count}/{len(order)}] {v / KMH:.2f} km/h, {s:.3f} m: {best.reason}, "
                      f"residual {best.residual:.1e}, kappa {best.unknowns[2]:.3f}, iota {best.unknowns[3]:.3f}, "
                      f"step-map radius {best.step_map_radius:.3f} ({time.monotonic() - started:.0f} s)")
+
+    if family == "stable":
+        _spread_stable_gaits(params, speeds, step_lengths, solutions, progress)
 
     def grid(fn) -> np.ndarray:
         return np.array([[fn(solutions[(i, j)]) for j in range(shape[1])] for i in range(shape[0])], float)
