@@ -115,6 +115,50 @@ def test_rate_mode_delivers_all_frames_at_the_scaled_rate(ros_context, tmp_path:
         executor.shutdown()
 
 
+def test_lockstep_frames_ahead_keeps_that_many_frames_unacknowledged(ros_context, tmp_path: Path) -> None:
+    """frames_ahead 2: three frames go out before the first ack, one more per ack, all in order."""
+    from std_msgs.msg import Header
+
+    bag = tmp_path / "bag"
+    stamps, _ = make_bag(bag, frames=6)
+    receiver = Receiver(ack=False, context=ros_context)
+    driver = Node("replay", context=ros_context)
+    acker = driver.create_publisher(Header, "/awalker/ack", 10)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(receiver)
+    executor.add_node(driver)
+
+    def ack(stamp_ns: int) -> None:
+        msg = Header()
+        msg.stamp.sec, msg.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
+        acker.publish(msg)
+
+    def run_for(seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end and replayer.step():
+            executor.spin_once(timeout_sec=replayer.next_wait())
+
+    try:
+        announced: list[int] = []
+        replayer = Replayer(driver, bag, ReplayConfig(lockstep=True, frames_ahead=2, wait_for_subscribers=5.0,
+                                                      ack_timeout=10.0), on_frame=announced.append)
+        run_for(1.5)
+        assert announced == stamps[:3]
+        ack(stamps[0])
+        run_for(0.5)
+        assert announced == stamps[:4]
+        ack(stamps[5])                      # acks are cumulative: the last frame's ack releases all
+        run_for(2.0)
+        assert replayer.done and replayer.summary.stopped is None and announced == stamps
+        _spin_for(executor, 0.2)
+        assert [s for s, _ in receiver.images["cam0"]] == stamps
+    finally:
+        executor.shutdown()
+    for bad in (-1, 100):
+        with pytest.raises(InputError, match="frames_ahead must lie in"):
+            ReplayConfig(lockstep=True, frames_ahead=bad).validated("replay test")
+
+
 def test_topic_filter_and_ack_timeout(ros_context, tmp_path: Path) -> None:
     bag = tmp_path / "bag"
     make_bag(bag, frames=3)

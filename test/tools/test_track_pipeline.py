@@ -1,5 +1,6 @@
-"""`awalker track` end to end on a short synthetic bag: one process (replay, features, tracker and
-pose publisher on one executor) and the nodes split across two processes (replay in a subprocess)."""
+"""`awalker track` end to end on a short synthetic bag: one process (replay, tracker and pose
+publisher on one executor, the features nodes in a thread) and the nodes split across two processes
+(replay in a subprocess)."""
 from __future__ import annotations
 
 import os
@@ -91,6 +92,22 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     assert page.count("data:image/png;base64,") >= 3 and page.count("<tr>") >= len(steps) + 2
     assert main(["report", str(tmp_path)]) == 2
     assert "no summary.csv, gait.csv, gait.json" in capsys.readouterr().err
+
+
+def test_a_failure_in_the_feature_thread_stops_track_with_its_error(synth_bag: Path, tmp_path: Path, monkeypatch):
+    """The features nodes spin in their own thread: an exception there ends `awalker track` at once with
+    that exception, not after the replay's ack timeout."""
+    from awalker_tools.pipeline import TrackOptions, run_tracking
+    from awalker_tracker.nodes.features import FeatureNode
+
+    def broken(self, *args, **kwargs):
+        raise RuntimeError("feature extraction broke")
+
+    monkeypatch.setattr(FeatureNode, "_process", broken)
+    started = time.monotonic()
+    with pytest.raises(RuntimeError, match="feature extraction broke"):
+        run_tracking(TrackOptions(bag=synth_bag, out=tmp_path / "run", particles=50, overlays=False, quiet=True))
+    assert time.monotonic() - started < 30.0      # the replay would wait 60 s for the first ack
 
 
 def test_track_with_nodes_in_two_processes(synth_bag: Path, localhost_context, tmp_path: Path):

@@ -1,5 +1,7 @@
 """`awalker track` in one process: replay (lockstep) -> features (one node per camera) ->
-tracker -> pose publisher, the same node classes a user starts separately, on one executor.
+tracker -> pose publisher, the same node classes a user starts separately. The feature nodes spin
+in their own thread (their OpenCV and numba work releases the GIL), one frame ahead of the
+tracker, which spins with the rest in the main thread.
 
 Writes into the output directory:
 - ``result.bag``: every topic the pipeline published (features, posterior, joint states, markers,
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +34,35 @@ from awalker_tools import evaluation
 
 START_FILE, BODY_FILE, CALIBRATION_FILE, RUN_FILE = "start.yaml", "body.yaml", "calibration.yaml", "run.yaml"
 PROGRESS_PERIOD_S = 2.0
+#: Lockstep replay lets this many frames out beyond the oldest the tracker has not acknowledged, so the
+#: feature thread works on the next frame while the tracker filters this one.
+FRAMES_AHEAD = 1
+
+
+class _SpinThread:
+    """An executor spinning its nodes in a background thread; an exception there is kept for ``check``."""
+
+    def __init__(self, executor: Any, nodes: list[Any], name: str) -> None:
+        self.executor = executor
+        for node in nodes:
+            executor.add_node(node)
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._spin, name=name, daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        try:
+            self.executor.spin()
+        except BaseException as exc:    # re-raised in the main thread by check()
+            self.error = exc
+
+    def check(self) -> None:
+        if self.error is not None:
+            raise self.error
+
+    def stop(self) -> None:
+        self.executor.shutdown()
+        self._thread.join(timeout=10.0)
 
 
 @dataclass(frozen=True)
@@ -196,6 +228,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     nodes: list[Any] = []
     recorder = None
+    feature_thread: _SpinThread | None = None
     result = TrackResult()
     started = time.monotonic()
     try:
@@ -245,12 +278,16 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         recorder = Recorder(recorder_node, result_bag, topics, options.storage)
         executor = SingleThreadedExecutor(context=context)
         for n in nodes:
-            executor.add_node(n)
-        replayer = Replayer(driver, bag, ReplayConfig(lockstep=True, wait_for_subscribers=10.0))
+            if n not in features:
+                executor.add_node(n)
+        feature_thread = _SpinThread(SingleThreadedExecutor(context=context), features, "awalker_features")
+        replayer = Replayer(driver, bag, ReplayConfig(lockstep=True, wait_for_subscribers=10.0,
+                                                        frames_ahead=FRAMES_AHEAD))
         last = streaming = time.monotonic()
         try:
             while replayer.step():
                 executor.spin_once(timeout_sec=replayer.next_wait())
+                feature_thread.check()
                 if time.monotonic() - last > PROGRESS_PERIOD_S:
                     last = time.monotonic()
                     done = tracker.stats.frames_received
@@ -259,6 +296,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
                                        f"filter {rate:.1f} frames/s")
         finally:
             replayer.close()
+        feature_thread.check()
         if replayer.summary.stopped:
             raise InputError(f"{bag}: replay stopped: {replayer.summary.stopped}")
         tracker.flush()
@@ -292,6 +330,8 @@ def run_tracking(options: TrackOptions) -> TrackResult:
                              f"start frame {tracker.start.frame}); check that the bag has images for every camera")
         write_outputs(out, tracker.tracker.map_trajectory(), tracker.summaries)
     finally:
+        if feature_thread is not None:
+            feature_thread.stop()
         if recorder is not None:
             recorder.close()
         for n in nodes:

@@ -6,7 +6,8 @@ Two modes:
 - lockstep: one frame at a time (all messages up to and including the images that share a
   stamp), then wait for an acknowledgement (std_msgs/Header on ``ack_topic`` whose stamp is the
   frame's image stamp) before the next frame, so offline processing drops nothing and is
-  deterministic.
+  deterministic. ``frames_ahead`` lets that many further frames out before the oldest is
+  acknowledged, so the feature nodes work on the next frame while the tracker works on this one.
 
 Messages are published as their raw CDR bytes from the bag (``Publisher.publish(bytes)`` calls
 ``publish_raw``): no deserialisation, no copy into Python message objects. Latched topics
@@ -26,6 +27,7 @@ import importlib
 import struct
 import sys
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -72,6 +74,7 @@ class ReplayConfig:
     wait_for_subscribers: float = 10.0  # s to wait for subscribers before the first message (0: no wait)
     settle: float = 0.5                 # s to wait after the subscribers matched (discovery is asymmetric)
     ack_timeout: float = 60.0           # s to wait for one ack before giving up (lockstep)
+    frames_ahead: int = 0               # lockstep: frames published beyond the oldest unacknowledged one
     depth: int = 100                    # history depth of the volatile publishers (reliable)
 
     def validated(self, where: str) -> "ReplayConfig":
@@ -80,6 +83,8 @@ class ReplayConfig:
         if self.wait_for_subscribers < 0 or self.settle < 0 or self.ack_timeout <= 0 or self.depth < 1:
             raise InputError(f"{where}: wait_for_subscribers >= 0, settle >= 0, ack_timeout > 0 and depth >= 1 "
                              "expected")
+        if not 0 <= self.frames_ahead < self.depth:
+            raise InputError(f"{where}: frames_ahead must lie in [0, depth = {self.depth}), got {self.frames_ahead}")
         return self
 
 
@@ -290,8 +295,8 @@ class Replayer:
             )
         self._batches = iter_batches(iter_messages(self._reader, self.path, read), self._image_topics)
         self._next: Batch | None = None
-        self._awaiting: int | None = None
-        self._await_since = 0.0
+        self._exhausted = False
+        self._awaiting: deque[tuple[int, float]] = deque()   # (frame stamp ns, published at) not yet acked
         self._started = time.monotonic()
         self._subscribers_ok = cfg.wait_for_subscribers == 0
         self._matched_at: float | None = None
@@ -328,7 +333,7 @@ class Replayer:
         """Seconds the driver may spin before the next ``step()`` is useful."""
         if self.done:
             return 0.0
-        if not self._subscribers_ok or self._awaiting is not None:
+        if not self._subscribers_ok or self._must_wait():
             return 0.02
         if self._next is not None and self._t0_wall is not None and not self.config.lockstep:
             due = self._t0_wall + (self._next.log_ns - self._t0_bag) / 1e9 / self.config.rate  # type: ignore[operator]
@@ -370,20 +375,22 @@ class Replayer:
                 return True
             self._subscribers_ok = True
         while True:
-            if self._awaiting is not None:
-                if self._acked_stamp >= self._awaiting:
-                    self._awaiting = None
-                elif time.monotonic() - self._await_since > cfg.ack_timeout:
-                    self._finish(f"no ack on {cfg.ack_topic} for frame {self._awaiting} ns within {cfg.ack_timeout} s")
-                    return False
-                else:
-                    return True
-            if self._next is None:
+            while self._awaiting and self._acked_stamp >= self._awaiting[0][0]:
+                self._awaiting.popleft()
+            if self._next is None and not self._exhausted:
                 self._next = next(self._batches, None)
-                if self._next is None:
-                    self._finish()
+                self._exhausted = self._next is None
+            if self._must_wait():
+                stamp, since = self._awaiting[0]
+                if time.monotonic() - since > cfg.ack_timeout:
+                    self._finish(f"no ack on {cfg.ack_topic} for frame {stamp} ns within {cfg.ack_timeout} s")
                     return False
+                return True
+            if self._exhausted:
+                self._finish()
+                return False
             batch = self._next
+            assert batch is not None
             if not cfg.lockstep:
                 if self._t0_wall is None:
                     self._t0_wall, self._t0_bag = time.monotonic(), batch.log_ns
@@ -393,8 +400,13 @@ class Replayer:
             self._publish(batch)
             self._next = None
             if cfg.lockstep and batch.stamp_ns is not None:
-                self._awaiting, self._await_since = batch.stamp_ns, time.monotonic()
+                self._awaiting.append((batch.stamp_ns, time.monotonic()))
             self._progress()
+
+    def _must_wait(self) -> bool:
+        """Lockstep: too many frames unacknowledged, or the bag is done and some still are."""
+        return bool(self.config.lockstep and self._awaiting
+                    and (self._exhausted or len(self._awaiting) > self.config.frames_ahead))
 
     def _publish(self, batch: Batch) -> None:
         published = self.summary.published
@@ -479,11 +491,13 @@ class ReplayNode(Node):
         wait = declare("wait_for_subscribers", defaults.wait_for_subscribers,
                        "seconds to wait for subscribers before the first message (0: no wait)")
         ack_timeout = declare("ack_timeout", defaults.ack_timeout, "seconds to wait for one ack in lockstep")
+        frames_ahead = declare("frames_ahead", defaults.frames_ahead,
+                               "lockstep: frames published beyond the oldest unacknowledged one")
         if not bag:
             raise InputError("parameter 'bag' is required (--ros-args -p bag:=PATH)")
         config = ReplayConfig(
             rate=float(rate), lockstep=bool(lockstep), ack_topic=str(ack_topic), topics=tuple(topics or ()),
-            wait_for_subscribers=float(wait), ack_timeout=float(ack_timeout),
+            wait_for_subscribers=float(wait), ack_timeout=float(ack_timeout), frames_ahead=int(frames_ahead),
         )
         self.replayer = Replayer(self, bag, config)
 
@@ -498,6 +512,7 @@ def replay_main(bag: str, config: ReplayConfig, args: list[str] | None = None) -
             Parameter("lockstep", value=bool(config.lockstep)), Parameter("ack_topic", value=config.ack_topic),
             Parameter("wait_for_subscribers", value=float(config.wait_for_subscribers)),
             Parameter("ack_timeout", value=float(config.ack_timeout)),
+            Parameter("frames_ahead", value=int(config.frames_ahead)),
             *([Parameter("topics", value=list(config.topics))] if config.topics else []),
         ])
         return _spin_replay(node)

@@ -24,6 +24,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--ack-topic", default=DEFAULT_ACK_TOPIC, help=f"ack topic (default {DEFAULT_ACK_TOPIC})")
     parser.add_argument("--ack-timeout", type=float, default=defaults.ack_timeout,
                         help=f"give up after this many seconds without an ack (default {defaults.ack_timeout:g})")
+    parser.add_argument("--frames-ahead", type=int, default=defaults.frames_ahead, metavar="N",
+                        help="with --lockstep: publish up to N frames beyond the oldest unacknowledged one, so "
+                        f"feature extraction overlaps tracking (default {defaults.frames_ahead})")
     parser.add_argument("--topics", nargs="+", default=[], metavar="TOPIC", help="replay only these topics")
     parser.add_argument("--wait-for-subscribers", type=float, default=defaults.wait_for_subscribers, metavar="SEC",
                         help="wait this long for subscribers before the first message (0: no wait; "
@@ -34,6 +37,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     config = ReplayConfig(
         rate=args.rate, lockstep=args.lockstep, ack_topic=args.ack_topic, topics=tuple(args.topics),
-        wait_for_subscribers=args.wait_for_subscribers, ack_timeout=args.ack_timeout,
+        wait_for_subscribers=args.wait_for_subscribers, ack_timeout=args.ack_timeout, frames_ahead=args.frames_ahead,
     ).validated("awalker replay")
     return replay_main(args.bag, config)

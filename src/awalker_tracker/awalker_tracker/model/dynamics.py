@@ -119,7 +119,7 @@ def _kernel_consts(k: _Consts) -> KernelConsts:
     return (k.R, k.a, k.c, k.b, k.A, k.B, k.mlb, k.M22, k.G1, k.G2, k.m_l, k.m_t, k.I_l, k.I_t)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _acc(kc, s1, c1, s2, c2, gap, w1, w2, kappa):
     """q'' (rad/s^2) of eq. (17) for one walker, from sin/cos of phi1, phi2 and gap = phi2 - phi1."""
     R, a, _, _, A, B, mlb, M22, G1, G2 = kc[:10]
@@ -135,7 +135,7 @@ def _acc(kc, s1, c1, s2, c2, gap, w1, w2, kappa):
     return (M22 * r1 - m12 * r2) * inv_det, (m11 * r2 - m12 * r1) * inv_det
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _rotate(s, c, delta):
     """(sin, cos) of angle + delta from (sin, cos) of angle, with Taylor series for delta.
 
@@ -151,7 +151,7 @@ def _rotate(s, c, delta):
     return s * cos_d + c * sin_d, c * cos_d - s * sin_d
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _rk4(kc, p1, p2, w1, w2, kappa, h):
     """One classical RK4 step of size h for one walker: (phi1, phi2, phi1', phi2') after it.
 
@@ -184,7 +184,7 @@ def _rk4(kc, p1, p2, w1, w2, kappa, h):
             w1 + h6 * (a1 + 2.0 * (b1 + g1) + j1), w2 + h6 * (a2 + 2.0 * (b2 + g2) + j2))
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _locate_strike(kc, p1, p2, w1, w2, kappa, h, s0, s1):
     """Fraction theta in [0, 1] of a sub-step at which phi1 + phi2 = 0 (Newton from the secant guess)."""
     theta = min(max(s0 / (s0 - s1), 0.0), 1.0)
@@ -198,7 +198,7 @@ def _locate_strike(kc, p1, p2, w1, w2, kappa, h, s0, s1):
     return theta
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _integrate(kc, p1, p2, w1, w2, kappa, first_step, steps, h, detect):
     """Integrate each walker i by one RK4 step of ``first_step[i]`` (if > 0) and ``steps[i]`` steps of h.
 
@@ -234,7 +234,7 @@ def _integrate(kc, p1, p2, w1, w2, kappa, first_step, steps, h, detect):
     return q1, q2, r1, r2, strike_step, theta
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _accelerations(kc, p1, p2, w1, w2, kappa):
     """Eq. (17)'s q'' (rad/s^2) of N walkers, (N, 2)."""
     out = np.empty((p1.shape[0], 2))
@@ -244,7 +244,7 @@ def _accelerations(kc, p1, p2, w1, w2, kappa):
     return out
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _impact_rates(kc, p1, p2, w1, w2, iota):
     """Post-impact (new stance, new swing) rates of N walkers from pre-impact angles/rates and toe-off iota.
 

@@ -584,13 +584,13 @@ def _geometry(body: BodyDescription) -> _Geometry:
         float(body.foot_radii_heel[0]))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _scratch() -> tuple[np.ndarray, np.ndarray]:
     """Per-particle scratch: frames (7, 3, 3) and points (6, 3) (see above)."""
     return np.empty((7, 3, 3)), np.empty((6, 3))
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _turn(frames: np.ndarray, f: int, axis: int, c: float, s: float) -> None:
     """frames[f] <- frames[f] @ R_axis(angle) in place, given the angle's cosine c and sine s:
     only the two columns other than ``axis`` change."""
@@ -601,7 +601,7 @@ def _turn(frames: np.ndarray, f: int, axis: int, c: float, s: float) -> None:
         frames[f, row, j] = c * b - s * a
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _set_heading(frames: np.ndarray, f: int, c: float, s: float) -> None:
     """frames[f] <- rotation about z by the heading (cosine c, sine s)."""
     frames[f, 0, 0], frames[f, 0, 1], frames[f, 0, 2] = c, -s, 0.0
@@ -609,14 +609,14 @@ def _set_heading(frames: np.ndarray, f: int, c: float, s: float) -> None:
     frames[f, 2, 0], frames[f, 2, 1], frames[f, 2, 2] = 0.0, 0.0, 1.0
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _copy_frame(frames: np.ndarray, source: int, target: int) -> None:
     for row in range(3):
         for col in range(3):
             frames[target, row, col] = frames[source, row, col]
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _local_pose(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, i: int, frames: np.ndarray,
                 points: np.ndarray) -> None:
     """Forward kinematics of body i relative to the pelvis (world orientation) into ``frames`` and
@@ -639,7 +639,7 @@ def _local_pose(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, i: int, frames
         _lower_leg(g, dofs, i, side, frames, points)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _lower_leg(g: _Geometry, dofs: np.ndarray, i: int, side: int, frames: np.ndarray, points: np.ndarray) -> None:
     """Shank frame, ankle position and foot frame of leg ``side`` of body i below its thigh and knee
     (knee flexion, then ankle flexion and inversion from ``dofs`` (N, 13))."""
@@ -653,7 +653,7 @@ def _lower_leg(g: _Geometry, dofs: np.ndarray, i: int, side: int, frames: np.nda
     _turn(frames, foot, 0, math.cos(dofs[i, 11 + side]), -sign * math.sin(dofs[i, 11 + side]))   # inversion
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _lowest_roll(g: _Geometry, along_z: float, up_z: float) -> float:
     """beta (rad) of the rocker sole's lowest point for a foot whose along and up axes have these
     world z components, clipped to the sole's ends (the foot then pivots about the heel/toe)."""
@@ -661,13 +661,13 @@ def _lowest_roll(g: _Geometry, along_z: float, up_z: float) -> float:
     return min(max(beta, -g.sole_half_angle), g.sole_half_angle)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _foot_lowest_roll(g: _Geometry, frames: np.ndarray, side: int) -> float:
     """``_lowest_roll`` of foot ``side`` in ``frames``."""
     return _lowest_roll(g, frames[_FOOT + side, 2, 0], frames[_FOOT + side, 2, 2])
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _sole_offsets(g: _Geometry, beta: float) -> tuple[float, float]:
     """Foot-frame coordinates (along the foot, up; m) of the rocker sole's point at angle beta
     (the circle's centre lies above the sole's middle; the lateral coordinate is 0)."""
@@ -677,7 +677,7 @@ def _sole_offsets(g: _Geometry, beta: float) -> tuple[float, float]:
     return along, up
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _sole_point(g: _Geometry, frames: np.ndarray, points: np.ndarray, side: int,
                 beta: float) -> tuple[float, float, float]:
     """Pelvis-relative point (m) at angle beta (rad) on the rocker sole of foot ``side``."""
@@ -688,7 +688,7 @@ def _sole_point(g: _Geometry, frames: np.ndarray, points: np.ndarray, side: int,
             points[ankle, 2] + frames[foot, 2, 0] * along + frames[foot, 2, 2] * up)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _swing_foot_lowest_z(g: _Geometry, thigh_z: tuple[float, float, float], knee_z: float, knee: float,
                          ankle_turns: tuple[float, float, float, float], shift_z: float) -> float:
     """World height (m) of the lowest point of the swing foot's sole for the swing knee angle ``knee``
@@ -714,7 +714,7 @@ def _swing_foot_lowest_z(g: _Geometry, thigh_z: tuple[float, float, float], knee
     return ankle_z + centre_z - rho * math.sqrt(x * x + z * z) + shift_z
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _clear_knee(g: _Geometry, dofs: np.ndarray, i: int, swing: int, frames: np.ndarray, points: np.ndarray,
                 shift_z: float) -> float:
     """Ground clearance: where body i's swing foot sole would go below z = 0 (``shift_z``: the pelvis
@@ -740,7 +740,7 @@ def _clear_knee(g: _Geometry, dofs: np.ndarray, i: int, swing: int, frames: np.n
     return above
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _write_posed_body(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, i: int, shift: tuple[float, float, float],
                       frames: np.ndarray, points: np.ndarray, markers: np.ndarray, joints: np.ndarray,
                       origin: np.ndarray, rotation: np.ndarray) -> None:
@@ -789,7 +789,7 @@ def _write_posed_body(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, i: int, 
             joints[i, 4 + 6 * side + j] = dofs[i, 3 + side + 2 * j]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, previous: np.ndarray,
                    contact_point: np.ndarray, contact_roll: np.ndarray, contact_leg: np.ndarray,
                    stance_leg: np.ndarray, clearance: np.ndarray, stance_x: np.ndarray,
@@ -838,7 +838,7 @@ def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, previous: n
         _write_posed_body(g, legs, dofs, i, shift, frames, points, markers, joints, origin, rotation)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _pose_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, contact_leg: np.ndarray,
                  contact_roll: np.ndarray, contact_point: np.ndarray, markers: np.ndarray, joints: np.ndarray,
                  origin: np.ndarray, rotation: np.ndarray) -> None:
@@ -852,7 +852,7 @@ def _pose_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, contact_leg: 
         _write_posed_body(g, legs, dofs, i, shift, frames, points, markers, joints, origin, rotation)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _sole_points_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, leg: np.ndarray, beta: np.ndarray,
                         lowest: bool, out: np.ndarray) -> None:
     """Pelvis-relative points (N, 3) m at angle beta (N,) rad on the rocker soles of feet ``leg`` (N,);
@@ -865,7 +865,7 @@ def _sole_points_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, leg: n
         out[i, 0], out[i, 1], out[i, 2] = _sole_point(g, frames, points, leg[i], beta[i])
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _eq6_row(table: np.ndarray, j: int, swing: int, psi_hip: float) -> tuple[float, float, float, float, float, float]:
     """Eq. (6) parameters (alpha, k, rest, sigma, lower, upper) of DOF j for a particle whose swing
     leg is ``swing``: its swing knee rests at gain x psi_hip (rad), the other DOFs at their rows."""
@@ -876,7 +876,7 @@ def _eq6_row(table: np.ndarray, j: int, swing: int, psi_hip: float) -> tuple[flo
             table[j, _UPPER])
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _eq6_mean_kernel(table: np.ndarray, dt: float, dt2: float, current: np.ndarray, previous: np.ndarray,
                      stance_leg: np.ndarray, psi_hip: np.ndarray, rate: np.ndarray, previous_rate: np.ndarray,
                      mean: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
@@ -899,7 +899,7 @@ def _eq6_mean_kernel(table: np.ndarray, dt: float, dt2: float, current: np.ndarr
             lo[i, j], hi[i, j] = (-b, -a) if a > 0 else (a, b)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _eq6_draw_kernel(table: np.ndarray, dt2: float, stance_leg: np.ndarray, psi_hip: np.ndarray, mean: np.ndarray,
                      z: np.ndarray, out: np.ndarray) -> None:
     """psi_t (N, 13) = mean + dt^2 eta (eq. 6) from the standard truncated normal samples z (N, 13)

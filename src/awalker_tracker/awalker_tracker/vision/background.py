@@ -60,7 +60,7 @@ def measurements(rgb: np.ndarray, downsample: int = 1) -> np.ndarray:
     return out
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _measurement_kernel(image: np.ndarray, d: int, out: np.ndarray) -> None:
     """out (h, w, 5) = per d x d block of ``image`` (H, W * 3: RGB rows, channels interleaved)
     its mean colour, then the central differences of the intensity I = (R + G + B) / 3 along x
@@ -156,7 +156,7 @@ def illumination_gains(m: np.ndarray, reference: np.ndarray, stride: int = 3) ->
     return np.clip(gains, 0.05, 20.0)
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def _colour_gains(m: np.ndarray, reference: np.ndarray, stride: int, gains: np.ndarray) -> None:
     """gains[c] = median of m / reference in colour channel c over every ``stride``-th pixel per
     axis where the reference is brighter than 8 grey levels (left as is below 16 such pixels)."""

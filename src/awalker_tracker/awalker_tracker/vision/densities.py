@@ -74,7 +74,7 @@ NEGLIGIBLE_LOG = -17.0
 BLOCK = 64
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _half_quad(L: np.ndarray, d0: float, d1: float, d2: float, d3: float, d4: float) -> float:
     """|L d|^2 / 2 for a lower-triangular 5x5 L (L = inverse Cholesky factor: the Mahalanobis term)."""
     z0 = L[0, 0] * d0
@@ -85,7 +85,7 @@ def _half_quad(L: np.ndarray, d0: float, d1: float, d2: float, d3: float, d4: fl
     return 0.5 * (z0 * z0 + z1 * z1 + z2 * z2 + z3 * z3 + z4 * z4)
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def logaddexp(a: float, b: float) -> float:
     """log(exp(a) + exp(b)) without overflow (a, b not both -inf); a negligible term is skipped
     (``NEGLIGIBLE_LOG``). log(1 + y) rather than log1p(y): half the cost, error below 1e-16 nats."""
@@ -96,7 +96,7 @@ def logaddexp(a: float, b: float) -> float:
     return a + np.log(1.0 + np.exp(b - a))
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def gauss_block(x: np.ndarray, start: int, n: int, mean: np.ndarray, inv_chol: np.ndarray, log_norm: float,
                 out: np.ndarray) -> None:
     """out[b] = log_norm - |L (x_p - mean)|^2 / 2 for pixels p = start + b, b < n; x (5, M)."""
@@ -113,7 +113,7 @@ def shadow_covariance(covariance: np.ndarray) -> np.ndarray:
     return np.asarray(covariance, np.float64) + np.diag([0.0, 0.0, 0.0, SHADOW_EDGE_STD ** 2, SHADOW_EDGE_STD ** 2])
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def background_block(x: np.ndarray, mean: np.ndarray, start: int, n: int, inv_chol: np.ndarray, log_norm: float,
                      shadows: bool, shadow_inv_chol: np.ndarray, shadow_log_norm: float, out: np.ndarray,
                      shaded: np.ndarray) -> None:
@@ -143,7 +143,7 @@ def background_block(x: np.ndarray, mean: np.ndarray, start: int, n: int, inv_ch
         out[b] = logaddexp(out[b], shaded[b])
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def background_kernel(x: np.ndarray, mean: np.ndarray, inv_chol: np.ndarray, log_norm: float, shadows: bool,
                       shadow_inv_chol: np.ndarray, shadow_log_norm: float, out: np.ndarray) -> None:
     """out (M,) float32 = log p_bg of measurements x with background means ``mean`` (5, M) float32."""
@@ -157,7 +157,7 @@ def background_kernel(x: np.ndarray, mean: np.ndarray, inv_chol: np.ndarray, log
         out[start: start + n] = block[:n]
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def component_kernel(x: np.ndarray, means: np.ndarray, inv_chol: np.ndarray, log_norm: np.ndarray,
                      out: np.ndarray) -> None:
     """out[k, p] = log N(x_p; means[k], Sigma_k) for x (5, M) float32, means (K, 5) -> out (K, M)."""
@@ -165,7 +165,7 @@ def component_kernel(x: np.ndarray, means: np.ndarray, inv_chol: np.ndarray, log
         gauss_block(x, 0, x.shape[1], means[k], inv_chol[k], log_norm[k], out[k])
 
 
-@numba.njit(cache=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy")
 def ratio_kernel(x: np.ndarray, bg_mean: np.ndarray, bg_inv_chol: np.ndarray, bg_log_norm: float, shadows: bool,
                  shadow_inv_chol: np.ndarray, shadow_log_norm: float, means: np.ndarray, inv_chol: np.ndarray,
                  log_weight_norm: np.ndarray, log_count: np.ndarray, keep: float, floor: float, clip: float,

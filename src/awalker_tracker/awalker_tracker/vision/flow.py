@@ -158,7 +158,7 @@ class GridFlow:
 _SUMS = {"reassoc", "contract"}
 
 
-@numba.njit(cache=True, error_model="numpy", inline="always")
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _sobel(top: np.ndarray, mid: np.ndarray, bottom: np.ndarray, left: int, x: int, right: int) -> tuple:
     """3x3 Sobel (gx, gy) / 8 at column x of three uint8 image rows, float32 grey levels / px."""
     tl, tc, tr = np.int32(top[left]), np.int32(top[x]), np.int32(top[right])
@@ -168,7 +168,7 @@ def _sobel(top: np.ndarray, mid: np.ndarray, bottom: np.ndarray, left: int, x: i
             np.float32(bl - tl + 2 * (bc - tc) + br - tr) * np.float32(0.125))
 
 
-@numba.njit(cache=True, error_model="numpy", fastmath=_SUMS)
+@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=_SUMS)
 def _gradient_tensors(grey: np.ndarray, size: int, step: int, tensor: np.ndarray, magnitude: np.ndarray) -> None:
     """Sobel 3x3 gradients gx, gy (grey levels / px: the kernel / 8) of ``grey`` (uint8 (H, W))
     cropped to the cells (rows * size, cols * size), borders reflected without the edge pixel
@@ -209,7 +209,7 @@ def _gradient_tensors(grey: np.ndarray, size: int, step: int, tensor: np.ndarray
                 magnitude[y // step, x // step] = np.sqrt(gx[x] * gx[x] + gy[x] * gy[x])
 
 
-@numba.njit(cache=True, error_model="numpy", fastmath=_SUMS)
+@numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=_SUMS)
 def _robust_cell_means(dense: np.ndarray, magnitude: np.ndarray, n: int, scale_x: float, scale_y: float,
                        inv_c2: float, iterations: int, out: np.ndarray) -> None:
     """Cauchy M-estimate (IRLS) of each cell's motion from its n x n dense vectors.

@@ -107,8 +107,8 @@ _MIN_DEPTH = 1e-6    # m: points nearer than this (or behind) are not in front o
 #   precomputes the sample positions along and across and which rows compare flow, divides once
 #   per projected point, and computes each part's image box once per state.
 # - error_model="numpy": no zero-division checks (every divisor here is bounded away from 0).
-_jit = numba.njit(cache=True, error_model="numpy")
-_inline = numba.njit(cache=True, error_model="numpy", inline="always")
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+_inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 
 
 @_inline
