@@ -79,6 +79,8 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     # timings: streaming is part of the whole command, the filter part of streaming
     run = yaml.safe_load((out / "run.yaml").read_text())
     assert 0 < run["seconds_in_filter"] < run["seconds_streaming"] < run["seconds"]
+    # the pictures are drawn after tracking and timed apart
+    assert run["seconds_pictures"] > 0 and (out / "gait.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "while streaming" in capsys.readouterr().err
     assert main(["eval", str(out)]) == 0          # ground truth found beside the input bag
     assert "absolute" in capsys.readouterr().out

@@ -304,12 +304,11 @@ def track_steps(track: PoseTrack, stance_leg: np.ndarray | None = None) -> list:
 
 
 def write_gait(out: Path, track: PoseTrack, stance_leg: np.ndarray) -> list:
-    """gait.csv (one row per step, ``GAIT_COLUMNS``), gait.json (``inference.gait.summary``) and gait.png."""
+    """gait.csv (one row per step, ``GAIT_COLUMNS``) and gait.json (``inference.gait.summary``); returns
+    the steps (``plot_gait_file`` draws them)."""
     import json
 
     from awalker_tracker.inference import gait
-
-    from awalker_tools import plots
 
     walk = track_steps(track, stance_leg)
     with open(out / "gait.csv", "w", newline="") as fh:
@@ -318,8 +317,14 @@ def write_gait(out: Path, track: PoseTrack, stance_leg: np.ndarray) -> list:
         for row in gait.as_rows(walk):
             writer.writerow({k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in row.items()})
     (out / "gait.json").write_text(json.dumps(gait.summary(walk), indent=1))
-    plots.plot_gait(out / "gait.png", walk, track.marker("pelvis")[:, :2], title=f"footprints: {out.name}")
     return walk
+
+
+def plot_gait_file(out: Path, track: PoseTrack, walk: list) -> Path:
+    """gait.png: the footprints of ``walk`` seen from above with the pelvis path of ``track``."""
+    from awalker_tools import plots
+
+    return plots.plot_gait(out / "gait.png", walk, track.marker("pelvis")[:, :2], title=f"footprints: {out.name}")
 
 
 def gait_comparison(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarray] | None) -> dict:

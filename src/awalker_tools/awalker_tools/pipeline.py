@@ -93,7 +93,8 @@ class TrackOptions:
 class TrackResult:
     frames: int = 0
     summaries: int = 0
-    seconds: float = 0.0            # the whole command: set-up, streaming, writing the outputs
+    seconds: float = 0.0            # the whole command: set-up, streaming, writing the outputs (not the pictures)
+    seconds_pictures: float = 0.0   # drawing gait.png and the overlays afterwards
     seconds_streaming: float = 0.0  # from the first replayed message to the last posterior received
     seconds_in_filter: float = 0.0
     sync_issues: list[str] = field(default_factory=list)
@@ -328,7 +329,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
                                  "description with --start")
             raise InputError(f"{bag}: no frame was tracked (frames received: {result.frames}; "
                              f"start frame {tracker.start.frame}); check that the bag has images for every camera")
-        write_outputs(out, tracker.tracker.map_trajectory(), tracker.summaries)
+        track, walk = write_outputs(out, tracker.tracker.map_trajectory(), tracker.summaries)
     finally:
         if feature_thread is not None:
             feature_thread.stop()
@@ -338,26 +339,31 @@ def run_tracking(options: TrackOptions) -> TrackResult:
             n.destroy_node()
         context.try_shutdown()
     result.seconds = time.monotonic() - started
+    # pictures after tracking, timed apart: they are not needed to keep up with a camera
+    evaluation.plot_gait_file(out, track, walk)
     if options.overlays:
         write_overlays(bag, out, cameras[0], body)
+    result.seconds_pictures = time.monotonic() - started - result.seconds
     (out / RUN_FILE).write_text(yaml.safe_dump({
         "input": str(bag.resolve()), "start_source": start_src, "body_source": body_src,
         "particles": options.particles, "lookahead": options.lookahead, "trust": options.trust, "seed": options.seed,
         "likelihood_scale": options.likelihood_scale, "recovery": options.recovery,
         "frames": result.frames, "posteriors": result.summaries, "seconds": round(result.seconds, 3),
-        "seconds_streaming": round(result.seconds_streaming, 3),
+        "seconds_streaming": round(result.seconds_streaming, 3), "seconds_pictures": round(result.seconds_pictures, 3),
         "seconds_in_filter": round(result.seconds_in_filter, 3), "sync_issues": result.sync_issues,
         "features": result.features, "recorded": result.recorded}, sort_keys=False))
     _progress(options, f"awalker track: {result.summaries} frames tracked in {result.seconds:.1f} s "
                        f"({result.frames_per_second:.2f} frames/s end to end, "
                        f"{result.streaming_frames_per_second:.2f} while streaming, filter "
-                       f"{result.summaries / max(result.seconds_in_filter, 1e-9):.2f} frames/s); outputs in {out}")
+                       f"{result.summaries / max(result.seconds_in_filter, 1e-9):.2f} frames/s; pictures "
+                       f"{result.seconds_pictures:.1f} s more); outputs in {out}")
     return result
 
 
-def write_outputs(out: Path, trajectory: Any, summaries: list[Any]) -> None:
+def write_outputs(out: Path, trajectory: Any, summaries: list[Any]) -> tuple[evaluation.PoseTrack, list]:
     """poses.csv (MAP trajectory), summary.csv (per-frame posterior summaries) and the gait analytics of
-    the MAP trajectory: gait.csv (one row per step), gait.json (summary) and gait.png (footprints)."""
+    the MAP trajectory: gait.csv (one row per step) and gait.json (summary). Returns the MAP pose track
+    and its steps, for the footprint picture (``evaluation.plot_gait_file``)."""
     track = evaluation.PoseTrack(trajectory.frames, trajectory.stamps_ns, tuple(trajectory.marker_names),
                                  trajectory.markers)
     evaluation.write_poses_csv(out / "poses.csv", track)
@@ -370,7 +376,7 @@ def write_outputs(out: Path, trajectory: Any, summaries: list[Any]) -> None:
              "reseeded_fallen": s.reseeded_fallen, "reacquired": s.reacquired, "person_still": int(s.person_still)}
             for s in summaries]
     evaluation.write_summary_csv(out / "summary.csv", rows)
-    evaluation.write_gait(out, track, trajectory.stance_leg)
+    return track, evaluation.write_gait(out, track, trajectory.stance_leg)
 
 
 def write_overlays(bag: Path, out: Path, camera: Any, body: BodyDescription, fps: float | None = None) -> Path | None:
