@@ -80,3 +80,21 @@ def test_asymmetry_and_comparison_with_the_truth():
     limp[:, right, :2] -= 0.1 * np.array([np.cos(0.4), np.sin(0.4)])
     summary = gait.summary(gait.steps(frames, stamps, limp, stance))
     assert summary["symmetry_left_over_right"]["step_length_m"] == pytest.approx(0.8 / 0.6, rel=0.02)
+
+
+def test_strikes_are_timed_within_the_frame_when_the_walker_says_when():
+    """The stance changes at the first frame after a strike; the walker's strike fraction (of the period
+    before that frame) moves the step's time back into that period, and so its step time and cadence."""
+    markers, stance, strikes = stylised_walk()
+    frames = np.arange(len(markers))
+    stamps = 1_000_000_000 + np.round(frames * 1e9 / RATE).astype(np.int64)
+    fraction = np.full(len(frames), np.nan)
+    fraction[strikes[0]] = 0.25
+    fraction[strikes[1]] = 0.75
+    walk = gait.steps(frames, stamps, markers, stance, fraction)
+    on_frames = gait.steps(frames, stamps, markers, stance)
+    assert [s.frame for s in walk] == [s.frame for s in on_frames] == strikes
+    assert walk[0].time_s == pytest.approx((strikes[0] - 1 + 0.25) / RATE, abs=1e-9)
+    assert walk[1].time_s == pytest.approx((strikes[1] - 1 + 0.75) / RATE, abs=1e-9)
+    assert walk[2].time_s == pytest.approx(strikes[2] / RATE, abs=1e-9)        # NaN: at the frame
+    assert walk[1].step_time_s == pytest.approx(0.5 + 0.5 / RATE, abs=1e-9)

@@ -16,6 +16,7 @@ def outputs(n: int, rng) -> ParticleOutputs:
         torso_position=rng.normal(size=(n, 3)), torso_rotation=np.tile(np.eye(3), (n, 1, 1)),
         speed=rng.uniform(1, 2, n), stance_leg=rng.integers(0, 2, n).astype(np.int8),
         contact_point=rng.normal(size=(n, 3)), heel_strike=np.zeros(n, bool), strike_point=np.zeros((n, 3)),
+        strike_fraction=np.full(n, np.nan),
         walker={k: rng.normal(size=n) for k in WALKER_FIELDS}, reseeded=np.zeros(n, np.int8))
 
 

@@ -3,9 +3,10 @@
 Files (one row per frame and marker, metres, world frame z up):
     poses.csv / ground_truth.csv: ``frame,stamp_ns,marker,x,y,z``
     summary.csv: ``frame,stamp_ns,speed,speed_std,stance_left_probability,effective_sample_size,
-                  resampled,heel_strike,stance_leg,reseeded_fallen,reacquired,person_still`` (the last
-                  three: particles re-seeded at that frame after a fall / at the detected person, and 1
-                  where the person stood still and the walkers were held)
+                  resampled,heel_strike,stance_leg,reseeded_fallen,reacquired,person_still,strike_fraction``
+                  (particles re-seeded at that frame after a fall / at the detected person, 1 where the
+                  person stood still and the walkers were held, and when in the period before the frame
+                  the MAP walker struck, 0-1, NaN where it did not)
 Metrics:
 - absolute error: per frame, mean 3D distance (mm) over pelvis, thorax, hips, knees, ankles;
 - relative error: the same after translating the estimated pelvis onto the true one;
@@ -34,9 +35,9 @@ FOOT_MARKERS = {"left": ("left_heel", "left_toe"), "right": ("right_heel", "righ
 POSE_COLUMNS = ("frame", "stamp_ns", "marker", "x", "y", "z")
 SUMMARY_COLUMNS = ("frame", "stamp_ns", "speed", "speed_std", "stance_left_probability",
                    "effective_sample_size", "resampled", "heel_strike", "stance_leg", "reseeded_fallen", "reacquired",
-                   "person_still")
-# columns later versions added, read as 0 from older files
-OPTIONAL_SUMMARY_COLUMNS = {"reseeded_fallen": "0", "reacquired": "0", "person_still": "0"}
+                   "person_still", "strike_fraction")
+# columns later versions added, read as 0 (strike_fraction: NaN, a strike at the frame) from older files
+OPTIONAL_SUMMARY_COLUMNS = {"reseeded_fallen": "0", "reacquired": "0", "person_still": "0", "strike_fraction": "nan"}
 
 
 @dataclass(frozen=True)
@@ -291,26 +292,28 @@ GAIT_COLUMNS = ("index", "frame", "stamp_ns", "time_s", "foot", "x", "y", "step_
                 "step_time_s", "stride_time_s", "cadence_steps_min", "speed_m_s")
 
 
-def track_steps(track: PoseTrack, stance_leg: np.ndarray | None = None) -> list:
+def track_steps(track: PoseTrack, stance_leg: np.ndarray | None = None,
+                strike_fraction: np.ndarray | None = None) -> list:
     """The steps of a pose track (``inference.gait``): from its stance legs (0 left / 1 right per frame)
-    when given (the tracker's own heel strikes), else from its heel markers."""
+    when given (the tracker's own heel strikes, timed within the frame by ``strike_fraction``), else from
+    its heel markers."""
     from awalker_tracker.inference import gait
 
     from awalker_tracker.model.body import MARKER_NAMES
 
     markers = _select(track, list(MARKER_NAMES), np.arange(len(track.frames)), "pose track")   # inference.gait's order
     stance = gait.stance_from_heels(markers) if stance_leg is None else np.asarray(stance_leg)
-    return gait.steps(track.frames, track.stamps_ns, markers, stance)
+    return gait.steps(track.frames, track.stamps_ns, markers, stance, strike_fraction)
 
 
-def write_gait(out: Path, track: PoseTrack, stance_leg: np.ndarray) -> list:
+def write_gait(out: Path, track: PoseTrack, stance_leg: np.ndarray, strike_fraction: np.ndarray | None = None) -> list:
     """gait.csv (one row per step, ``GAIT_COLUMNS``) and gait.json (``inference.gait.summary``); returns
     the steps (``plot_gait_file`` draws them)."""
     import json
 
     from awalker_tracker.inference import gait
 
-    walk = track_steps(track, stance_leg)
+    walk = track_steps(track, stance_leg, strike_fraction)
     with open(out / "gait.csv", "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=GAIT_COLUMNS)
         writer.writeheader()
@@ -332,12 +335,14 @@ def gait_comparison(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np
     the truth (its heels), and their comparison (``inference.gait.compare``)."""
     from awalker_tracker.inference import gait
 
-    stance = None
+    stance = fraction = None
     if summary is not None:
         lookup = dict(zip(summary["stamp_ns"].tolist(), summary["stance_leg"].tolist()))
         if all(int(s) in lookup for s in estimate.stamps_ns):
             stance = np.array([0 if lookup[int(s)] == "left" else 1 for s in estimate.stamps_ns])
-    est, true = track_steps(estimate, stance), track_steps(truth)
+            when = dict(zip(summary["stamp_ns"].tolist(), summary["strike_fraction"].tolist()))
+            fraction = np.array([when[int(s)] for s in estimate.stamps_ns], float)
+    est, true = track_steps(estimate, stance, fraction), track_steps(truth)
     return {"estimate": gait.summary(est), "truth": gait.summary(true), "comparison": gait.compare(est, true)}
 
 

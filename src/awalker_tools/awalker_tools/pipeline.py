@@ -368,15 +368,17 @@ def write_outputs(out: Path, trajectory: Any, summaries: list[Any]) -> tuple[eva
                                  trajectory.markers)
     evaluation.write_poses_csv(out / "poses.csv", track)
     map_leg = dict(zip(trajectory.stamps_ns.tolist(), trajectory.stance_leg.tolist()))
+    map_strike = dict(zip(trajectory.stamps_ns.tolist(), trajectory.strike_fraction.tolist()))
     rows = [{"frame": s.frame_index, "stamp_ns": s.stamp_ns, "speed": f"{s.speed:.4f}",
              "speed_std": f"{s.speed_std:.4f}", "stance_left_probability": f"{s.stance_left_probability:.4f}",
              "effective_sample_size": f"{s.effective_sample_size:.1f}", "resampled": int(s.resampled),
              "heel_strike": s.heel_strike_foot,
              "stance_leg": "left" if map_leg.get(s.stamp_ns, s.map_stance_leg) == 0 else "right",
-             "reseeded_fallen": s.reseeded_fallen, "reacquired": s.reacquired, "person_still": int(s.person_still)}
+             "reseeded_fallen": s.reseeded_fallen, "reacquired": s.reacquired, "person_still": int(s.person_still),
+             "strike_fraction": f"{map_strike.get(s.stamp_ns, float('nan')):.4f}"}
             for s in summaries]
     evaluation.write_summary_csv(out / "summary.csv", rows)
-    return track, evaluation.write_gait(out, track, trajectory.stance_leg)
+    return track, evaluation.write_gait(out, track, trajectory.stance_leg, trajectory.strike_fraction)
 
 
 def write_overlays(bag: Path, out: Path, camera: Any, body: BodyDescription, fps: float | None = None) -> Path | None:

@@ -1,8 +1,9 @@
 """Gait analytics from a tracked (or true) walk: heel strikes, steps and their parameters.
 
 A step ends at a heel strike: the frame where the stance leg changes to the other foot (the
-walker's own event for the tracker's MAP trajectory; for marker data without stance labels, the
-frame a heel comes down after a swing: ``stance_from_heels``). Per step: time (s),
+walker's own event for the tracker's MAP trajectory, timed within the frame where the walker's
+strike time is given; for marker data without stance labels, the frame a heel comes down after a
+swing: ``stance_from_heels``). Per step: time (s),
 foot, ground position (the striking heel's xy, m); step length = the displacement from the
 previous strike along the walking direction (the stride from the same foot's previous strike,
 else the step itself); step width = across it; step time, stride time (s), cadence
@@ -99,14 +100,23 @@ class StepCounter:
                     float(heel[0]), float(heel[1]), length, width, step_time, stride_time, cadence, speed)
 
 
-def steps(frames: np.ndarray, stamps_ns: np.ndarray, markers: np.ndarray, stance_leg: np.ndarray) -> list[Step]:
-    """The steps of a walk: markers (F, 13, 3) in MARKER_NAMES order, stance leg per frame (0/1)."""
+def steps(frames: np.ndarray, stamps_ns: np.ndarray, markers: np.ndarray, stance_leg: np.ndarray,
+          strike_fraction: np.ndarray | None = None) -> list[Step]:
+    """The steps of a walk: markers (F, 13, 3) in MARKER_NAMES order, stance leg per frame (0/1) and,
+    if known, when in the period before each frame the strike happened (0-1; NaN: at the frame)."""
     stance = np.asarray(stance_leg).astype(int)
     t = (np.asarray(stamps_ns, np.int64) - int(stamps_ns[0])) * 1e-9
+    fraction = np.full(len(stance), np.nan) if strike_fraction is None else np.asarray(strike_fraction, float)
     counter = StepCounter()
-    return [counter.add(int(frames[f]), int(stamps_ns[f]), float(t[f]), int(stance[f]),
-                        markers[f, _M[_FOOT[int(stance[f])][0]], :2])
-            for f in range(1, len(stance)) if stance[f] != stance[f - 1]]
+    walk = []
+    for f in range(1, len(stance)):
+        if stance[f] == stance[f - 1]:
+            continue
+        # the strike happened during the transition from frame f-1 to frame f
+        when = t[f - 1] + fraction[f] * (t[f] - t[f - 1]) if np.isfinite(fraction[f]) else t[f]
+        walk.append(counter.add(int(frames[f]), int(stamps_ns[f]), float(when), int(stance[f]),
+                                markers[f, _M[_FOOT[int(stance[f])][0]], :2]))
+    return walk
 
 
 def summary(walk: list[Step]) -> dict[str, object]:

@@ -31,6 +31,7 @@ class ParticleOutputs:
     contact_point: np.ndarray      # (N, 3) stance foot's ground contact, world (m)
     heel_strike: np.ndarray        # (N,) bool: the swing foot struck the ground during this frame
     strike_point: np.ndarray       # (N, 3) where it struck (valid where heel_strike), world (m)
+    strike_fraction: np.ndarray    # (N,) when in the frame it struck, 0-1 of the frame period (NaN where none)
     walker: dict[str, np.ndarray]  # WALKER_FIELDS -> (N,) walker and control state
     reseeded: np.ndarray           # (N,) int8: 0, or re-seeded this frame: 1 after a fall, 2 at the detected person,
                                    # 3 held where it stood (the person stands still; inference.recovery)

@@ -155,7 +155,7 @@ class TrackerConfig:
     likelihood_scale: float = 0.1
     recovery: RecoveryConfig = RecoveryConfig()
     cloud_size: int = 200
-    history_payload: tuple[str, ...] = ("markers", "joint_angles", "stance_leg", "heel_strike")
+    history_payload: tuple[str, ...] = ("markers", "joint_angles", "stance_leg", "heel_strike", "strike_fraction")
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -415,7 +415,9 @@ class TrackerModel:
             torso_position=states.pose.markers[:, MARKER_NAMES.index("pelvis")],
             torso_rotation=states.pose.segments.rotation[:, 0],
             speed=states.speed, stance_leg=states.walker.stance_leg, contact_point=contact,
-            heel_strike=struck, strike_point=contact, walker=walker_fields, reseeded=states.reseeded)
+            heel_strike=struck, strike_point=contact,
+            strike_fraction=np.where(struck, np.asarray(getattr(events, "strike_fraction", np.zeros(n)), float), np.nan),
+            walker=walker_fields, reseeded=states.reseeded)
 
 
 # ----------------------------------------------------------------------------- online tracker
@@ -431,6 +433,7 @@ class MapTrajectory:
     joint_angles: np.ndarray    # (F, J)
     stance_leg: np.ndarray      # (F,)
     heel_strike: np.ndarray     # (F,) bool
+    strike_fraction: np.ndarray  # (F,) when in the frame's period the walker struck, 0-1 (NaN where it did not)
     marker_names: tuple[str, ...] = MARKER_NAMES
     joint_names: tuple[str, ...] = JOINT_NAMES
 
@@ -461,7 +464,8 @@ class Tracker:
         frame_index, stamp_ns = self._frames[step.frame]
         out = self.model.outputs(step.states, step.info)
         payload = {"markers": out.markers.astype(np.float32), "joint_angles": out.joint_angles.astype(np.float32),
-                   "stance_leg": out.stance_leg.copy(), "heel_strike": out.heel_strike.copy()}
+                   "stance_leg": out.stance_leg.copy(), "heel_strike": out.heel_strike.copy(),
+                   "strike_fraction": out.strike_fraction.astype(np.float32)}
         self.history.append(None if step.frame == 0 else step.ancestors, payload)
         self._last_step = step
         return summarize(frame_index, stamp_ns, step.log_weights, out, MARKER_NAMES, JOINT_NAMES,
@@ -476,7 +480,8 @@ class Tracker:
         frames = np.array([f for f, _ in self._frames[:count]], np.int64)
         stamps = np.array([s for _, s in self._frames[:count]], np.int64)
         return MapTrajectory(frames, stamps, traj["markers"].astype(float), traj["joint_angles"].astype(float),
-                             traj["stance_leg"], traj["heel_strike"].astype(bool))
+                             traj["stance_leg"], traj["heel_strike"].astype(bool),
+                             traj["strike_fraction"].astype(float))
 
 
 def marker_likelihood(sigma_m: float = 0.03, names: tuple[str, ...] = MARKER_NAMES) -> LikelihoodFn:
