@@ -56,11 +56,14 @@ def test_the_walking_person_starts_the_tracker(frames):
             break
         assert "frames" in finder.status()
     assert found is not None, finder.status()
-    # after the empty frames, about the 0.7 s of track it needs (21 frames, 80 % of them seen)
-    assert 4 + 15 <= found.frame <= 4 + 23
+    # found after the empty frames and about the 0.7 s of track it needs (21 frames, 80 % of them seen);
+    # the start is the central frame of that window's detections, where their line fit is most precise
+    assert 4 + 15 <= k <= 4 + 23
+    assert 4 + 4 <= found.frame <= k - 6
     pose = poses[found.frame - 4]
     pelvis = pose_body(BODY, PARAMS, pose.walker, pose.kin).markers[0, 0, :2]
-    assert np.linalg.norm(np.array(found.position) - pelvis) < 0.15
+    # (one camera's depth from the feet row: the first detections of this scene are 0.1-0.3 m too far)
+    assert np.linalg.norm(np.array(found.position) - pelvis) < 0.2
     # one camera: the feet row jitters in depth by ~8 cm as the legs swing, so the heading is rough
     assert abs(np.angle(np.exp(1j * (found.heading - HEADING)))) < np.radians(20)
     assert found.speed == pytest.approx(SPEED, rel=0.2)

@@ -208,3 +208,26 @@ def test_walk_quality_heading_swaps_falls_and_the_last_frame():
     assert quality["fallen_frames"] == 3 and quality["off_person_frames"] == 3
     assert quality["end"]["fallen"] and quality["end"]["off_person"]
     assert quality["end"]["pelvis_ground_error_m"] == pytest.approx(0.8)
+
+
+def test_gait_is_compared_over_the_frames_the_estimate_covers():
+    """An estimate that starts later than the truth (an automatic start): step times count from its first
+    frame in both, so an exact estimate has no timing error and only the covered strikes count."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "inference"))
+    from test_gait import stylised_walk
+
+    markers, stance, strikes = stylised_walk()
+    frames = np.arange(len(markers))
+    stamps = 1_000_000_000 + np.round(frames * 1e9 / 30).astype(np.int64)
+    truth = PoseTrack(frames, stamps, NAMES, markers)
+    late = 20                                          # the estimate begins 20 frames into the walk
+    estimate = PoseTrack(frames[late:], stamps[late:], NAMES, markers[late:])
+    summary = {"stamp_ns": stamps[late:], "stance_leg": np.array(["left" if s == 0 else "right" for s in stance[late:]]),
+               "strike_fraction": np.full(len(frames) - late, np.nan)}
+    result = evaluation.gait_comparison(estimate, truth, summary)["comparison"]
+    assert result["true_strikes"] == sum(late < f for f in strikes)
+    assert result["matched_strikes"] == result["true_strikes"]
+    assert result["timing_error_s_median"] == pytest.approx(0.0, abs=1e-9)

@@ -332,8 +332,12 @@ def plot_gait_file(out: Path, track: PoseTrack, walk: list) -> Path:
 
 def gait_comparison(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarray] | None) -> dict:
     """Gait summaries of the estimate (its stance legs from summary.csv when there, else its heels) and of
-    the truth (its heels), and their comparison (``inference.gait.compare``)."""
+    the truth (its heels) over the frames the estimate covers, and their comparison
+    (``inference.gait.compare``; step times count from the first tracked frame in both)."""
     from awalker_tracker.inference import gait
+
+    covered = (truth.stamps_ns >= estimate.stamps_ns[0]) & (truth.stamps_ns <= estimate.stamps_ns[-1])
+    truth = PoseTrack(truth.frames[covered], truth.stamps_ns[covered], truth.marker_names, truth.markers[covered])
 
     stance = fraction = None
     if summary is not None:

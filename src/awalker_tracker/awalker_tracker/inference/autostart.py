@@ -5,10 +5,11 @@
 cameras; with several, the other cameras' blobs where its feet put the person) and keeps the
 frames where the person is wholly in view of some camera. Once the detections over ``window_s``
 (at least ``min_fraction`` of its frames) form a ground track moving at ``min_speed_m_s`` or
-faster, the start is that frame, the straight-line fit of the track's
-positions at it, its direction (heading) and speed (clamped to ``speed_range_m_s``, the gaits the
-tracker knows); step length: the usual one at that speed; stance leg unknown (both sampled, at
-any phase). Before that it answers None: a person standing still, half out of view, or nobody,
+faster, the start is the central frame of that window's detections, where the straight-line fit of
+the track's positions is most precise (the caller keeps the window's frames and tracks from there:
+the track begins about ``window_s`` / 2 before the walk was found), that fit's position at it, its direction (heading)
+and speed (clamped to ``speed_range_m_s``, the gaits the tracker knows); step length: the usual one
+at that speed; stance leg unknown (both sampled, at any phase). Before that it answers None: a person standing still, half out of view, or nobody,
 does not start the tracker. The detections' heights (top of the blob over the ground point) give the
 person's height (``estimated_height``), from which a body can be scaled when nobody measured one.
 """
@@ -62,7 +63,8 @@ class StartFinder:
         return float(np.median(self.heights)) if self.heights else None
 
     def push(self, frame: int, features: list[Any]) -> StartDescription | None:
-        """The start description at ``frame`` if the person is found walking by then, else None."""
+        """The start description if the person is found walking by ``frame``, else None. Its frame is the
+        central frame of the window the walk was found over (about ``window_s`` / 2 before ``frame``)."""
         self.frames_seen += 1
         # not gated on the last sighting: that follows the ghost a median background leaves where the
         # person walked in its first frames, once it splits off the person's blob
@@ -79,9 +81,10 @@ class StartFinder:
         velocity = self.track.velocity(frame, cfg.window_s, cfg.min_fraction)
         if velocity is None or np.linalg.norm(velocity) < cfg.min_speed_m_s:
             return None
-        position = self.track.fitted_position(frame, cfg.window_s)
+        central = self.track.central_frame(frame, cfg.window_s)
+        position = self.track.fitted_position(frame, cfg.window_s, at=central)
         speed = float(np.clip(np.linalg.norm(velocity), *cfg.speed_range_m_s))
-        return StartDescription(frame=int(frame), position=(float(position[0]), float(position[1])),
+        return StartDescription(frame=int(central), position=(float(position[0]), float(position[1])),
                                 heading=float(np.arctan2(velocity[1], velocity[0])), speed=speed,
                                 step_length=None, stance_leg=None)
 

@@ -16,6 +16,7 @@ Frames that arrive before everything is known are kept and processed as soon as 
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -129,6 +130,7 @@ class TrackerNode(Node):
 
         self.start = StartDescription.from_yaml(start_path) if start_path and not self.auto_start else None
         self.start_found_automatically = False
+        self._seen: deque = deque()               # frames the start finder saw (automatic start)
         self._finder: Any = None
         self.body = BodyDescription.from_yaml(body_path) if body_path else None
         self._body_from_file = bool(body_path)
@@ -252,7 +254,8 @@ class TrackerNode(Node):
 
     def _find_start(self, final: bool) -> bool:
         """Automatic start: feed the pending frames to the start finder until it finds the walking person;
-        frames before that are dropped (already acknowledged). True once the start is known."""
+        the frames of the window it found the walk over are tracked, earlier ones dropped (all already
+        acknowledged). True once the start is known."""
         from awalker_tracker.inference.autostart import StartFinder
 
         dt = self._dt() or (1.0 / 30.0 if final else None)
@@ -260,10 +263,14 @@ class TrackerNode(Node):
             return False
         if self._finder is None:
             self._finder = StartFinder([self.cameras[c] for c in self.camera_names], dt)
+            # the frames the finder saw, kept for as long as a start can reach back (its window)
+            self._seen = deque(maxlen=int(np.ceil(self._finder.config.window_s / dt)) + 2)
         while self._pending:
             item = self._pending[0]
             found = self._finder.push(item.frame_index, list(item.messages))
             if found is not None:
+                # track from the start's frame, inside the window the walk was found over
+                self._pending[:0] = [p for p in self._seen if p.frame_index >= found.frame]
                 self.start, self.start_found_automatically = found, True
                 self.get_logger().info(
                     f"automatic start at frame {found.frame}: person at ({found.position[0]:.2f}, "
@@ -271,7 +278,7 @@ class TrackerNode(Node):
                     f"{found.speed:.2f} m/s, stance leg unknown (both sampled)")
                 self._write_start()
                 return True
-            self._pending.pop(0)
+            self._seen.append(self._pending.pop(0))
             if self._finder.frames_seen % 30 == 0:
                 self.get_logger().info(f"automatic start: waiting for a walking person ({self._finder.status()})")
         if final:

@@ -221,13 +221,22 @@ class GroundTrack:
         t -= t.mean()
         return (t @ (xy - xy.mean(axis=0))) / max(float(t @ t), 1e-12)
 
-    def fitted_position(self, frame: int, window_s: float) -> np.ndarray | None:
-        """The straight-line fit of the window's positions evaluated at ``frame`` (steadier than one detection)."""
+    def central_frame(self, frame: int, window_s: float) -> int | None:
+        """The mean (rounded) of the frames with a position in the ``window_s`` up to ``frame``: where a
+        straight-line fit of them is most precise (None if there is none)."""
+        span = max(2, int(round(window_s / self.dt)))
+        seen = [f for f in range(frame - span, frame + 1) if self.positions.get(f) is not None]
+        return int(round(float(np.mean(seen)))) if seen else None
+
+    def fitted_position(self, frame: int, window_s: float, at: int | None = None) -> np.ndarray | None:
+        """The straight-line fit of the positions in the window up to ``frame``, evaluated at frame ``at``
+        (default ``frame``; steadier than one detection)."""
         span = max(2, int(round(window_s / self.dt)))
         points = [(f, p) for f in range(frame - span, frame + 1) if (p := self.positions.get(f)) is not None]
         if len(points) < 2:
             return None
+        at = frame if at is None else at
         t = np.array([f for f, _ in points], float)
         xy = np.array([p for _, p in points])
-        fit = np.polyfit(t - frame, xy, 1)             # rows: slope, value at frame
+        fit = np.polyfit(t - at, xy, 1)                # rows: slope, value at frame ``at``
         return fit[1]
