@@ -7,10 +7,10 @@ frames where the person is wholly in view of some camera. Once the detections ov
 (at least ``min_fraction`` of its frames) form a ground track moving at ``min_speed_m_s`` or
 faster, the start is the central frame of that window's detections, where the straight-line fit of
 the track's positions is most precise (the caller keeps the window's frames and tracks from there:
-the track begins about ``window_s`` / 2 before the walk was found), that fit's position at it, its direction (heading)
-and speed (clamped to ``speed_range_m_s``, the gaits the tracker knows); step length: the usual one
-at that speed; stance leg unknown (both sampled, at any phase). Before that it answers None: a person standing still, half out of view, or nobody,
-does not start the tracker. The detections' heights (top of the blob over the ground point) give the
+the track begins about ``window_s`` / 2 before the walk was found), that fit's position at it, its
+direction (heading) and speed (clamped to ``speed_range_m_s``, the gaits the tracker knows); step
+length: the usual one at that speed; stance leg unknown (both sampled, at any phase). Before that it
+answers None: a person standing still, half out of view, or nobody, does not start the tracker. The detections' heights (top of the blob over the ground point) give the
 person's height (``estimated_height``), from which a body can be scaled when nobody measured one.
 """
 from __future__ import annotations

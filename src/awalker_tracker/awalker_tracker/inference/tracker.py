@@ -155,7 +155,6 @@ class TrackerConfig:
     likelihood_scale: float = 0.1
     recovery: RecoveryConfig = RecoveryConfig()
     cloud_size: int = 200
-    history_payload: tuple[str, ...] = ("markers", "joint_angles", "stance_leg", "heel_strike", "strike_fraction")
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -416,7 +415,8 @@ class TrackerModel:
             torso_rotation=states.pose.segments.rotation[:, 0],
             speed=states.speed, stance_leg=states.walker.stance_leg, contact_point=contact,
             heel_strike=struck, strike_point=contact,
-            strike_fraction=np.where(struck, np.asarray(getattr(events, "strike_fraction", np.zeros(n)), float), np.nan),
+            strike_fraction=(np.full(n, np.nan) if events is None
+                             else np.where(struck, np.asarray(events.strike_fraction, float), np.nan)),
             walker=walker_fields, reseeded=states.reseeded)
 
 

@@ -440,6 +440,12 @@ def step_map_radius(params: WalkerParams, speed: float, step_length: float, unkn
     return float(np.max(np.abs(np.linalg.eigvals(jac)))) if np.all(np.isfinite(jac)) else np.inf
 
 
+def _rated(params: WalkerParams, sol: GaitSolution) -> GaitSolution:
+    """``sol`` with its step-map radius, and "(asymmetric gait)" added to its reason when it is one."""
+    sol = dataclasses.replace(sol, step_map_radius=step_map_radius(params, sol.speed, sol.step_length, sol.unknowns))
+    return sol if is_symmetric(sol) else dataclasses.replace(sol, reason=sol.reason + " (asymmetric gait)")
+
+
 def _best_solution(params: WalkerParams, v: float, s: float, continued: list[np.ndarray],
                    fresh: list[np.ndarray], family: str) -> GaitSolution:
     """Collect the distinct gaits reachable from the guesses and pick one per ``family``.
@@ -472,14 +478,10 @@ def _best_solution(params: WalkerParams, v: float, s: float, continued: list[np.
                 break
     if not found:
         return min(failures, key=lambda f: f.residual)
-    found = [dataclasses.replace(f, step_map_radius=step_map_radius(params, v, s, f.unknowns)) for f in found]
+    found = [_rated(params, f) for f in found]
     if family == "symmetric" and any(is_symmetric(f) for f in found):
-        best = next(f for f in found if is_symmetric(f))
-    else:
-        best = min(found, key=lambda f: f.step_map_radius)
-    if not is_symmetric(best):
-        best = dataclasses.replace(best, reason=best.reason + " (asymmetric gait)")
-    return best
+        return next(f for f in found if is_symmetric(f))
+    return min(found, key=lambda f: f.step_map_radius)
 
 
 def _spread_stable_gaits(params: WalkerParams, speeds: np.ndarray, step_lengths: np.ndarray,
@@ -495,10 +497,6 @@ def _spread_stable_gaits(params: WalkerParams, speeds: np.ndarray, step_lengths:
     are close and plain continuation falls back onto the symmetric one), and keeps a result whose
     radius is smaller.
     """
-    def radius_of(sol: GaitSolution, i: int, j: int) -> GaitSolution:
-        return dataclasses.replace(sol, step_map_radius=step_map_radius(
-            params, float(speeds[i]), float(step_lengths[j]), sol.unknowns))
-
     offsets: dict[tuple[int, int], np.ndarray] = {}
 
     def offset_from_symmetric(key: tuple[int, int]) -> np.ndarray:
@@ -520,10 +518,8 @@ def _spread_stable_gaits(params: WalkerParams, speeds: np.ndarray, step_lengths:
                     sol = solve_point(params, float(speeds[i]), float(step_lengths[j]), guess)
                     if not sol.converged:
                         continue
-                    sol = radius_of(sol, i, j)
+                    sol = _rated(params, sol)
                     if sol.step_map_radius < current.step_map_radius - 1e-6:
-                        if not is_symmetric(sol):
-                            sol = dataclasses.replace(sol, reason=sol.reason + " (asymmetric gait)")
                         solutions[(i, j)] = current = sol
                         offsets.pop((i, j), None)
                         improved += 1

@@ -209,11 +209,15 @@ class GroundTrack:
         for old in [f for f in self.positions if f < frame - self.keep_frames]:
             del self.positions[old]
 
+    def _window(self, frame: int, window_s: float) -> tuple[int, list[tuple[int, np.ndarray]]]:
+        """(frames in the ``window_s`` up to ``frame``, its (frame, position) pairs with a position)."""
+        span = max(2, int(round(window_s / self.dt)))
+        return span, [(f, p) for f in range(frame - span, frame + 1) if (p := self.positions.get(f)) is not None]
+
     def velocity(self, frame: int, window_s: float, min_fraction: float = 0.8) -> np.ndarray | None:
         """Least-squares ground velocity (m/s) over the ``window_s`` up to ``frame``, or None when fewer than
         ``min_fraction`` of its frames (and fewer than 3) have a position."""
-        span = max(2, int(round(window_s / self.dt)))
-        points = [(f, p) for f in range(frame - span, frame + 1) if (p := self.positions.get(f)) is not None]
+        span, points = self._window(frame, window_s)
         if len(points) < max(3, int(min_fraction * span)):
             return None
         t = np.array([f for f, _ in points], float) * self.dt
@@ -224,15 +228,13 @@ class GroundTrack:
     def central_frame(self, frame: int, window_s: float) -> int | None:
         """The mean (rounded) of the frames with a position in the ``window_s`` up to ``frame``: where a
         straight-line fit of them is most precise (None if there is none)."""
-        span = max(2, int(round(window_s / self.dt)))
-        seen = [f for f in range(frame - span, frame + 1) if self.positions.get(f) is not None]
-        return int(round(float(np.mean(seen)))) if seen else None
+        _, points = self._window(frame, window_s)
+        return int(round(float(np.mean([f for f, _ in points])))) if points else None
 
     def fitted_position(self, frame: int, window_s: float, at: int | None = None) -> np.ndarray | None:
         """The straight-line fit of the positions in the window up to ``frame``, evaluated at frame ``at``
         (default ``frame``; steadier than one detection)."""
-        span = max(2, int(round(window_s / self.dt)))
-        points = [(f, p) for f in range(frame - span, frame + 1) if (p := self.positions.get(f)) is not None]
+        _, points = self._window(frame, window_s)
         if len(points) < 2:
             return None
         at = frame if at is None else at
