@@ -48,18 +48,23 @@ def frames():
 
 def test_the_walking_person_starts_the_tracker(frames):
     camera, features, poses = frames
-    finder = StartFinder([camera], DT)
+    # the track is fitted over 0.9 s (the scene's walk lasts 1 s), from the first frame of the 0.7 s window
+    finder = StartFinder([camera], DT, AutoStartConfig(fit_window_s=0.9))
     found = None
     for k, f in enumerate(features):
         found = finder.push(k, f and [f])
         if found is not None:
             break
-        assert "frames" in finder.status()
+        if "walking since" not in finder.status():
+            walking_at = k + 1
+            assert "not yet walking" in finder.status() or "no person seen" in finder.status()
     assert found is not None, finder.status()
-    # found after the empty frames and about the 0.7 s of track it needs (21 frames, 80 % of them seen);
-    # the start is the central frame of that window's detections, where their line fit is most precise
-    assert 4 + 15 <= k <= 4 + 23
-    assert 4 + 4 <= found.frame <= k - 6
+    # walking found after the empty frames and about the 0.7 s of track it needs (21 frames, 80 % of them
+    # seen), answered 0.2 s (6 frames) later; the start is the central frame of the 0.7 s window's
+    # detections, so the track begins before the walk was found
+    assert 4 + 15 <= walking_at <= 4 + 23
+    assert k == walking_at + 6
+    assert 4 + 4 <= found.frame <= walking_at - 6
     pose = poses[found.frame - 4]
     pelvis = pose_body(BODY, PARAMS, pose.walker, pose.kin).markers[0, 0, :2]
     # (one camera's depth from the feet row: the first detections of this scene are 0.1-0.3 m too far)
@@ -77,6 +82,21 @@ def test_the_walking_person_starts_the_tracker(frames):
         BODY.scaled_to_height(3.0)
 
 
+def test_a_sequence_ending_before_the_fit_window_is_in_still_starts(frames):
+    camera, features, poses = frames
+    finder = StartFinder([camera], DT)       # fit over 1.3 s: longer than the walk
+    assert all(finder.push(k, f and [f]) is None for k, f in enumerate(features))
+    assert "walking since" in finder.status()
+    found = finder.finish()
+    assert found is not None and 4 + 4 <= found.frame <= len(features) - 10
+    pose = poses[found.frame - 4]
+    pelvis = pose_body(BODY, PARAMS, pose.walker, pose.kin).markers[0, 0, :2]
+    assert np.linalg.norm(np.array(found.position) - pelvis) < 0.2
+    assert found.speed == pytest.approx(SPEED, rel=0.2)
+    # a finder that never saw a walking person has nothing to finish with
+    assert StartFinder([camera], DT).finish() is None
+
+
 def test_a_person_standing_still_does_not_start_it(frames):
     camera, features, _ = frames
     finder = StartFinder([camera], DT)
@@ -88,3 +108,5 @@ def test_a_person_standing_still_does_not_start_it(frames):
 def test_config_is_checked():
     with pytest.raises(ValueError):
         AutoStartConfig(min_fraction=0.0)
+    with pytest.raises(ValueError):
+        AutoStartConfig(window_s=1.0, fit_window_s=0.8)

@@ -177,13 +177,16 @@ def test_a_track_started_beside_the_person_is_reacquired(runs, tmp_path, recover
     last_half = float(np.median(absolute[FRAMES // 2:]))
     # measured (synthesis seed 1, tracker seeds 0-4; last-half medians, along the walk / all markers, mm):
     # with recovery re-acquired at frame 11 (6 frames, 0.2 s, after the start), 4-85 / 61-432; without
-    # 431-1195 / 435-1194 (the numpy and the compiled dynamics, which draw the toe-offs in another order)
+    # 431-1195 / 435-1194 (the numpy and the compiled dynamics, which draw the toe-offs in another order).
+    # Since the detection's column is the upper body's (tracker seeds 0-9): with recovery 12-130 / 261-708
+    # (median 33 / 597; the whole blob's column gave 4-111 / 149-993, median 65 / 482): all markers'
+    # error is one camera's depth, which a re-acquisition does not fix.
     if recovery:
         fired = summary["frame"][summary["reacquired"] > 0]
         assert result["recovery"]["reacquisitions"] >= 1 and fired.size
         assert fired[0] - summary["frame"][0] <= 30, f"re-acquired only at frame {fired[0]}"
         assert last_half_along < 200.0, f"last half {last_half_along:.0f} mm off along the walk after re-acquisition"
-        assert last_half < 550.0, f"last half {last_half:.0f} mm after re-acquisition"
+        assert last_half < 800.0, f"last half {last_half:.0f} mm after re-acquisition"
     else:
         assert result["recovery"]["reacquisitions"] == 0 and (summary["reacquired"] == 0).all()
         assert last_half_along > 300.0, \
@@ -192,7 +195,7 @@ def test_a_track_started_beside_the_person_is_reacquired(runs, tmp_path, recover
 
 def test_automatic_start_without_empty_frames(tmp_path):
     """No start description and no background-only frames (issue 12 §1-2): the features node learns a
-    robust median background from the walk itself, the tracker finds the walking person within about a
+    robust background from the walk itself, the tracker finds the walking person within about a
     second of having a background and tracks from there, about as well as from a hand-written start."""
     import numpy as np
     import yaml
@@ -217,7 +220,7 @@ def test_automatic_start_without_empty_frames(tmp_path):
                  "--seed", str(TRACK_SEED), "--no-overlay"]) == 0
     assert main(["eval", str(out), "--truth", str(seq / "ground_truth.csv")]) == 0
     run = yaml.safe_load((out / "run.yaml").read_text())
-    assert "robust temporal median" in run["features"]["cam0"]["background"]
+    assert "robust fit" in run["features"]["cam0"]["background"]
     assert run["start_source"].startswith("found automatically")
     assert run["body_source"].startswith("scaled to the person's height")
     # issue 12 §3: the body from the silhouette's height (measured: legs 0.417 m, true 0.41)

@@ -66,6 +66,54 @@ def test_robust_background_ignores_a_moving_person():
     assert mask[~person].mean() < 0.01
 
 
+def test_robust_background_has_no_ghost_where_a_moving_person_lingers():
+    """A person walking along the view (stripes moving through the same pixels) covers a block in 12 of
+    20 frames: the temporal median learns the person there (a ghost), the densest colour cluster the
+    background seen steadily in the other 8."""
+    rng = np.random.default_rng(3)
+    clean = background_image(CAM)
+    frames = []
+    for f in range(20):
+        image = noisy(clean, rng)
+        if f < 12:
+            stripes = ((np.arange(100)[:, None] + 7 * f) // 6) % 2 == 0          # shifted every frame
+            image[80:180, 100:140] = np.where(stripes[..., None], (250, 40, 40), (235, 150, 60)).astype(np.uint8)
+        frames.append(image)
+    truth = measurements(clean, 2)[..., :3]
+    block = (slice(40, 90), slice(50, 70))
+    median = np.median(np.stack([measurements(f, 2) for f in frames]), axis=0)[..., :3]
+    assert np.median(np.abs(median[block] - truth[block])[..., 0]) > 30.0    # the median's ghost (red)
+    robust = learn_background_robust(frames, downsample=2)
+    assert np.percentile(np.abs(robust.mean[..., :3] - truth)[block], 99) < 3.0
+    assert robust.foreground_mask(measurements(noisy(clean, rng), 2))[block].mean() < 0.01
+
+
+def test_robust_background_is_learned_again_and_a_ghost_fades():
+    """A person standing still in 14 of the first 20 frames is learned into the background (nothing can
+    tell them apart yet); refitted from the frames so far, the background there is right again once the
+    frames without them are the majority (after 30 frames here)."""
+    from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
+
+    rng = np.random.default_rng(6)
+    clean = background_image(CAM)
+    extractor = FeatureExtractor(FeatureConfig(downsample=2, median_frames=20, refit_frames=(25, 30, 40)))
+    block = (slice(40, 90), slice(20, 35))
+    clean_m = measurements(clean, 2)
+    ghost_at = {}
+    for f in range(41):
+        image = noisy(clean, rng)
+        x = 40 if f < 14 else 40 + 40 * (f - 13)          # stands, then walks off to the right
+        image[80:180, x : x + 30] = (200, 40, 40)
+        extractor.process(image)
+        if extractor.background is not None:
+            ghost_at[f + 1] = extractor.background.foreground_mask(clean_m)[block].mean()
+    assert ghost_at[20] > 0.9 and ghost_at[25] > 0.9       # learned at 20 frames, still 14 of 25 there
+    assert ghost_at[30] < 0.01 and ghost_at[41] < 0.01     # 14 of 30: gone
+    assert np.percentile(np.abs(extractor.background.mean[..., :3] - clean_m[..., :3]), 99) < 3.0
+    with pytest.raises(ValueError):
+        FeatureConfig(refit_frames=(0,))
+
+
 def test_adaptation_moves_background_but_not_foreground_pixels():
     rng = np.random.default_rng(2)
     clean = background_image(CAM)
@@ -78,7 +126,7 @@ def test_adaptation_moves_background_but_not_foreground_pixels():
     assert np.median(adapted.mean[10:, :, 0] - model.mean[10:, :, 0]) == pytest.approx(1.5, abs=0.3)
 
 
-def test_extractor_learns_from_the_median_when_no_background_frames_are_known():
+def test_extractor_learns_robustly_when_no_background_frames_are_known():
     from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
     from vision_scene import render_frames, walking_poses
 

@@ -118,3 +118,43 @@ def test_two_people_are_not_mixed_across_cameras(two_people):
     far = np.array([6.0, 0.0, 0.9])
     assert all(blob_near(person_blobs(f, c.name), c, far) is None for f, c in zip(features, cameras))
     assert np.allclose(detect_person(features, cameras, near=far).position, detect_person(features, cameras).position)
+
+
+def test_the_column_is_the_upper_bodys_and_a_ghost_at_the_feet_does_not_move_it(scene):
+    """What is left of a ghost (a planted foot learned into the background) or a shadow joins the blob
+    at its feet: the column (upper half's mean) stays over the person, the whole blob's mean would not."""
+    from dataclasses import replace
+
+    from awalker_tracker.vision.detection import person_blobs
+
+    cameras, features, markers = scene
+    side = features[0]
+    clean = person_blob(side, "side")
+    llr = side.llr.copy()
+    d = side.downsample
+    u0, v1, middle = int(clean.box[0] / d), int(clean.box[3] / d), int(clean.feet_uv[0] / d)
+    llr[:, v1 - 3 : v1 + 1, max(u0 - 25, 0) : middle] = 10.0  # a foot-high ghost reaching 25 map px behind
+    ghosted = person_blobs(replace(side, llr=llr), "side")[0]
+    assert ghosted.box[0] < clean.box[0] - 40                 # one blob, wider
+    assert ghosted.feet_uv[0] == pytest.approx(clean.feet_uv[0], abs=1.0)
+    rows, cols = np.nonzero(np.max(llr, axis=0) > 2.0)
+    assert d * cols.mean() < clean.feet_uv[0] - 8             # the whole blob's mean column would move
+    pelvis_u = cameras[0].project(markers[:1])[0][0, 0]
+    assert ghosted.feet_uv[0] == pytest.approx(pelvis_u, abs=6.0)
+
+
+def test_ground_track_fit_drops_a_misplaced_detection():
+    """A blob broken in two puts one frame's person metres away: the line fit drops it."""
+    from awalker_tracker.vision.detection import GroundTrack
+
+    track = GroundTrack(dt=1 / 30)
+    rng = np.random.default_rng(0)
+    for f in range(30):
+        track.add(f, np.array([1.2 * f / 30, 0.5]) + rng.normal(0, 0.03, 2))
+    track.add(30, np.array([1.2, 9.8]))                        # the feet row of a torso alone: 9 m deep
+    velocity = track.velocity(30, 1.0)
+    assert velocity == pytest.approx([1.2, 0.0], abs=0.1)
+    assert track.fitted_position(30, 1.0, at=15) == pytest.approx([0.6, 0.5], abs=0.05)
+    t = np.arange(31) / 30
+    plain = np.polyfit(t, [0.5] * 30 + [9.8], 1)[0]
+    assert plain > 1.0                                         # what a plain fit would say across the walk

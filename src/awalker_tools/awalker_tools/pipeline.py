@@ -236,7 +236,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         driver = Node("awalker_track_replay", context=context)
         nodes.append(driver)
         # the features nodes get the same start and body as the tracker (files or bag topics alike)
-        # (automatic start: none, the features nodes learn a robust median background)
+        # (automatic start: none, the features nodes learn the background robustly from the walk)
         features = [FeatureNode(context=context, parameter_overrides=[
             Parameter("camera_name", value=c),
             Parameter("start_description", value=str(out / START_FILE) if start is not None else ""),

@@ -5,11 +5,14 @@
 cameras; with several, the other cameras' blobs where its feet put the person) and keeps the
 frames where the person is wholly in view of some camera. Once the detections over ``window_s``
 (at least ``min_fraction`` of its frames) form a ground track moving at ``min_speed_m_s`` or
-faster, the start is the central frame of that window's detections, where the straight-line fit of
-the track's positions is most precise (the caller keeps the window's frames and tracks from there:
-the track begins about ``window_s`` / 2 before the walk was found), that fit's position at it, its
-direction (heading) and speed (clamped to ``speed_range_m_s``, the gaits the tracker knows); step
-length: the usual one at that speed; stance leg unknown (both sampled, at any phase). Before that it
+faster, the start is the central frame of that window's detections (the caller keeps the window's
+frames and tracks from there: the track begins about ``window_s`` / 2 before the walk was found).
+Its position, heading and speed (clamped to ``speed_range_m_s``, the gaits the tracker knows) come
+from a straight-line fit of the track over ``fit_window_s`` from the window's first frame: the
+finder waits that much longer before answering (one camera places the feet in steps of a map row,
+0.2 m in depth at 5 m, so a 0.7 s track's direction is 10-20 degrees off; over 1.3 s, 3-6), or
+answers with what it has at ``finish`` (the sequence ended). Step length: the usual one at that
+speed; stance leg unknown (both sampled, at any phase). Before that it
 answers None: a person standing still, half out of view, or nobody, does not start the tracker. The detections' heights (top of the blob over the ground point) give the
 person's height (``estimated_height``), from which a body can be scaled when nobody measured one.
 """
@@ -35,13 +38,14 @@ AUTO_SPREAD = InitialSpread(position_m=0.15, heading_rad=0.2, speed_fraction=0.2
 class AutoStartConfig:
     """When the detections are a walking person (times s, speeds m/s)."""
 
-    window_s: float = 0.7           # one camera: 0.5 s gave 13 degrees of heading error, 0.7 s 10, 1.0 s 4
+    window_s: float = 0.7           # walking steadily over this long starts the tracker
+    fit_window_s: float = 1.3       # position, heading and speed fitted over this long from the window's start
     min_fraction: float = 0.8
     min_speed_m_s: float = 0.4
     speed_range_m_s: tuple[float, float] = (0.6, 1.9)
 
     def __post_init__(self) -> None:
-        if not (self.window_s > 0 and 0 < self.min_fraction <= 1 and self.min_speed_m_s >= 0
+        if not (0 < self.window_s <= self.fit_window_s and 0 < self.min_fraction <= 1 and self.min_speed_m_s >= 0
                 and 0 < self.speed_range_m_s[0] < self.speed_range_m_s[1]):
             raise ValueError(f"AutoStartConfig: invalid settings {self}")
 
@@ -57,20 +61,32 @@ class StartFinder:
         self.frames_detected = 0
         self.last_detection: PersonDetection | None = None
         self.heights: list[float] = []
+        self._found: tuple[int, int] | None = None     # (start frame, first frame of its window) once walking
+        self._last_frame = -1
+
+    @property
+    def keep_frames(self) -> int:
+        """How many frames before the current one a start can reach back to (the caller keeps them)."""
+        return int(np.ceil(self.config.fit_window_s / self.track.dt)) + 2
 
     def estimated_height(self) -> float | None:
         """Median height (m) of the person over the frames seen wholly so far (None before any)."""
         return float(np.median(self.heights)) if self.heights else None
 
     def push(self, frame: int, features: list[Any]) -> StartDescription | None:
-        """The start description if the person is found walking by ``frame``, else None. Its frame is the
-        central frame of the window the walk was found over (about ``window_s`` / 2 before ``frame``)."""
+        """The start description once the person was found walking and ``fit_window_s`` of track is in,
+        else None. Its frame is the central frame of the window the walk was found over."""
         self.frames_seen += 1
+        self._last_frame = frame
         # not gated on the last sighting: that follows the ghost a median background leaves where the
         # person walked in its first frames, once it splits off the person's blob
         detection = detect_person(list(features), self.cameras)
         whole = detection is not None and wholly_in_view(detection, self.cameras)
         self.track.add(frame, detection.position if whole else None)
+        if self._found is not None:
+            if frame - self._found[1] >= int(round(self.config.fit_window_s / self.track.dt)):
+                return self.finish()
+            return None
         if not whole:
             return None
         self.frames_detected += 1
@@ -81,10 +97,21 @@ class StartFinder:
         velocity = self.track.velocity(frame, cfg.window_s, cfg.min_fraction)
         if velocity is None or np.linalg.norm(velocity) < cfg.min_speed_m_s:
             return None
-        central = self.track.central_frame(frame, cfg.window_s)
-        position = self.track.fitted_position(frame, cfg.window_s, at=central)
-        speed = float(np.clip(np.linalg.norm(velocity), *cfg.speed_range_m_s))
-        return StartDescription(frame=int(central), position=(float(position[0]), float(position[1])),
+        span = max(2, int(round(cfg.window_s / self.track.dt)))
+        self._found = (int(self.track.central_frame(frame, cfg.window_s)), frame - span)
+        return None
+
+    def finish(self) -> StartDescription | None:
+        """The start of the person found walking, fitted over the track seen so far (``push`` calls it
+        once ``fit_window_s`` is in; call it when the sequence ends before that), else None."""
+        if self._found is None:
+            return None
+        central, first = self._found
+        window_s = (self._last_frame - first) * self.track.dt
+        velocity = self.track.velocity(self._last_frame, window_s, min_fraction=0.0)
+        position = self.track.fitted_position(self._last_frame, window_s, at=central)
+        speed = float(np.clip(np.linalg.norm(velocity), *self.config.speed_range_m_s))
+        return StartDescription(frame=central, position=(float(position[0]), float(position[1])),
                                 heading=float(np.arctan2(velocity[1], velocity[0])), speed=speed,
                                 step_length=None, stance_leg=None)
 
@@ -92,5 +119,8 @@ class StartFinder:
         """What has been seen so far, for a log line while waiting."""
         if self.frames_detected == 0:
             return f"no person seen in {self.frames_seen} frames"
+        if self._found is not None:
+            return (f"person walking since frame {self._found[0]}, fitting the track over "
+                    f"{self.config.fit_window_s:g} s")
         return (f"person wholly in view in {self.frames_detected} of {self.frames_seen} frames, "
                 f"not yet walking steadily for {self.config.window_s:g} s")

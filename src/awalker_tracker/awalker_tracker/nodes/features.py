@@ -14,7 +14,8 @@ Subscribes (camera ``<cam>`` from the ``camera_name`` parameter):
 - ``/awalker/start_description`` (latched std_msgs/String), or the ``start_description`` YAML
   file parameter: the frames before its ``frame`` are background-only (``background_frames`` =
   -1, the default); with ``use_start_description`` false neither is used (automatic start: the
-  background is the robust median of the first ``median_frames`` frames);
+  background is learned robustly from the first ``median_frames`` frames, and again from more
+  frames as they come (``vision.features``));
 - ``/awalker/body_description`` (latched), or the ``body_description`` file parameter: body
   sizes (start-pose projection, bands);
 - ``/<cam>/camera_info`` and ``/<cam>/camera_pose`` (latched geometry_msgs/PoseStamped, as the
@@ -173,8 +174,8 @@ class FeatureNode(Node):
         floor = declare("flow_floor_std", 1.0, "px added to each flow cell's standard deviation")
         self.background_param = int(declare("background_frames", -1,
                                             "background-only frames at the start; -1: the start description's "
-                                            "frame; 0: none (robust temporal median)"))
-        median = declare("median_frames", 20, "frames for the robust median background when none are known")
+                                            "frame; 0: none (robust background from the walk itself)"))
+        median = declare("median_frames", 20, "frames the robust background is first learned from when none are known")
         outlier = declare("outlier_probability", 0.02, "uniform outlier share of the appearance densities")
         clip = declare("llr_clip", 25.0, "bound on each pixel's log-likelihood ratio")
         adapt = declare("adapt_rate", 0.0, "background adaptation rate per frame (0 = frozen)")
@@ -191,7 +192,7 @@ class FeatureNode(Node):
         body_path = str(declare("body_description", "", "body YAML; empty: the /awalker/body_description topic "
                                                         "or the default body"))
         use_start = bool(declare("use_start_description", True, "false: no start description (the tracker finds the "
-                                 "person itself): robust median background, foreground from height bands"))
+                                 "person itself): robust background, foreground from height bands"))
         if not self.camera_name:
             raise InputError("parameter 'camera_name' is required (e.g. --ros-args -p camera_name:=cam0)")
         try:
@@ -361,7 +362,8 @@ class FeatureNode(Node):
                 frames = self.extractor.frame_index - 1
                 self.stats.background_from = (
                     f"{frames} background-only frames (start description)" if self.extractor.background_frames > 0
-                    else f"robust temporal median of frames 0-{frames}")
+                    else f"robust fit (densest colour per pixel) of frames 0-{frames}, refitted "
+                    f"after {list(self.config.refit_frames)} frames")
             if not learned and self.extractor.foreground is not None:
                 self.stats.foreground_from = ("start pose" if start_labels is not None else
                                               "label image" if self._labels is not None else "height bands")

@@ -263,24 +263,30 @@ class TrackerNode(Node):
             return False
         if self._finder is None:
             self._finder = StartFinder([self.cameras[c] for c in self.camera_names], dt)
-            # the frames the finder saw, kept for as long as a start can reach back (its window)
-            self._seen = deque(maxlen=int(np.ceil(self._finder.config.window_s / dt)) + 2)
+            # the frames the finder saw, kept for as long as a start can reach back
+            self._seen = deque(maxlen=self._finder.keep_frames)
+
+        def started(found: Any) -> bool:
+            # track from the start's frame, inside the window the walk was found over
+            self._pending[:0] = [p for p in self._seen if p.frame_index >= found.frame]
+            self.start, self.start_found_automatically = found, True
+            self.get_logger().info(
+                f"automatic start at frame {found.frame}: person at ({found.position[0]:.2f}, "
+                f"{found.position[1]:.2f}) m, heading {np.degrees(found.heading):.0f} deg, "
+                f"{found.speed:.2f} m/s, stance leg unknown (both sampled)")
+            self._write_start()
+            return True
+
         while self._pending:
             item = self._pending[0]
             found = self._finder.push(item.frame_index, list(item.messages))
             if found is not None:
-                # track from the start's frame, inside the window the walk was found over
-                self._pending[:0] = [p for p in self._seen if p.frame_index >= found.frame]
-                self.start, self.start_found_automatically = found, True
-                self.get_logger().info(
-                    f"automatic start at frame {found.frame}: person at ({found.position[0]:.2f}, "
-                    f"{found.position[1]:.2f}) m, heading {np.degrees(found.heading):.0f} deg, "
-                    f"{found.speed:.2f} m/s, stance leg unknown (both sampled)")
-                self._write_start()
-                return True
+                return started(found)
             self._seen.append(self._pending.pop(0))
             if self._finder.frames_seen % 30 == 0:
                 self.get_logger().info(f"automatic start: waiting for a walking person ({self._finder.status()})")
+        if final and (found := self._finder.finish()) is not None:
+            return started(found)
         if final:
             self.get_logger().warning(f"automatic start: no walking person found ({self._finder.status()}); "
                                       "nothing tracked")

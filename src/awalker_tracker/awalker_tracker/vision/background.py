@@ -7,9 +7,14 @@ image after area-averaging it down by ``downsample`` (the likelihood maps' resol
 Background (``BackgroundModel``): a per-pixel mean of m and one shared 5x5 covariance. It is
 learned either from background-only frames (``learn_background``: per-pixel mean, pooled
 covariance of the residuals) or, when the sequence has none, robustly from frames in which
-the person moves (``learn_background_robust``: the temporal median, then pixels whose
-Mahalanobis residual exceeds a chi-square threshold are rejected as outliers and the mean and
-covariance are re-estimated from the inliers). A covariance floor keeps the model from
+the person moves (``learn_background_robust``: per pixel the densest cluster of colours over the
+frames (``_densest_colour``), then pixels whose Mahalanobis residual exceeds a chi-square threshold
+are rejected as outliers and the mean and covariance are re-estimated from the inliers). The
+densest cluster rather than the temporal median: where a person walks along a camera's view or
+plants a foot, they cover a pixel in more than half of the frames, and the median learns them into
+the background (a "ghost" that stays foreground after they leave); the background, unlike a moving
+person, shows the same colour in every frame it is seen, so its cluster is the tightest even when
+it is seen in fewer frames. A covariance floor keeps the model from
 becoming over-confident on perfectly static synthetic frames. ``adapt`` blends in a new frame
 where it is classified as background (optional slow adaptation). ``illumination_gains``
 estimates a global per-channel gain between a frame and the background, so that lighting
@@ -203,15 +208,15 @@ def fit_background(stack: np.ndarray, floor_std: tuple[float, ...] = DEFAULT_FLO
 def learn_background_robust(frames: list[np.ndarray] | np.ndarray, downsample: int = 1,
                             floor_std: tuple[float, ...] = DEFAULT_FLOOR_STD,
                             iterations: int = 2) -> BackgroundModel:
-    """Background from frames that may show the moving person: temporal median, then the
-    inlier mean and covariance after rejecting residuals beyond the 99.9 % chi-square bound."""
+    """Background from frames that may show the moving person: per pixel the densest colour cluster,
+    then the inlier mean and covariance after rejecting residuals beyond the 99.9 % chi-square bound."""
     return fit_background_robust(_stack(frames, downsample), floor_std, iterations)
 
 
 def fit_background_robust(stack: np.ndarray, floor_std: tuple[float, ...] = DEFAULT_FLOOR_STD,
                           iterations: int = 2) -> BackgroundModel:
     """``learn_background_robust`` on a measurement stack (F, h, w, 5)."""
-    mean = np.median(stack, axis=0).astype(np.float32)
+    mean = _densest_colour(stack)
     residual = (stack - mean).reshape(-1, MEASUREMENT_DIM).astype(np.float64)
     # Start from a robust (MAD) per-dimension scale, then refine with inlier statistics.
     mad = 1.4826 * np.median(np.abs(residual), axis=0)
@@ -226,6 +231,37 @@ def fit_background_robust(stack: np.ndarray, floor_std: tuple[float, ...] = DEFA
         if len(resid) > MEASUREMENT_DIM:
             cov = _floored(resid.T @ resid / len(resid), floor_std)
     return BackgroundModel(mean, cov)
+
+
+def colour_noise_radius(stack: np.ndarray, factor: float = 3.0, floor: float = 6.0) -> float:
+    """Distance (grey levels, RGB) within which two frames' colours of a static pixel fall: ``factor``
+    times the robust scale of frame-to-frame colour differences (most pixels are static
+    background), at least ``floor``."""
+    if len(stack) < 2:
+        return floor
+    diff = np.abs(np.diff(stack[..., :3], axis=0)).reshape(-1, 3)
+    scale = 1.4826 * np.median(diff, axis=0)
+    return max(factor * float(np.sqrt(np.sum(np.square(scale)))), floor)
+
+
+def _densest_colour(stack: np.ndarray) -> np.ndarray:
+    """Per pixel of a measurement stack (F, h, w, 5) the mean (h, w, 5) float32 of the frames whose
+    colour lies within ``colour_noise_radius`` of the frame with the most such neighbours (the
+    latest such frame on a tie): the pixel's most often seen steady colour."""
+    frames = stack.astype(np.float32)
+    rgb = frames[..., :3]
+    radius2 = colour_noise_radius(frames) ** 2
+    best_count = np.zeros(frames.shape[1:3], np.int32)
+    best = np.zeros(frames.shape[1:3], np.int64)
+    for j in range(len(frames)):
+        count = (np.sum(np.square(rgb - rgb[j]), axis=-1) < radius2).sum(axis=0)
+        better = count >= best_count
+        best_count = np.where(better, count, best_count)
+        best = np.where(better, j, best)
+    centre = np.take_along_axis(rgb, best[None, ..., None], axis=0)[0]          # (h, w, 3)
+    members = np.sum(np.square(rgb - centre), axis=-1) < radius2               # (F, h, w)
+    summed = np.where(members[..., None], frames, 0.0).sum(axis=0)
+    return (summed / np.maximum(members.sum(axis=0), 1)[..., None]).astype(np.float32)
 
 
 def _stack(frames: list[np.ndarray] | np.ndarray, downsample: int) -> np.ndarray:

@@ -8,15 +8,19 @@ pelvis), the blob nearest to where that point projects (``blob_near``), so that 
 view is not mixed into the detection. Its image is placed in the world with the calibrated camera and
 the ground plane z = 0 (``detect_person``):
 
-- one camera: the ray through the blob's mean column at its lowest row (the feet) meets the ground
+The blob's column is the mean column of its upper half (head, shoulders, trunk): the pelvis is
+under it, while the lower half follows the stride (a planted foot, a trailing leg), the contact
+shadow and what is left of a ghost in a background learned from the walk itself.
+
+- one camera: the ray through the blob's column at its lowest row (the feet) meets the ground
   at the near edge of the feet; the person stands ``near_edge_m`` (0.12 m: half a stride's width
   of feet and hips, measured on renders) farther along the ray;
-- several cameras: each blob's middle column, seen from its camera, is a vertical plane; the
+- several cameras: each blob's column, seen from its camera, is a vertical plane; the
   person stands on the line where these planes meet (least squares over the cameras), which
   does not depend on where the feet end in the image. With two cameras looking nearly along the
   same line the planes are close to parallel; then the feet rows decide, as with one camera.
 
-The height is where the ray through the middle of the blob's top row passes over the ground
+The height is where the ray through the blob's column at its top row passes over the ground
 point (median over cameras). ``GroundTrack`` keeps the positions of the frames where the person
 was wholly in view of some camera and fits their ground velocity. Used to re-acquire a lost track
 (``inference.recovery``) and to start the tracker without a start description (``inference.autostart``).
@@ -39,8 +43,8 @@ class PersonBlob:
     camera: str
     box: tuple[float, float, float, float]   # u0, v0, u1, v1 (px)
     area_px: float
-    feet_uv: tuple[float, float]             # the blob's mean column, lowest row
-    head_uv: tuple[float, float]             # the blob's mean column, highest row
+    feet_uv: tuple[float, float]             # the blob's column (module docstring), lowest row
+    head_uv: tuple[float, float]             # the blob's column, highest row
 
 
 @dataclass(frozen=True)
@@ -71,8 +75,8 @@ def person_blobs(features: FrameFeatures, camera_name: str = "", threshold: floa
         top, bottom = rows.min(), rows.max()
         # map pixel j covers image pixels d j .. d j + d - 1 (centre d j + (d - 1) / 2)
         centre = lambda j: d * j + 0.5 * (d - 1)  # noqa: E731
-        # the blob's mean column (steadier than the lowest row's, which follows the planted foot)
-        middle = centre(float(np.mean(cols)))
+        # the upper half's mean column (module docstring)
+        middle = centre(float(np.mean(cols[rows <= 0.5 * (top + bottom)])))
         box = (d * cols.min() - 0.5, d * top - 0.5, d * (cols.max() + 1) - 0.5, d * (bottom + 1) - 0.5)
         blobs.append(PersonBlob(camera_name, box, area, (middle, centre(bottom)), (middle, centre(top))))
     return blobs
@@ -152,9 +156,8 @@ def detect_person(features: list[FrameFeatures], cameras: list[Camera], threshol
         if blob is None:
             continue
         blobs.append(blob)
-        # vertical plane through the camera and the blob's middle column: normal n, n . x = n . c
-        middle = (0.5 * (blob.box[0] + blob.box[2]), 0.5 * (blob.box[1] + blob.box[3]))
-        d = _ray(camera, middle)[:2]
+        # vertical plane through the camera and the blob's column: normal n, n . x = n . c
+        d = _ray(camera, (blob.feet_uv[0], 0.5 * (blob.box[1] + blob.box[3])))[:2]
         if np.linalg.norm(d) > 1e-9:
             normal = np.array([-d[1], d[0]]) / np.linalg.norm(d)
             planes.append((normal, float(normal @ camera.position[:2]), camera, blob))
@@ -215,15 +218,12 @@ class GroundTrack:
         return span, [(f, p) for f in range(frame - span, frame + 1) if (p := self.positions.get(f)) is not None]
 
     def velocity(self, frame: int, window_s: float, min_fraction: float = 0.8) -> np.ndarray | None:
-        """Least-squares ground velocity (m/s) over the ``window_s`` up to ``frame``, or None when fewer than
-        ``min_fraction`` of its frames (and fewer than 3) have a position."""
+        """Ground velocity (m/s) of the line fit (``_line_fit``) over the ``window_s`` up to ``frame``, or None
+        when fewer than ``min_fraction`` of its frames (and fewer than 3) have a position."""
         span, points = self._window(frame, window_s)
         if len(points) < max(3, int(min_fraction * span)):
             return None
-        t = np.array([f for f, _ in points], float) * self.dt
-        xy = np.array([p for _, p in points])
-        t -= t.mean()
-        return (t @ (xy - xy.mean(axis=0))) / max(float(t @ t), 1e-12)
+        return self._line_fit(points, frame)[0] / self.dt
 
     def central_frame(self, frame: int, window_s: float) -> int | None:
         """The mean (rounded) of the frames with a position in the ``window_s`` up to ``frame``: where a
@@ -232,13 +232,30 @@ class GroundTrack:
         return int(round(float(np.mean([f for f, _ in points])))) if points else None
 
     def fitted_position(self, frame: int, window_s: float, at: int | None = None) -> np.ndarray | None:
-        """The straight-line fit of the positions in the window up to ``frame``, evaluated at frame ``at``
-        (default ``frame``; steadier than one detection)."""
+        """The line fit (``_line_fit``) of the positions in the window up to ``frame``, evaluated at frame
+        ``at`` (default ``frame``; steadier than one detection)."""
         _, points = self._window(frame, window_s)
         if len(points) < 2:
             return None
-        at = frame if at is None else at
-        t = np.array([f for f, _ in points], float)
+        return self._line_fit(points, frame if at is None else at)[1]
+
+    @staticmethod
+    def _line_fit(points: list[tuple[int, np.ndarray]], at: int, outlier_floor_m: float = 0.5,
+                  iterations: int = 3) -> tuple[np.ndarray, np.ndarray]:
+        """Straight-line fit of (frame, position) pairs: (slope m/frame, value at frame ``at``). Positions
+        farther from the line than 3 robust standard deviations of the distances (at least
+        ``outlier_floor_m``) are dropped and the line fitted again: a blob broken in two or merged
+        with something else misplaces one frame's person by metres."""
+        t = np.array([f for f, _ in points], float) - at
         xy = np.array([p for _, p in points])
-        fit = np.polyfit(t - at, xy, 1)                # rows: slope, value at frame ``at``
-        return fit[1]
+        keep = np.ones(len(t), bool)
+        for _ in range(iterations):
+            fit = np.polyfit(t[keep], xy[keep], 1)          # rows: slope, value at ``at``
+            distance = np.linalg.norm(xy - (fit[0] * t[:, None] + fit[1]), axis=1)
+            bound = max(3.0 * 1.4826 * float(np.median(distance[keep])), outlier_floor_m)
+            inside = distance <= bound
+            if inside.sum() < 2 or np.array_equal(inside, keep):
+                break
+            keep = inside
+        fit = np.polyfit(t[keep], xy[keep], 1)
+        return fit[0], fit[1]

@@ -10,8 +10,12 @@ Learning, in order of preference (all automatic, no hand labels needed):
 1. Background: frames known to be background-only (``background_frames`` > 0, e.g. the
    frames before the start description's ``frame``) give the per-pixel mean and pooled
    covariance. Otherwise the first ``median_frames`` frames are buffered and the background
-   is their robust temporal median (``fit_background_robust``); until then the maps are
-   zero (no appearance information).
+   is learned robustly from them (``fit_background_robust``: per pixel the densest colour cluster);
+   until then the maps are zero (no appearance information). It is learned again from the
+   frames so far (at most ``refit_keep`` of them, evenly spread) after each of ``refit_frames``
+   frames: a person who walks along a camera's view covers the same pixels for much of the
+   first frames, and that "ghost" fades as the frames where the person has moved on outnumber
+   them.
 2. Foreground: at the first frame after the background is known, the mixtures are fitted to
    the interior pixels of the foreground (``learn_foreground``), labelled by (a) a class-label image passed
    with that frame: a user's label mask, or the body projected at the start description's
@@ -50,7 +54,9 @@ class FeatureConfig:
 
     downsample: int = 4
     background_frames: int = 0        # known background-only frames at the start (0 = unknown)
-    median_frames: int = 20           # frames buffered for the robust median when none are known
+    median_frames: int = 20           # frames buffered for the robust background when none are known
+    refit_frames: tuple[int, ...] = (25, 30, 35, 40, 50, 60)  # robust background learned again after these
+    refit_keep: int = 30              # at most this many frames (evenly spread) per robust refit
     outlier_probability: float = 0.02  # uniform outlier share of both appearance densities
     llr_clip: float = 25.0            # |log-likelihood ratio| bound per pixel (a safety net)
     adapt_rate: float = 0.0           # background adaptation per frame (0 = frozen)
@@ -59,7 +65,8 @@ class FeatureConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if not 0 < self.outlier_probability < 1 or self.downsample < 1 or self.background_frames < 0 or self.median_frames < 1 or self.llr_clip <= 0:
+        if not 0 < self.outlier_probability < 1 or self.downsample < 1 or self.background_frames < 0 or self.median_frames < 1 or self.llr_clip <= 0 \
+                or self.refit_keep < 2 or any(f < 1 for f in self.refit_frames):
             raise ValueError(f"invalid FeatureConfig {self}")
         if not 0.0 <= self.adapt_rate <= 1.0:
             raise ValueError("FeatureConfig.adapt_rate must be in [0, 1]")
@@ -114,6 +121,7 @@ class FeatureExtractor:
         self.frame_index = 0
         self.background_frames = config.background_frames
         self._buffer: list[np.ndarray] = []
+        self._refits: list[int] = []           # frame counts after which the robust background is refitted
         self._flow = GridFlow(config.flow)
         self._prev_grey: np.ndarray | None = None
 
@@ -142,7 +150,7 @@ class FeatureExtractor:
     @property
     def learns_foreground_next(self) -> bool:
         """True when the next frame is the one the foreground mixtures will be learned from
-        (known background frames only; with the robust median it is not known in advance)."""
+        (known background frames only; with the robust fit it is not known in advance)."""
         return self.foreground is None and 0 < self.background_frames == self.frame_index
 
     def process(self, rgb: np.ndarray, occlusion_mask: np.ndarray | None = None,
@@ -174,13 +182,25 @@ class FeatureExtractor:
                 self.background = fit_background(np.stack(self._buffer))
                 self._buffer = []
             else:
-                self.background_frames = 0     # nothing known to be background: robust median
+                self.background_frames = 0     # nothing known to be background: robust fit
                 self._buffer.append(m)
                 if len(self._buffer) >= cfg.median_frames:
                     self.background = fit_background_robust(np.stack(self._buffer))
-                    self._buffer = []
+                    self._refits = sorted(f for f in cfg.refit_frames if f > self.frame_index + 1)
+                    if not self._refits:
+                        self._buffer = []
             if self.background is not None:
                 self._log(f"background learned at frame {self.frame_index}")
+        elif self._refits:
+            self._buffer.append(m)
+            if self.frame_index + 1 == self._refits[0]:
+                self._refits.pop(0)
+                keep = np.linspace(0, len(self._buffer) - 1, min(len(self._buffer), cfg.refit_keep)).round().astype(int)
+                self.background = fit_background_robust(np.stack([self._buffer[k] for k in keep]))
+                self._log(f"background learned again at frame {self.frame_index} from {len(keep)} of its "
+                          f"{len(self._buffer)} frames")
+                if not self._refits:
+                    self._buffer = []
         if self.background is not None and self.foreground is None and (
                 self.background_frames == 0 or self.frame_index >= self.background_frames):
             labels = None if class_labels is None else self._labels_at_map(class_labels, m.shape[:2])
