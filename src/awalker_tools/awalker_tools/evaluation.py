@@ -295,15 +295,17 @@ GAIT_COLUMNS = ("index", "frame", "stamp_ns", "time_s", "foot", "x", "y", "step_
 def track_steps(track: PoseTrack, stance_leg: np.ndarray | None = None,
                 strike_fraction: np.ndarray | None = None) -> list:
     """The steps of a pose track (``inference.gait``): from its stance legs (0 left / 1 right per frame)
-    when given (the tracker's own heel strikes, timed within the frame by ``strike_fraction``), else from
-    its heel markers."""
+    when given (the tracker's own strikes, timed within the frame by ``strike_fraction``, the heel strike
+    half a human double support before: ``gait.HUMAN_DOUBLE_SUPPORT``), else from its heel markers."""
     from awalker_tracker.inference import gait
 
     from awalker_tracker.model.body import MARKER_NAMES
 
     markers = _select(track, list(MARKER_NAMES), np.arange(len(track.frames)), "pose track")   # inference.gait's order
-    stance = gait.stance_from_heels(markers) if stance_leg is None else np.asarray(stance_leg)
-    return gait.steps(track.frames, track.stamps_ns, markers, stance, strike_fraction)
+    if stance_leg is None:
+        return gait.steps(track.frames, track.stamps_ns, markers, gait.stance_from_heels(markers))
+    return gait.steps(track.frames, track.stamps_ns, markers, np.asarray(stance_leg), strike_fraction,
+                      gait.HUMAN_DOUBLE_SUPPORT)
 
 
 def write_gait(out: Path, track: PoseTrack, stance_leg: np.ndarray, strike_fraction: np.ndarray | None = None) -> list:

@@ -13,6 +13,13 @@ Stance and swing: the walker's toe-off is an impulse at the other foot's heel st
 foot stands from its own strike to the other foot's next one: stance is exactly half the stride
 and there is no double support (people: about 60 % and 20 %). ``summary`` says so rather than
 reporting a measured proportion.
+
+Heel-strike time of a walker's step: a person's support passes from foot to foot over a double
+support (heel strike to the other foot's toe-off, ``HUMAN_DOUBLE_SUPPORT`` = 10 % of the stride each
+time in normal walking; Perry and Burnfield, *Gait Analysis*), the walker's in one instant. Taking
+that instant as the middle of the double support, the heel struck half of it, i.e.
+``HUMAN_DOUBLE_SUPPORT`` x the step time, earlier (``StepCounter(double_support=...)``; the first
+step, with no step time yet, uses ``TYPICAL_STEP_TIME_S``). Steps from heel markers are not shifted.
 """
 from __future__ import annotations
 
@@ -25,6 +32,9 @@ from awalker_tracker.model.walker import LEFT
 
 _M = {n: i for i, n in enumerate(MARKER_NAMES)}
 _FOOT = {0: ("left_heel", "left_toe"), 1: ("right_heel", "right_toe")}
+
+HUMAN_DOUBLE_SUPPORT = 0.10    # each double support, share of the stride (normal walking)
+TYPICAL_STEP_TIME_S = 0.55     # s, 110 steps/min: the first step's, before one is measured
 
 
 @dataclass(frozen=True)
@@ -75,11 +85,13 @@ class StepCounter:
     """Steps from heel strikes as they come (online: the tracker's events while it runs); ``steps``
     feeds it a whole walk. Times in s, positions world xy (m)."""
 
-    def __init__(self) -> None:
+    def __init__(self, double_support: float = 0.0) -> None:
+        self.double_support = float(double_support)    # HUMAN_DOUBLE_SUPPORT for the walker's events, else 0
         self.strikes: list[tuple[float, np.ndarray]] = []      # (time, heel xy) of every strike so far
 
     def add(self, frame: int, stamp_ns: int, time_s: float, foot: int, heel_xy: np.ndarray) -> Step:
-        """The step that ends with this heel strike of ``foot`` (LEFT 0 / RIGHT 1)."""
+        """The step that ends with this strike of ``foot`` (LEFT 0 / RIGHT 1) at ``time_s``; its reported
+        time is the heel strike, ``double_support`` x the step time before (module docstring)."""
         heel = np.asarray(heel_xy, float)[:2]
         k = len(self.strikes)
         length = width = step_time = stride_time = cadence = speed = float("nan")
@@ -96,18 +108,20 @@ class StepCounter:
             cadence = 60.0 / step_time if step_time > 0 else float("nan")
             speed = length / step_time if step_time > 0 else float("nan")
         self.strikes.append((float(time_s), heel))
-        return Step(k, int(frame), int(stamp_ns), float(time_s), "left" if foot == LEFT else "right",
+        heel_strike = time_s - self.double_support * (step_time if step_time > 0 else TYPICAL_STEP_TIME_S)
+        return Step(k, int(frame), int(stamp_ns), float(heel_strike), "left" if foot == LEFT else "right",
                     float(heel[0]), float(heel[1]), length, width, step_time, stride_time, cadence, speed)
 
 
 def steps(frames: np.ndarray, stamps_ns: np.ndarray, markers: np.ndarray, stance_leg: np.ndarray,
-          strike_fraction: np.ndarray | None = None) -> list[Step]:
+          strike_fraction: np.ndarray | None = None, double_support: float = 0.0) -> list[Step]:
     """The steps of a walk: markers (F, 13, 3) in MARKER_NAMES order, stance leg per frame (0/1) and,
-    if known, when in the period before each frame the strike happened (0-1; NaN: at the frame)."""
+    if known, when in the period before each frame the strike happened (0-1; NaN: at the frame);
+    ``double_support`` as for ``StepCounter``."""
     stance = np.asarray(stance_leg).astype(int)
     t = (np.asarray(stamps_ns, np.int64) - int(stamps_ns[0])) * 1e-9
     fraction = np.full(len(stance), np.nan) if strike_fraction is None else np.asarray(strike_fraction, float)
-    counter = StepCounter()
+    counter = StepCounter(double_support)
     walk = []
     for f in range(1, len(stance)):
         if stance[f] == stance[f - 1]:
@@ -136,7 +150,9 @@ def summary(walk: list[Step]) -> dict[str, object]:
     out["stance_fraction"] = 0.5
     out["double_support_fraction"] = 0.0
     out["stance_note"] = ("impulsive toe-off: each foot stands from its heel strike to the other foot's next one, "
-                          "so stance is half the stride and there is no double support (people: ~60 % and ~20 %)")
+                          "so stance is half the stride and there is no double support (people: ~60 % and ~20 %); "
+                          "heel strikes are reported half a person's double support (0.1 x the step time) before "
+                          "the walker's")
     return out
 
 
