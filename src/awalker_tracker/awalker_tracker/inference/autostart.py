@@ -2,8 +2,9 @@
 
 ``StartFinder`` is fed each frame's image features. Per frame it detects the person
 (``vision.detection``: the largest foreground blob, placed on the ground through the calibrated
-cameras; with several, the other cameras' blobs where its feet put the person) and keeps the
-frames where the person is wholly in view of some camera. Once the detections over ``window_s``
+cameras; with several, the other cameras' blobs where its feet put the person; once someone was seen,
+within ``gate_s``, each camera's blob nearest to them, so that with two people in view the first one
+seen is followed) and keeps the frames where the person is wholly in view of some camera. Once the detections over ``window_s``
 (at least ``min_fraction`` of its frames) form a ground track moving at ``min_speed_m_s`` or
 faster, the start is the central frame of that window's detections (the caller keeps the window's
 frames and tracks from there: the track begins about ``window_s`` / 2 before the walk was found).
@@ -40,12 +41,14 @@ class AutoStartConfig:
 
     window_s: float = 0.7           # walking steadily over this long starts the tracker
     fit_window_s: float = 1.3       # position, heading and speed fitted over this long from the window's start
+    gate_s: float = 0.5             # detections follow the person seen within this long (several people)
+    gate_m: float = 0.5             # ... and within this distance of where they would be now
     min_fraction: float = 0.8
     min_speed_m_s: float = 0.4
     speed_range_m_s: tuple[float, float] = (0.6, 1.9)
 
     def __post_init__(self) -> None:
-        if not (0 < self.window_s <= self.fit_window_s and 0 < self.min_fraction <= 1 and self.min_speed_m_s >= 0
+        if not (0 < self.window_s <= self.fit_window_s and 0 < self.min_fraction <= 1 and self.gate_s >= 0 and self.gate_m > 0 and self.min_speed_m_s >= 0
                 and 0 < self.speed_range_m_s[0] < self.speed_range_m_s[1]):
             raise ValueError(f"AutoStartConfig: invalid settings {self}")
 
@@ -62,6 +65,7 @@ class StartFinder:
         self.last_detection: PersonDetection | None = None
         self.heights: list[float] = []
         self._found: tuple[int, int] | None = None     # (start frame, first frame of its window) once walking
+        self._last_seen: tuple[int, np.ndarray] | None = None   # (frame, ground position) of the last sighting
         self._last_frame = -1
 
     @property
@@ -78,11 +82,24 @@ class StartFinder:
         else None. Its frame is the central frame of the window the walk was found over."""
         self.frames_seen += 1
         self._last_frame = frame
-        # not gated on the last sighting: that follows the ghost a median background leaves where the
-        # person walked in its first frames, once it splits off the person's blob
-        detection = detect_person(list(features), self.cameras)
-        whole = detection is not None and wholly_in_view(detection, self.cameras)
+        # the person seen last (within gate_s), where they would be now (carried on at their velocity over
+        # the window, once half its frames have a position; else anywhere a fast walk reaches): each
+        # camera's blob nearest to there, and a detection farther than gate_m from it is someone else (or
+        # two people's blobs merged)
+        cfg = self.config
+        predicted, reach = None, cfg.gate_m
+        if self._last_seen is not None and (frame - self._last_seen[0]) * self.track.dt <= cfg.gate_s:
+            since = (frame - self._last_seen[0]) * self.track.dt
+            velocity = self.track.velocity(self._last_seen[0], cfg.window_s, min_fraction=0.5)
+            predicted = self._last_seen[1] + (0.0 if velocity is None else since * velocity)
+            reach = cfg.gate_m + (cfg.speed_range_m_s[1] * since if velocity is None else 0.0)
+        detection = detect_person(list(features), self.cameras,
+                                  near=None if predicted is None else np.append(predicted, 0.9))
+        whole = detection is not None and wholly_in_view(detection, self.cameras) and (
+            predicted is None or np.linalg.norm(detection.position - predicted) <= reach)
         self.track.add(frame, detection.position if whole else None)
+        if whole:
+            self._last_seen = (frame, detection.position)
         if self._found is not None:
             if frame - self._found[1] >= int(round(self.config.fit_window_s / self.track.dt)):
                 return self.finish()
@@ -93,7 +110,6 @@ class StartFinder:
         self.last_detection = detection
         if np.isfinite(detection.height):
             self.heights.append(float(detection.height))
-        cfg = self.config
         velocity = self.track.velocity(frame, cfg.window_s, cfg.min_fraction)
         if velocity is None or np.linalg.norm(velocity) < cfg.min_speed_m_s:
             return None
