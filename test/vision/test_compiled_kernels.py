@@ -147,6 +147,30 @@ def test_measurements_match_the_opencv_definition(d):
     assert np.allclose(measurements(rgb.astype(np.float64), d), got, atol=1e-4)
 
 
+def test_densest_colour_matches_the_reference():
+    """Per pixel: the frame with the most frames within the radius (RGB distance; the latest on a tie),
+    and the mean of all five measurements over the frames within the radius of it."""
+    from awalker_tracker.vision.background import _densest_colour, colour_noise_radius
+
+    rng = np.random.default_rng(3)
+    steady = rng.uniform(0, 255, (1, 6, 7, 5)).astype(np.float32)
+    stack = np.repeat(steady, 12, axis=0) + rng.normal(0, 2, (12, 6, 7, 5)).astype(np.float32)
+    # a person passing: each pixel covered in one run of 0-8 of the 12 frames, in changing colours
+    begin, length = rng.integers(0, 12, (6, 7)), rng.integers(0, 9, (6, 7))
+    frame = np.arange(12)[:, None, None]
+    visits = (frame >= begin) & (frame < begin + length)
+    stack[visits] = rng.uniform(0, 255, (visits.sum(), 5)).astype(np.float32)
+    radius2 = colour_noise_radius(stack) ** 2
+    rgb = stack[..., :3].astype(np.float64)
+    distance2 = np.sum(np.square(rgb[:, None] - rgb[None, :]), axis=-1)     # (F, F, h, w)
+    counts = (distance2 < radius2).sum(axis=1)                               # (F, h, w)
+    best = len(stack) - 1 - np.argmax(counts[::-1], axis=0)                  # the latest of the most
+    near = np.take_along_axis(distance2, best[None, None], axis=1)[:, 0] < radius2
+    reference = (np.where(near[..., None], stack, 0.0).sum(axis=0) / near.sum(axis=0)[..., None])
+    assert 0 < near.sum() < near.size and len(np.unique(best)) > 3      # the inputs exercise the choice
+    assert np.allclose(_densest_colour(stack), reference, atol=1e-3)
+
+
 def test_illumination_gains_are_median_ratios():
     rng = np.random.default_rng(5)
     reference = rng.uniform(0, 255, (40, 60, 5)).astype(np.float32)

@@ -21,7 +21,7 @@ estimates a global per-channel gain between a frame and the background, so that 
 changes (camera auto-exposure, clouds) can be divided out before comparing.
 
 Measurements come from one serial numba kernel over the downsampled pixels (``_measurement_kernel``,
-no full-resolution float copy); densities from the compiled kernels of ``vision.densities``, with
+no full-resolution float copy), the densest colours from another (``_densest_colour_kernel``); densities from the compiled kernels of ``vision.densities``, with
 a model's Cholesky factors computed once per model, not per frame.
 """
 from __future__ import annotations
@@ -217,9 +217,10 @@ def fit_background_robust(stack: np.ndarray, floor_std: tuple[float, ...] = DEFA
                           iterations: int = 2) -> BackgroundModel:
     """``learn_background_robust`` on a measurement stack (F, h, w, 5)."""
     mean = _densest_colour(stack)
-    residual = (stack - mean).reshape(-1, MEASUREMENT_DIM).astype(np.float64)
-    # Start from a robust (MAD) per-dimension scale, then refine with inlier statistics.
-    mad = 1.4826 * np.median(np.abs(residual), axis=0)
+    residual = (stack - mean).reshape(-1, MEASUREMENT_DIM)
+    # Start from a robust (MAD) per-dimension scale (over at most ~200k samples: it is only a start),
+    # then refine with inlier statistics.
+    mad = 1.4826 * np.median(np.abs(residual[:: max(1, len(residual) // 200_000)]), axis=0).astype(np.float64)
     cov = _floored(np.diag(np.square(mad)), floor_std)
     for _ in range(iterations):
         model = BackgroundModel(mean, cov)
@@ -248,20 +249,45 @@ def _densest_colour(stack: np.ndarray) -> np.ndarray:
     """Per pixel of a measurement stack (F, h, w, 5) the mean (h, w, 5) float32 of the frames whose
     colour lies within ``colour_noise_radius`` of the frame with the most such neighbours (the
     latest such frame on a tie): the pixel's most often seen steady colour."""
-    frames = stack.astype(np.float32)
-    rgb = frames[..., :3]
-    radius2 = colour_noise_radius(frames) ** 2
-    best_count = np.zeros(frames.shape[1:3], np.int32)
-    best = np.zeros(frames.shape[1:3], np.int64)
-    for j in range(len(frames)):
-        count = (np.sum(np.square(rgb - rgb[j]), axis=-1) < radius2).sum(axis=0)
-        better = count >= best_count
-        best_count = np.where(better, count, best_count)
-        best = np.where(better, j, best)
-    centre = np.take_along_axis(rgb, best[None, ..., None], axis=0)[0]          # (h, w, 3)
-    members = np.sum(np.square(rgb - centre), axis=-1) < radius2               # (F, h, w)
-    summed = np.where(members[..., None], frames, 0.0).sum(axis=0)
-    return (summed / np.maximum(members.sum(axis=0), 1)[..., None]).astype(np.float32)
+    frames = np.ascontiguousarray(stack, np.float32)
+    out = np.empty(frames.shape[1:], np.float32)
+    _densest_colour_kernel(frames, np.float32(colour_noise_radius(frames) ** 2), out)
+    return out
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _densest_colour_kernel(frames: np.ndarray, radius2: np.float32, out: np.ndarray) -> None:
+    """``_densest_colour`` of frames (F, h, w, 5) into out (h, w, 5): per pixel, count for each frame j
+    the frames whose RGB lies within sqrt(radius2) of frame j's; average all 5 measurements over the
+    frames near the best j."""
+    count_frames, h, w, dims = frames.shape
+    near = np.empty(count_frames, np.bool_)
+    for i in range(h):
+        for j in range(w):
+            best, best_count = 0, -1
+            for a in range(count_frames):
+                count = 0
+                for b in range(count_frames):
+                    d0 = frames[a, i, j, 0] - frames[b, i, j, 0]
+                    d1 = frames[a, i, j, 1] - frames[b, i, j, 1]
+                    d2 = frames[a, i, j, 2] - frames[b, i, j, 2]
+                    if d0 * d0 + d1 * d1 + d2 * d2 < radius2:
+                        count += 1
+                if count >= best_count:
+                    best, best_count = a, count
+            members = 0
+            for b in range(count_frames):
+                d0 = frames[best, i, j, 0] - frames[b, i, j, 0]
+                d1 = frames[best, i, j, 1] - frames[b, i, j, 1]
+                d2 = frames[best, i, j, 2] - frames[b, i, j, 2]
+                near[b] = d0 * d0 + d1 * d1 + d2 * d2 < radius2
+                members += near[b]
+            for k in range(dims):
+                total = np.float32(0.0)
+                for b in range(count_frames):
+                    if near[b]:
+                        total += frames[b, i, j, k]
+                out[i, j, k] = total / np.float32(members)
 
 
 def _stack(frames: list[np.ndarray] | np.ndarray, downsample: int) -> np.ndarray:
