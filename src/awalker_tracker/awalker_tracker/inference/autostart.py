@@ -48,8 +48,8 @@ class AutoStartConfig:
     speed_range_m_s: tuple[float, float] = (0.6, 1.9)
 
     def __post_init__(self) -> None:
-        if not (0 < self.window_s <= self.fit_window_s and 0 < self.min_fraction <= 1 and self.gate_s >= 0 and self.gate_m > 0 and self.min_speed_m_s >= 0
-                and 0 < self.speed_range_m_s[0] < self.speed_range_m_s[1]):
+        if not (0 < self.window_s <= self.fit_window_s and 0 < self.min_fraction <= 1 and self.gate_s >= 0
+                and self.gate_m > 0 and self.min_speed_m_s >= 0 and 0 < self.speed_range_m_s[0] < self.speed_range_m_s[1]):
             raise ValueError(f"AutoStartConfig: invalid settings {self}")
 
 
@@ -88,8 +88,8 @@ class StartFinder:
         # two people's blobs merged)
         cfg = self.config
         predicted, reach = None, cfg.gate_m
-        if self._last_seen is not None and (frame - self._last_seen[0]) * self.track.dt <= cfg.gate_s:
-            since = (frame - self._last_seen[0]) * self.track.dt
+        since = None if self._last_seen is None else (frame - self._last_seen[0]) * self.track.dt
+        if since is not None and since <= cfg.gate_s:
             velocity = self.track.velocity(self._last_seen[0], cfg.window_s, min_fraction=0.5)
             predicted = self._last_seen[1] + (0.0 if velocity is None else since * velocity)
             reach = cfg.gate_m + (cfg.speed_range_m_s[1] * since if velocity is None else 0.0)
@@ -101,7 +101,7 @@ class StartFinder:
         if whole:
             self._last_seen = (frame, detection.position)
         if self._found is not None:
-            if frame - self._found[1] >= int(round(self.config.fit_window_s / self.track.dt)):
+            if frame - self._found[1] >= self.track.span(cfg.fit_window_s):
                 return self.finish()
             return None
         if not whole:
@@ -113,8 +113,7 @@ class StartFinder:
         velocity = self.track.velocity(frame, cfg.window_s, cfg.min_fraction)
         if velocity is None or np.linalg.norm(velocity) < cfg.min_speed_m_s:
             return None
-        span = max(2, int(round(cfg.window_s / self.track.dt)))
-        self._found = (int(self.track.central_frame(frame, cfg.window_s)), frame - span)
+        self._found = (int(self.track.central_frame(frame, cfg.window_s)), frame - self.track.span(cfg.window_s))
         return None
 
     def finish(self) -> StartDescription | None:

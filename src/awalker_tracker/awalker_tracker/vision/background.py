@@ -21,8 +21,9 @@ estimates a global per-channel gain between a frame and the background, so that 
 changes (camera auto-exposure, clouds) can be divided out before comparing.
 
 Measurements come from one serial numba kernel over the downsampled pixels (``_measurement_kernel``,
-no full-resolution float copy), the densest colours from another (``_densest_colour_kernel``); densities from the compiled kernels of ``vision.densities``, with
-a model's Cholesky factors computed once per model, not per frame.
+no full-resolution float copy), the densest colours from another (``_densest_colour_kernel``);
+densities from the compiled kernels of ``vision.densities``, with a model's Cholesky factors
+computed once per model, not per frame.
 """
 from __future__ import annotations
 
@@ -255,6 +256,15 @@ def _densest_colour(stack: np.ndarray) -> np.ndarray:
     return out
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _colour_distance2(frames: np.ndarray, a: int, b: int, i: int, j: int) -> float:
+    """Squared RGB distance between frames a and b of a stack (F, h, w, 5) at pixel (i, j)."""
+    d0 = frames[a, i, j, 0] - frames[b, i, j, 0]
+    d1 = frames[a, i, j, 1] - frames[b, i, j, 1]
+    d2 = frames[a, i, j, 2] - frames[b, i, j, 2]
+    return d0 * d0 + d1 * d1 + d2 * d2
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _densest_colour_kernel(frames: np.ndarray, radius2: np.float32, out: np.ndarray) -> None:
     """``_densest_colour`` of frames (F, h, w, 5) into out (h, w, 5): per pixel, count for each frame j
@@ -268,19 +278,13 @@ def _densest_colour_kernel(frames: np.ndarray, radius2: np.float32, out: np.ndar
             for a in range(count_frames):
                 count = 0
                 for b in range(count_frames):
-                    d0 = frames[a, i, j, 0] - frames[b, i, j, 0]
-                    d1 = frames[a, i, j, 1] - frames[b, i, j, 1]
-                    d2 = frames[a, i, j, 2] - frames[b, i, j, 2]
-                    if d0 * d0 + d1 * d1 + d2 * d2 < radius2:
+                    if _colour_distance2(frames, a, b, i, j) < radius2:
                         count += 1
                 if count >= best_count:
                     best, best_count = a, count
             members = 0
             for b in range(count_frames):
-                d0 = frames[best, i, j, 0] - frames[b, i, j, 0]
-                d1 = frames[best, i, j, 1] - frames[b, i, j, 1]
-                d2 = frames[best, i, j, 2] - frames[b, i, j, 2]
-                near[b] = d0 * d0 + d1 * d1 + d2 * d2 < radius2
+                near[b] = _colour_distance2(frames, best, b, i, j) < radius2
                 members += near[b]
             for k in range(dims):
                 total = np.float32(0.0)

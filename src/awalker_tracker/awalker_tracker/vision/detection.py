@@ -212,9 +212,13 @@ class GroundTrack:
         for old in [f for f in self.positions if f < frame - self.keep_frames]:
             del self.positions[old]
 
+    def span(self, window_s: float) -> int:
+        """Frames in a window of ``window_s`` (at least 2)."""
+        return max(2, int(round(window_s / self.dt)))
+
     def _window(self, frame: int, window_s: float) -> tuple[int, list[tuple[int, np.ndarray]]]:
         """(frames in the ``window_s`` up to ``frame``, its (frame, position) pairs with a position)."""
-        span = max(2, int(round(window_s / self.dt)))
+        span = self.span(window_s)
         return span, [(f, p) for f in range(frame - span, frame + 1) if (p := self.positions.get(f)) is not None]
 
     def velocity(self, frame: int, window_s: float, min_fraction: float = 0.8) -> np.ndarray | None:

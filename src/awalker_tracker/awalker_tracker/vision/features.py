@@ -65,8 +65,9 @@ class FeatureConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if not 0 < self.outlier_probability < 1 or self.downsample < 1 or self.background_frames < 0 or self.median_frames < 1 or self.llr_clip <= 0 \
-                or self.refit_keep < 2 or any(f < 1 for f in self.refit_frames):
+        if (not 0 < self.outlier_probability < 1 or self.downsample < 1 or self.background_frames < 0
+                or self.median_frames < 1 or self.llr_clip <= 0 or self.refit_keep < 2
+                or any(f < 1 for f in self.refit_frames)):
             raise ValueError(f"invalid FeatureConfig {self}")
         if not 0.0 <= self.adapt_rate <= 1.0:
             raise ValueError("FeatureConfig.adapt_rate must be in [0, 1]")
