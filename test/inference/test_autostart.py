@@ -110,3 +110,5 @@ def test_config_is_checked():
         AutoStartConfig(min_fraction=0.0)
     with pytest.raises(ValueError):
         AutoStartConfig(window_s=1.0, fit_window_s=0.8)
+    with pytest.raises(ValueError, match="invalid settings"):
+        AutoStartConfig(gate_m=0.0)
