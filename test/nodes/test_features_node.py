@@ -326,3 +326,65 @@ def test_occlusion_mask_published_after_its_image_is_applied(ros_context):
         executor.shutdown()
         node.destroy_node()
         probe.destroy_node()
+
+
+def test_masks_that_came_in_time_are_applied_when_the_node_was_kept_waiting(ros_context):
+    """Two frames in flight (image, image, mask, mask) and the node's executor kept from running for longer
+    than mask_wait_s: the hold timers and the masks are ready together, and rclpy runs timers first. Both
+    frames must still get their masks, in order (before: the first image went out unmasked whenever the
+    machine was busy, so runs of one bag differed)."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import Image
+
+    from awalker_msgs.msg import ImageFeatures
+    from awalker_tracker.nodes.convert import header, stamp_to_ns
+    from awalker_tracker.nodes.features import FeatureNode, features_from_msg
+
+    frames = scene_frames()
+    node = FeatureNode(context=ros_context, parameter_overrides=[
+        Parameter("camera_name", value="cam"), Parameter("downsample", value=2), Parameter("flow_cell_size", value=8),
+        Parameter("background_frames", value=3), Parameter("mask_wait_s", value=0.1)])
+    probe = Node("probe", context=ros_context)
+    received: list = []
+    probe.create_subscription(ImageFeatures, "/cam/features", received.append, QoSProfile(depth=50))
+    image_pub = probe.create_publisher(Image, "/cam/image_raw", QoSProfile(depth=50))
+    mask_pub = probe.create_publisher(Image, "/cam/occlusion_mask", QoSProfile(depth=50))
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(probe)
+    h, w = frames[0].shape[:2]
+    occluded = np.zeros((h, w), np.uint8)
+    occluded[:, w // 2:] = 255
+    stamps = [3_000_000_000 + k * 33_333_333 for k in range(len(frames))]
+    try:
+        deadline = time.monotonic() + 10
+        while (image_pub.get_subscription_count() == 0 or mask_pub.get_subscription_count() == 0
+               or node.count_publishers("/cam/occlusion_mask") == 0) and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        for k in range(0, len(frames) - 1, 2):
+            pair = (k, k + 1)
+            for j in pair:
+                image_pub.publish(image_msg(frames[j], stamps[j]))
+            # the first image of the pair is taken and held; its timer then waits in the executor
+            while not node._held and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
+            for j in pair:
+                mask = Image(header=header(stamps[j], "cam_optical_frame"), height=h, width=w, encoding="mono8",
+                             step=w)
+                mask.data = occluded.tobytes()
+                mask_pub.publish(mask)
+            time.sleep(0.3)                          # the node kept from running past mask_wait_s
+            while len(received) < k + 2 and time.monotonic() < deadline + 10:
+                executor.spin_once(timeout_sec=0.05)
+        assert [stamp_to_ns(m.header.stamp) for m in received] == stamps[: len(received)]
+        assert len(received) >= 4 and node.stats.frames_without_mask == 0
+        half = features_from_msg(received[0]).map_shape[1] // 2
+        for msg in received[3:]:                     # after the background frames: the right half is hidden
+            assert not np.any(features_from_msg(msg).llr[:, :, half:])
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        probe.destroy_node()

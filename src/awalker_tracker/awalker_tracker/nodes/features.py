@@ -8,8 +8,10 @@ Subscribes (camera ``<cam>`` from the ``camera_name`` parameter):
   stamp: its pixels get ratio 0 and its flow cells are invalid). When the camera has masks (a
   publisher on the topic, or a mask seen before), an image whose mask has not arrived yet is
   held until it does (replay publishes a frame's mask just after its image), for at most
-  ``mask_wait_s``; an image that gets no mask is processed without one, logged and counted
-  (``stats.frames_without_mask``). And ``/<cam>/foreground_labels`` (mono8 class label
+  ``mask_wait_s``; images are processed in the order they came, each once its own mask is
+  there; an image that gets no mask is processed without one, logged and counted
+  (``stats.frames_without_mask``). Whether a mask came in time does not depend on how busy the
+  machine is: the wait's end is decided after the messages already delivered are handled. And ``/<cam>/foreground_labels`` (mono8 class label
   image for learning the foreground: 0 = none, k = 1 + index into PART_CLASSES);
 - ``/awalker/start_description`` (latched std_msgs/String), or the ``start_description`` YAML
   file parameter: the frames before its ``frame`` are background-only (``background_frames`` =
@@ -35,6 +37,7 @@ from __future__ import annotations
 import array
 import sys
 import time
+from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
@@ -213,8 +216,10 @@ class FeatureNode(Node):
         self._last_stamp = -1
         self._masks: dict[int, np.ndarray] = {}
         self._masks_seen = False
-        self._held: tuple[Image | CompressedImage, str, int] | None = None  # image waiting for its mask
+        # images waiting for their masks, oldest first: (message, topic, stamp ns, monotonic deadline s)
+        self._held: deque[tuple[Image | CompressedImage, str, int, float]] = deque()
         self._hold_timer: Any = None
+        self._wait_over = self.create_guard_condition(lambda: self._release_held(overdue=True))
         self._labels: np.ndarray | None = None
         self._start: Any = None
         self._info: CameraInfo | None = None
@@ -298,8 +303,7 @@ class FeatureNode(Node):
             self.get_logger().error(str(exc))
         while len(self._masks) > 30:
             self._masks.pop(min(self._masks))
-        if self._held is not None and self._held[2] == stamp:
-            self._release_held()
+        self._release_held()
 
     def _on_labels(self, msg: Image) -> None:
         try:
@@ -319,28 +323,39 @@ class FeatureNode(Node):
     def _on_image(self, msg: Image | CompressedImage, topic: str) -> None:
         """Process the image now, or hold it until its occlusion mask arrives (see the module docstring)."""
         stamp = stamp_to_ns(msg.header.stamp)
-        if self._held is not None:
-            self._release_held()
-        if stamp in self._masks or self.mask_wait_s <= 0 or not self._expects_masks():
+        if not self._held and (stamp in self._masks or self.mask_wait_s <= 0 or not self._expects_masks()):
             self._process(msg, topic)
             return
-        self._held = (msg, topic, stamp)
-        self._hold_timer = self.create_timer(self.mask_wait_s, self._release_held)
+        self._held.append((msg, topic, stamp, time.monotonic() + self.mask_wait_s))
+        self._release_held()
 
-    def _release_held(self) -> None:
-        """Process the held image, with its mask if it has come."""
+    def _release_held(self, overdue: bool = False) -> None:
+        """Process held images, oldest first, while the oldest has its mask (with ``overdue``: or its
+        wait is over), then time the wait of the oldest still held."""
         if self._hold_timer is not None:
             self.destroy_timer(self._hold_timer)
             self._hold_timer = None
-        if self._held is None:
-            return
-        msg, topic, stamp = self._held
-        self._held = None
-        if stamp not in self._masks:
-            self.stats.frames_without_mask += 1
-            self.get_logger().warning(f"/{self.camera_name}/occlusion_mask: no mask for the image at {stamp} ns "
-                                      f"within {self.mask_wait_s} s; its features ignore occlusion")
-        self._process(msg, topic)
+        now = time.monotonic()
+        while self._held:
+            msg, topic, stamp, deadline = self._held[0]
+            if stamp not in self._masks and not (overdue and now >= deadline):
+                break
+            self._held.popleft()
+            if stamp not in self._masks:
+                self.stats.frames_without_mask += 1
+                self.get_logger().warning(f"/{self.camera_name}/occlusion_mask: no mask for the image at {stamp} ns "
+                                          f"within {self.mask_wait_s} s; its features ignore occlusion")
+            self._process(msg, topic)
+        if self._held:
+            self._hold_timer = self.create_timer(max(self._held[0][3] - now, 1e-3), self._on_wait_over)
+
+    def _on_wait_over(self) -> None:
+        """The oldest held image's wait is over. An executor that was kept from running sees this timer and
+        that image's mask ready together and runs timers first: the guard condition decides after the
+        subscriptions (rclpy runs a node's timers, then its subscriptions, then its guard conditions)."""
+        self.destroy_timer(self._hold_timer)
+        self._hold_timer = None
+        self._wait_over.trigger()
 
     def _process(self, msg: Image | CompressedImage, topic: str) -> None:
         stamp = stamp_to_ns(msg.header.stamp)
