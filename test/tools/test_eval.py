@@ -96,6 +96,22 @@ def test_foot_skate_penetration_and_float():
     assert raised["float_mm"]["mean"] == pytest.approx(12.0)
 
 
+def test_a_reacquisition_jump_is_not_foot_skate():
+    """The tracker re-placing the body (a re-acquisition) moves a planted foot in one frame: a slide unless
+    that frame is marked replaced, and only that frame's step is left out."""
+    truth = walking_truth()
+    markers = truth.markers.copy()
+    markers[20:, :, 0] += 0.5                                  # the whole body 0.5 m along x from frame 20 on
+    jumped = PoseTrack(truth.frames, truth.stamps_ns, NAMES, markers)
+    assert evaluation.foot_plausibility(jumped)["skate_mm"]["max"] == pytest.approx(500.0)
+    replaced = np.arange(FRAMES) == 20
+    feet = evaluation.foot_plausibility(jumped, replaced=replaced)
+    assert feet["skate_mm"]["max"] == pytest.approx(0.0) and feet["skate_mm"]["replaced"] == 1
+    assert feet["skate_mm"]["contact_pairs"] >= evaluation.foot_plausibility(truth)["skate_mm"]["contact_pairs"] - 4
+    late = evaluation.foot_plausibility(jumped, replaced=np.arange(FRAMES) == 21)   # the wrong frame: still a slide
+    assert late["skate_mm"]["max"] == pytest.approx(500.0)
+
+
 def test_csv_roundtrip_and_bad_files(tmp_path):
     truth = walking_truth()
     path = tmp_path / "poses.csv"

@@ -194,15 +194,18 @@ def ground_contact(track: PoseTrack, tolerance_m: float = 0.02) -> dict[str, np.
     return contact
 
 
-def foot_plausibility(track: PoseTrack, tolerance_m: float = 0.02,
-                      stance_left: np.ndarray | None = None) -> dict[str, object]:
+def foot_plausibility(track: PoseTrack, tolerance_m: float = 0.02, stance_left: np.ndarray | None = None,
+                      replaced: np.ndarray | None = None) -> dict[str, object]:
     """Foot skate, penetration and float of a pose track (mm).
 
     Skate: horizontal displacement between consecutive frames of each heel/toe marker that is
     in ground contact in both frames; with ``stance_left`` (per frame, e.g. the tracker's MAP
     stance leg) only the stance foot's markers count, and only while it stays the stance foot
-    (a low swing foot gliding over the floor is not skating). Penetration: depth of the lowest
-    foot marker below z = 0. Float: height of the lowest foot marker above z = 0.
+    (a low swing foot gliding over the floor is not skating). ``replaced`` (per frame, bool): frames
+    where the tracker put the body somewhere new (a re-acquisition); the step into such a frame is
+    not a slide and is not counted (``skate_mm.replaced`` says how many frames were left out).
+    Penetration: depth of the lowest foot marker below z = 0. Float: height of the lowest foot
+    marker above z = 0.
     """
     for names in FOOT_MARKERS.values():
         for n in names:
@@ -210,6 +213,8 @@ def foot_plausibility(track: PoseTrack, tolerance_m: float = 0.02,
                 raise InputError(f"pose track has no {n!r} marker (needed for foot skate)")
     contact = ground_contact(track, tolerance_m)
     consecutive = np.diff(track.frames) == 1
+    if replaced is not None:
+        consecutive &= ~np.asarray(replaced, bool)[1:]
     slips = []
     for name, touching in contact.items():
         xy = track.marker(name)[:, :2]
@@ -227,7 +232,8 @@ def foot_plausibility(track: PoseTrack, tolerance_m: float = 0.02,
     return {
         "skate_mm": {"mean": float(slips_all.mean()) if slips_all.size else 0.0,
                      "max": float(slips_all.max()) if slips_all.size else 0.0,
-                     "contact_pairs": int(slips_all.size)},
+                     "contact_pairs": int(slips_all.size),
+                     "replaced": int(np.sum(replaced)) if replaced is not None else 0},
         "penetration_mm": {"mean": float(penetration.mean()), "max": float(penetration.max())},
         "float_mm": {"mean": float(floating.mean()), "max": float(floating.max())},
     }
@@ -250,16 +256,18 @@ def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarra
              ) -> dict[str, object]:
     """All metrics as a JSON-ready dict (per-frame series included)."""
     errors = marker_errors(estimate, truth)
-    stance_left = None
+    stance_left = replaced = None
     if summary is not None:
         lookup = dict(zip(summary["stamp_ns"].tolist(), summary["stance_leg"].tolist()))
         if all(int(s) in lookup for s in estimate.stamps_ns):
             stance_left = np.array([lookup[int(s)] == "left" for s in estimate.stamps_ns])
+        moved = dict(zip(summary["stamp_ns"].tolist(), (summary["reacquired"] > 0).tolist()))
+        replaced = np.array([moved.get(int(s), False) for s in estimate.stamps_ns])
     result: dict[str, object] = {
         "absolute_mm": statistics(errors["absolute_mm"]),
         "relative_mm": statistics(errors["relative_mm"]),
         "per_marker_absolute_mm": errors["per_marker_mm"],
-        "estimate_feet": foot_plausibility(estimate, stance_left=stance_left),
+        "estimate_feet": foot_plausibility(estimate, stance_left=stance_left, replaced=replaced),
         "truth_feet": foot_plausibility(truth),
         "walk": walk_quality(estimate, truth),
         "gait": gait_comparison(estimate, truth, summary),
