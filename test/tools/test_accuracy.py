@@ -23,7 +23,11 @@ from awalker_tools.cli import main
 
 MOCAP = Path(__file__).resolve().parents[1] / "data" / "mocap"
 FRAMES, BACKGROUND, SIZE, PARTICLES = 40, 5, ("320", "240"), 500
-SYNTH_SEED, TRACK_SEED = 1, 0
+SYNTH_SEED = 1
+# bounds are set from tracker seeds 0-4; run another with AWALKER_TEST_TRACK_SEED=3 pytest test/tools/test_accuracy.py
+# (2026-11-25, seeds 1-4: all pass but the stop test at seed 3, whose track ends 0.54 m off the person, and the
+# no-recovery control of the re-acquisition test at seed 4, 262 mm along the walk, where 300 is asked)
+TRACK_SEED = int(os.environ.get("AWALKER_TEST_TRACK_SEED", "0"))
 
 SEQUENCES = {
     "mono_straight": ["--cameras", "1"],
@@ -65,9 +69,12 @@ BOUNDS = {
     "speed_change": Bounds(280.0, 45.0, 0.24, 0.9),
     "turn": Bounds(330.0, 95.0, 0.28, 0.85),       # the second half of the turn is followed loosely
     "occluder": Bounds(300.0, 62.0, 0.18, 0.85),   # the occluded stretch delays the stance switch
-    # real gait: the walker's legs and feet differ from the mocap's (relative 54-71 mm over tracker seeds 0-4
-    # with the turn prior and the area-weighted appearance, 58-65 without the area weighting)
-    "mocap": Bounds(360.0, 75.0, 0.2, 0.85),
+    # real gait: the walker's legs and feet differ from the mocap's. Since the mocap walk faces the walking
+    # direction over a stride (synth, b5b794d) and the shadow model (0e43ec0, 4d2c087), tracker seeds 0-4 give
+    # mean absolute 146-273 mm, relative 55-82, stance 0.78-0.97 (the bounds before, 75 mm and 0.85, held for
+    # seeds 0-1 only). The stance leg is what the images decide here: with the likelihood scaled to 1e-6
+    # relative 63-77 mm but stance 0.56-0.66; with no likelihood relative 69-205, stance the same.
+    "mocap": Bounds(360.0, 90.0, 0.2, 0.72),
 }
 
 
