@@ -105,6 +105,48 @@ def test_a_person_standing_still_does_not_start_it(frames):
     assert "not yet walking" in finder.status()
 
 
+@pytest.fixture(scope="module")
+def two_walking():
+    """The side camera's features of two people walking along +x: A from x = -0.8 m as in ``frames``, B from
+    x = 0.2 m and 0.8 m nearer the camera (its blob the larger)."""
+    from awalker_tracker.vision.render import render, render_rgb
+
+    camera = side_camera()
+    background = background_image(camera, seed=0)
+    rng = np.random.default_rng(5)
+    extractor = FeatureExtractor(CONFIG)
+    for _ in range(CONFIG.background_frames):
+        extractor.process(noisy(background, rng))
+    a, b = walking(30, x0=-0.8), walking(30, x0=0.2)
+    features = []
+    for pa, pb in zip(a, b):
+        pb.kin.contact_point = pb.kin.contact_point + np.array([0.0, -0.8])
+        image = background
+        for person in (pa, pb):                                    # the farther first
+            image = render_rgb(BODY, person.segments(), camera, image, result=render(BODY, person.segments(), camera))
+        features.append(extractor.process(noisy(image, rng)))
+    return camera, features
+
+
+def _start(camera, features, config: AutoStartConfig):
+    finder = StartFinder([camera], DT, config)
+    found = [finder.push(k, [f]) for k, f in enumerate(features)]
+    return next((s for s in found if s is not None), None) or finder.finish(), finder
+
+
+def test_follow_near_chooses_which_of_two_people(two_walking):
+    """Of two people walking, the finder follows the larger blob (B, nearer the camera) unless told to follow
+    the one near a ground point (A's start), and starts on nobody when nobody is near the point."""
+    camera, features = two_walking
+    first, _ = _start(camera, features, AutoStartConfig())
+    assert first is not None and abs(first.position[1] - (-0.8)) < 0.25          # B
+    chosen, _ = _start(camera, features, AutoStartConfig(follow_near=(-0.8, 0.0)))
+    assert chosen is not None and abs(chosen.position[1]) < 0.25 and chosen.position[0] < 0.0   # A
+    assert abs(chosen.heading - HEADING) < np.radians(20) and abs(chosen.speed - SPEED) < 0.3
+    nobody, finder = _start(camera, features, AutoStartConfig(follow_near=(5.0, 5.0)))
+    assert nobody is None and "within 1.5 m of (5, 5) m" in finder.status()
+
+
 def test_config_is_checked():
     with pytest.raises(ValueError):
         AutoStartConfig(min_fraction=0.0)
@@ -112,3 +154,7 @@ def test_config_is_checked():
         AutoStartConfig(window_s=1.0, fit_window_s=0.8)
     with pytest.raises(ValueError, match="invalid settings"):
         AutoStartConfig(gate_m=0.0)
+    with pytest.raises(ValueError, match="follow_near"):
+        AutoStartConfig(follow_near=(np.nan, 0.0))
+    with pytest.raises(ValueError, match="invalid settings"):
+        AutoStartConfig(follow_near=(0.0, 0.0), follow_radius_m=0.0)

@@ -393,12 +393,14 @@ def test_the_automatic_start_follows_one_of_two_people(tmp_path):
     and speed. Measured (synthesis seed 1): the second person (the first one seen) at 0.09 m and 4
     degrees (120 frames: 0.13 m, 5 degrees); before the detections were gated, the largest blob of any
     camera alternated between them: 0.40 m and 28 degrees from the first person (120 frames: 1.0 and
-    2.4 m from them); gated on the last sighting without the distance check: 0.29 m and 92 degrees."""
+    2.4 m from them); gated on the last sighting without the distance check: 0.29 m and 92 degrees.
+    ``--follow-near`` (AutoStartConfig.follow_near) at where the first person enters chooses them instead."""
     import numpy as np
+    import yaml
 
     from awalker_tools import evaluation
     from awalker_tools.bagio import SequenceReader
-    from awalker_tracker.inference.autostart import StartFinder
+    from awalker_tracker.inference.autostart import AutoStartConfig, StartFinder
     from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
 
     seq = tmp_path / "seq"
@@ -408,23 +410,48 @@ def test_the_automatic_start_follows_one_of_two_people(tmp_path):
     with SequenceReader(seq / "synth.bag") as reader:
         cameras = reader.cameras
         extractors = [FeatureExtractor(FeatureConfig()) for _ in cameras]
-        finder, stamps, found = StartFinder(cameras, 1 / 30), [], None
-        for k, (stamp, images) in enumerate(reader.frames()):
+        stamps, features = [], []
+        for stamp, images in reader.frames():
             stamps.append(int(stamp))
-            found = finder.push(k, [e.process(images[c.name]) for e, c in zip(extractors, cameras)])
+            features.append([e.process(images[c.name]) for e, c in zip(extractors, cameras)])
+    people = [evaluation.read_poses_csv(seq / csv) for csv in ("ground_truth.csv", "second_person.csv")]
+
+    def misses(config: AutoStartConfig) -> list[tuple[float, float]]:
+        """(distance m, heading error deg) of the start found from each person's pelvis track."""
+        finder, found = StartFinder(cameras, 1 / 30, config), None
+        for k, frame in enumerate(features):
+            found = finder.push(k, frame)
             if found is not None:
                 break
-    found = found or finder.finish()
-    assert found is not None, finder.status()
-    misses = []
-    for csv in ("ground_truth.csv", "second_person.csv"):
-        person = evaluation.read_poses_csv(seq / csv)
-        row = int(np.flatnonzero(person.stamps_ns == stamps[found.frame])[0])
-        pelvis = person.marker("pelvis")[:, :2]
-        walk = pelvis[min(row + 10, len(pelvis) - 1)] - pelvis[max(row - 10, 0)]
-        heading_error = abs(np.degrees(np.angle(np.exp(1j * (found.heading - np.arctan2(walk[1], walk[0]))))))
-        misses.append((float(np.linalg.norm(np.array(found.position) - pelvis[row])), heading_error))
-    assert any(distance < 0.3 and heading < 20.0 for distance, heading in misses), misses
+        found = found or finder.finish()
+        assert found is not None, finder.status()
+        out = []
+        for person in people:
+            row = int(np.flatnonzero(person.stamps_ns == stamps[found.frame])[0])
+            pelvis = person.marker("pelvis")[:, :2]
+            walk = pelvis[min(row + 10, len(pelvis) - 1)] - pelvis[max(row - 10, 0)]
+            heading = abs(np.degrees(np.angle(np.exp(1j * (found.heading - np.arctan2(walk[1], walk[0]))))))
+            out.append((float(np.linalg.norm(np.array(found.position) - pelvis[row])), heading))
+        return out
+
+    def on(miss: tuple[float, float]) -> bool:
+        return miss[0] < 0.3 and miss[1] < 20.0
+
+    first_seen = misses(AutoStartConfig())
+    assert any(on(m) for m in first_seen), first_seen
+    other = 0 if on(first_seen[1]) else 1                  # the person the default start did not follow
+    enters = people[other].marker("pelvis")[0, :2]
+    chosen = misses(AutoStartConfig(follow_near=(float(enters[0]), float(enters[1]))))
+    assert on(chosen[other]) and not on(chosen[1 - other]), chosen
+    # the same through the command line and the tracker node (a few particles: only the start is checked)
+    out = tmp_path / "run"
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+        assert main(["track", str(seq / "synth.bag"), "--out", str(out), "--particles", "100", "--no-overlay",
+                     "--follow-near", str(enters[0]), str(enters[1])]) == 0
+    start = yaml.safe_load((out / "start.yaml").read_text())["start"]
+    row = int(np.flatnonzero(people[other].stamps_ns == stamps[start["frame"]])[0])
+    assert np.linalg.norm(np.array(start["position"]) - people[other].marker("pelvis")[row, :2]) < 0.3
 
 
 def test_one_camera_does_not_drift_toward_the_camera(tmp_path):

@@ -79,6 +79,7 @@ class TrackOptions:
     seed: int = 0
     likelihood_scale: float = 0.1
     auto_start: bool = False        # ignore any start description and find the walking person (also when none exists)
+    follow_near: tuple[float, float] | None = None   # automatic start: follow the person first seen near this ground point (m)
     recovery: bool = True           # re-seed fallen walkers and re-acquire a lost track (inference/recovery.py)
     overlays: bool = True
     storage: str = "mcap"
@@ -247,6 +248,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
             Parameter("cameras", value=names), Parameter("calibration", value=str(out / CALIBRATION_FILE)),
             Parameter("start_description", value=str(out / START_FILE) if start is not None else ""),
             Parameter("auto_start", value=start is None), Parameter("start_output", value=str(out / START_FILE)),
+            *([Parameter("follow_near", value=[float(v) for v in options.follow_near])] if options.follow_near else []),
             Parameter("body_description", value=str(out / BODY_FILE) if body is not None else ""),
             Parameter("estimate_body", value=body is None), Parameter("body_output", value=str(out / BODY_FILE)),
             Parameter("num_particles", value=int(options.particles)), Parameter("lookahead", value=int(options.lookahead)),

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from awalker_tracker.errors import InputError
@@ -18,12 +19,15 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--trust (gamma) must lie in [0, 1], got {args.trust}")
     if args.lookahead < 0:
         raise InputError(f"--lookahead must be >= 0, got {args.lookahead}")
+    if args.follow_near is not None and not all(math.isfinite(v) for v in args.follow_near):
+        raise InputError(f"--follow-near must be a ground point X Y in metres, got {args.follow_near}")
     run_tracking(TrackOptions(
         bag=Path(args.bag), out=Path(args.out), start=Path(args.start) if args.start else None,
         body=Path(args.body) if args.body else None, particles=args.particles, lookahead=args.lookahead,
         trust=args.trust,
         seed=args.seed, likelihood_scale=args.likelihood_scale, recovery=not args.no_recovery,
-        auto_start=args.auto_start, overlays=not args.no_overlay,
+        auto_start=args.auto_start or args.follow_near is not None,
+        follow_near=tuple(args.follow_near) if args.follow_near is not None else None, overlays=not args.no_overlay,
         storage=args.storage,
         share_topics=args.share_topics))
     return 0
@@ -43,6 +47,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--auto-start", action="store_true",
                         help="ignore any start description and find the walking person in the images (also done "
                              "when there is none); the start found is written to DIR/start.yaml")
+    parser.add_argument("--follow-near", nargs=2, type=float, metavar=("X", "Y"),
+                        help="with several people in view, follow the one first seen within 1.5 m of this world "
+                             "ground point (m); implies --auto-start (default: the first person seen walking)")
     parser.add_argument("--body", help="body description YAML (segment sizes in metres)")
     parser.add_argument("--particles", type=int, default=5000, help="number of particles (default 5000)")
     parser.add_argument("--lookahead", type=int, default=3, help="look-ahead tau in frames (default 3)")

@@ -4,7 +4,8 @@
 (``vision.detection``: the largest foreground blob, placed on the ground through the calibrated
 cameras; with several, the other cameras' blobs where its feet put the person; once someone was seen,
 within ``gate_s``, each camera's blob nearest to them, so that with two people in view the first one
-seen is followed) and keeps the frames where the person is wholly in view of some camera. Once the detections over ``window_s``
+seen is followed; ``follow_near`` chooses another: until someone is seen, only a person within
+``follow_radius_m`` of that ground point counts) and keeps the frames where the person is wholly in view of some camera. Once the detections over ``window_s``
 (at least ``min_fraction`` of its frames) form a ground track moving at ``min_speed_m_s`` or
 faster, the start is the central frame of that window's detections (the caller keeps the window's
 frames and tracks from there: the track begins about ``window_s`` / 2 before the walk was found).
@@ -46,11 +47,17 @@ class AutoStartConfig:
     min_fraction: float = 0.8
     min_speed_m_s: float = 0.4
     speed_range_m_s: tuple[float, float] = (0.6, 1.9)
+    follow_near: tuple[float, float] | None = None   # world ground point (m): follow the person first seen near it
+    follow_radius_m: float = 1.5                     # ... within this distance (several people in view)
 
     def __post_init__(self) -> None:
         if not (0 < self.window_s <= self.fit_window_s and 0 < self.min_fraction <= 1 and self.gate_s >= 0
-                and self.gate_m > 0 and self.min_speed_m_s >= 0 and 0 < self.speed_range_m_s[0] < self.speed_range_m_s[1]):
+                and self.gate_m > 0 and self.min_speed_m_s >= 0 and 0 < self.speed_range_m_s[0] < self.speed_range_m_s[1]
+                and self.follow_radius_m > 0):
             raise ValueError(f"AutoStartConfig: invalid settings {self}")
+        if self.follow_near is not None and not (len(self.follow_near) == 2 and np.all(np.isfinite(self.follow_near))):
+            raise ValueError(f"AutoStartConfig: follow_near must be a finite ground point (x, y) in m, got "
+                             f"{self.follow_near!r}")
 
 
 class StartFinder:
@@ -93,6 +100,8 @@ class StartFinder:
             velocity = self.track.velocity(self._last_seen[0], cfg.window_s, min_fraction=0.5)
             predicted = self._last_seen[1] + (0.0 if velocity is None else since * velocity)
             reach = cfg.gate_m + (cfg.speed_range_m_s[1] * since if velocity is None else 0.0)
+        elif self._last_seen is None and cfg.follow_near is not None:
+            predicted, reach = np.asarray(cfg.follow_near, float), cfg.follow_radius_m
         detection = detect_person(list(features), self.cameras,
                                   near=None if predicted is None else np.append(predicted, 0.9))
         whole = detection is not None and wholly_in_view(detection, self.cameras) and (
@@ -133,7 +142,10 @@ class StartFinder:
     def status(self) -> str:
         """What has been seen so far, for a log line while waiting."""
         if self.frames_detected == 0:
-            return f"no person seen in {self.frames_seen} frames"
+            near = ("" if self.config.follow_near is None else
+                    f" within {self.config.follow_radius_m:g} m of ({self.config.follow_near[0]:g}, "
+                    f"{self.config.follow_near[1]:g}) m")
+            return f"no person seen{near} in {self.frames_seen} frames"
         if self._found is not None:
             return (f"person walking since frame {self._found[0]}, fitting the track over "
                     f"{self.config.fit_window_s:g} s")

@@ -33,7 +33,7 @@ from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header, String
 
 from awalker_tracker.errors import InputError
-from awalker_tracker.inference.autostart import AUTO_SPREAD
+from awalker_tracker.inference.autostart import AUTO_SPREAD, AutoStartConfig
 from awalker_tracker.inference.posterior import PosteriorSummary as CoreSummary
 from awalker_tracker.inference.recovery import RecoveryConfig
 from awalker_tracker.inference.smc import SMCConfig
@@ -90,6 +90,8 @@ class TrackerNode(Node):
                                               "(dead reckoning)"))
         self.auto_start = bool(declare("auto_start", False, "no start description: find the walking person in the "
                                        "images (inference/autostart.py)"))
+        follow = declare("follow_near", Parameter.Type.DOUBLE_ARRAY, "automatic start with several people in view: "
+                         "follow the one first seen near this world ground point [x, y] (m); unset: the first seen")
         self.start_output = str(declare("start_output", "", "write the start description used (given or found) "
                                         "to this YAML file; empty: do not"))
         self.estimate_body = bool(declare("estimate_body", False, "no body description: with the automatic start, "
@@ -109,6 +111,10 @@ class TrackerNode(Node):
                                             "give up (report, ack) on a frame missing a camera after this (s)"))
         if not cameras:
             raise InputError("awalker_tracker: parameter 'cameras' is required (e.g. -p cameras:=[cam0])")
+        try:
+            self.autostart_config = AutoStartConfig(follow_near=None if not follow else tuple(float(v) for v in follow))
+        except ValueError as exc:
+            raise InputError(f"awalker_tracker: parameter 'follow_near': {exc}") from None
         self.camera_names = tuple(cameras)
         try:
             self.smc_config = SMCConfig(num_particles=int(n), lookahead=int(tau), trust=float(gamma),
@@ -262,7 +268,7 @@ class TrackerNode(Node):
         if dt is None:
             return False
         if self._finder is None:
-            self._finder = StartFinder([self.cameras[c] for c in self.camera_names], dt)
+            self._finder = StartFinder([self.cameras[c] for c in self.camera_names], dt, self.autostart_config)
             # the frames the finder saw, kept for as long as a start can reach back
             self._seen = deque(maxlen=self._finder.keep_frames)
 
