@@ -31,15 +31,22 @@ def walking(frames: int, x0: float) -> list:
     return poses
 
 
-@pytest.fixture(scope="module")
-def frames():
-    """Features of 4 empty frames, then 30 of a person walking from x = -0.8 m."""
+def side_scene():
+    """The side camera, its background image, a noise generator and a features extractor that has learned
+    that background."""
     camera = side_camera()
     background = background_image(camera, seed=0)
     rng = np.random.default_rng(5)
     extractor = FeatureExtractor(CONFIG)
     for _ in range(CONFIG.background_frames):
         extractor.process(noisy(background, rng))
+    return camera, background, rng, extractor
+
+
+@pytest.fixture(scope="module")
+def frames():
+    """Features of 4 empty frames, then 30 of a person walking from x = -0.8 m."""
+    camera, background, rng, extractor = side_scene()
     empty = [extractor.process(noisy(background, rng)) for _ in range(4)]
     poses = walking(30, x0=-0.8)
     images, _ = render_frames(camera, poses, background, seed=2)
@@ -111,12 +118,7 @@ def two_walking():
     x = 0.2 m and 0.8 m nearer the camera (its blob the larger)."""
     from awalker_tracker.vision.render import render, render_rgb
 
-    camera = side_camera()
-    background = background_image(camera, seed=0)
-    rng = np.random.default_rng(5)
-    extractor = FeatureExtractor(CONFIG)
-    for _ in range(CONFIG.background_frames):
-        extractor.process(noisy(background, rng))
+    camera, background, rng, extractor = side_scene()
     a, b = walking(30, x0=-0.8), walking(30, x0=0.2)
     features = []
     for pa, pb in zip(a, b):

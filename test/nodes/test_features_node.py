@@ -272,50 +272,79 @@ def test_features_for_every_frame_of_a_replayed_bag(ros_context, tmp_path):
             n.destroy_node()
 
 
+class MaskRig:
+    """A features node for camera ``cam`` with occlusion masks, a probe publishing images and masks (the right
+    half of each frame hidden) and receiving the features, one executor; ``close()`` when done."""
+
+    def __init__(self, ros_context, mask_wait_s: float) -> None:
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+        from rclpy.parameter import Parameter
+        from rclpy.qos import QoSProfile
+        from sensor_msgs.msg import Image
+
+        from awalker_msgs.msg import ImageFeatures
+        from awalker_tracker.nodes.features import FeatureNode
+
+        self.frames = scene_frames()
+        self.stamps = [3_000_000_000 + k * 33_333_333 for k in range(len(self.frames))]
+        self.node = FeatureNode(context=ros_context, parameter_overrides=[
+            Parameter("camera_name", value="cam"), Parameter("downsample", value=2),
+            Parameter("flow_cell_size", value=8), Parameter("background_frames", value=3),
+            Parameter("mask_wait_s", value=mask_wait_s)])
+        self.probe = Node("probe", context=ros_context)
+        self.received: list = []
+        self.probe.create_subscription(ImageFeatures, "/cam/features", self.received.append, QoSProfile(depth=50))
+        self.image_pub = self.probe.create_publisher(Image, "/cam/image_raw", QoSProfile(depth=50))
+        self.mask_pub = self.probe.create_publisher(Image, "/cam/occlusion_mask", QoSProfile(depth=50))
+        self.executor = SingleThreadedExecutor(context=ros_context)
+        self.executor.add_node(self.node)
+        self.executor.add_node(self.probe)
+        self.deadline = time.monotonic() + 10
+        self.spin_until(lambda: self.image_pub.get_subscription_count() > 0 and self.mask_pub.get_subscription_count() > 0
+                        and self.node.count_publishers("/cam/occlusion_mask") > 0)
+
+    def spin_until(self, done) -> None:
+        while not done() and time.monotonic() < self.deadline + 10:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def publish_image(self, k: int) -> None:
+        self.image_pub.publish(image_msg(self.frames[k], self.stamps[k]))
+
+    def publish_mask(self, k: int) -> None:
+        from sensor_msgs.msg import Image
+
+        from awalker_tracker.nodes.convert import header
+
+        h, w = self.frames[k].shape[:2]
+        occluded = np.zeros((h, w), np.uint8)
+        occluded[:, w // 2:] = 255
+        mask = Image(header=header(self.stamps[k], "cam_optical_frame"), height=h, width=w, encoding="mono8", step=w)
+        mask.data = occluded.tobytes()
+        self.mask_pub.publish(mask)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.probe.destroy_node()
+
+
 def test_occlusion_mask_published_after_its_image_is_applied(ros_context):
     """Replay publishes a frame's mask just after its image: the node holds the image for it. A frame
     whose mask never comes is processed after mask_wait_s, counted, and still published."""
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
-    from rclpy.parameter import Parameter
-    from rclpy.qos import QoSProfile
-    from sensor_msgs.msg import Image
+    from awalker_tracker.nodes.convert import stamp_to_ns
+    from awalker_tracker.nodes.features import features_from_msg
 
-    from awalker_msgs.msg import ImageFeatures
-    from awalker_tracker.nodes.convert import header, stamp_to_ns
-    from awalker_tracker.nodes.features import FeatureNode, features_from_msg
-
-    frames = scene_frames()
-    node = FeatureNode(context=ros_context, parameter_overrides=[
-        Parameter("camera_name", value="cam"), Parameter("downsample", value=2), Parameter("flow_cell_size", value=8),
-        Parameter("background_frames", value=3), Parameter("mask_wait_s", value=0.3)])
-    probe = Node("probe", context=ros_context)
-    received: list = []
-    probe.create_subscription(ImageFeatures, "/cam/features", received.append, QoSProfile(depth=50))
-    image_pub = probe.create_publisher(Image, "/cam/image_raw", QoSProfile(depth=50))
-    mask_pub = probe.create_publisher(Image, "/cam/occlusion_mask", QoSProfile(depth=50))
-    executor = SingleThreadedExecutor(context=ros_context)
-    executor.add_node(node)
-    executor.add_node(probe)
-    h, w = frames[0].shape[:2]
-    occluded = np.zeros((h, w), np.uint8)
-    occluded[:, w // 2:] = 255                       # the right half of every frame is hidden
+    rig = MaskRig(ros_context, mask_wait_s=0.3)
+    received, count = rig.received, len(rig.frames)
     try:
-        deadline = time.monotonic() + 10
-        while (image_pub.get_subscription_count() == 0 or mask_pub.get_subscription_count() == 0
-               or node.count_publishers("/cam/occlusion_mask") == 0) and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.05)
-        stamps = [3_000_000_000 + k * 33_333_333 for k in range(len(frames))]
-        for k, (stamp, rgb) in enumerate(zip(stamps, frames)):
-            image_pub.publish(image_msg(rgb, stamp))
-            if k != len(frames) - 1:                 # the last frame's mask never comes
-                mask = Image(header=header(stamp, "cam_optical_frame"), height=h, width=w, encoding="mono8", step=w)
-                mask.data = occluded.tobytes()
-                mask_pub.publish(mask)
-            while len(received) < k + 1 and time.monotonic() < deadline + 10:
-                executor.spin_once(timeout_sec=0.05)
-        assert [stamp_to_ns(m.header.stamp) for m in received] == stamps
-        assert node.stats.frames == len(frames) and node.stats.frames_without_mask == 1
+        for k in range(count):
+            rig.publish_image(k)
+            if k != count - 1:                       # the last frame's mask never comes
+                rig.publish_mask(k)
+            rig.spin_until(lambda: len(received) >= k + 1)
+        assert [stamp_to_ns(m.header.stamp) for m in received] == rig.stamps
+        assert rig.node.stats.frames == count and rig.node.stats.frames_without_mask == 1
         half = features_from_msg(received[0]).map_shape[1] // 2
         masked = features_from_msg(received[-2])
         assert not np.any(masked.llr[:, :, half:]) and np.abs(masked.llr[:, :, :half - 1]).max() > 1
@@ -323,9 +352,7 @@ def test_occlusion_mask_published_after_its_image_is_applied(ros_context):
         unmasked = features_from_msg(received[-1])  # processed after mask_wait_s without its mask
         assert np.abs(unmasked.llr[:, :, half + 1:]).max() > 1
     finally:
-        executor.shutdown()
-        node.destroy_node()
-        probe.destroy_node()
+        rig.close()
 
 
 def test_masks_that_came_in_time_are_applied_when_the_node_was_kept_waiting(ros_context):
@@ -333,58 +360,24 @@ def test_masks_that_came_in_time_are_applied_when_the_node_was_kept_waiting(ros_
     than mask_wait_s: the hold timers and the masks are ready together, and rclpy runs timers first. Both
     frames must still get their masks, in order (before: the first image went out unmasked whenever the
     machine was busy, so runs of one bag differed)."""
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
-    from rclpy.parameter import Parameter
-    from rclpy.qos import QoSProfile
-    from sensor_msgs.msg import Image
+    from awalker_tracker.nodes.convert import stamp_to_ns
+    from awalker_tracker.nodes.features import features_from_msg
 
-    from awalker_msgs.msg import ImageFeatures
-    from awalker_tracker.nodes.convert import header, stamp_to_ns
-    from awalker_tracker.nodes.features import FeatureNode, features_from_msg
-
-    frames = scene_frames()
-    node = FeatureNode(context=ros_context, parameter_overrides=[
-        Parameter("camera_name", value="cam"), Parameter("downsample", value=2), Parameter("flow_cell_size", value=8),
-        Parameter("background_frames", value=3), Parameter("mask_wait_s", value=0.1)])
-    probe = Node("probe", context=ros_context)
-    received: list = []
-    probe.create_subscription(ImageFeatures, "/cam/features", received.append, QoSProfile(depth=50))
-    image_pub = probe.create_publisher(Image, "/cam/image_raw", QoSProfile(depth=50))
-    mask_pub = probe.create_publisher(Image, "/cam/occlusion_mask", QoSProfile(depth=50))
-    executor = SingleThreadedExecutor(context=ros_context)
-    executor.add_node(node)
-    executor.add_node(probe)
-    h, w = frames[0].shape[:2]
-    occluded = np.zeros((h, w), np.uint8)
-    occluded[:, w // 2:] = 255
-    stamps = [3_000_000_000 + k * 33_333_333 for k in range(len(frames))]
+    rig = MaskRig(ros_context, mask_wait_s=0.1)
+    received = rig.received
     try:
-        deadline = time.monotonic() + 10
-        while (image_pub.get_subscription_count() == 0 or mask_pub.get_subscription_count() == 0
-               or node.count_publishers("/cam/occlusion_mask") == 0) and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.05)
-        for k in range(0, len(frames) - 1, 2):
-            pair = (k, k + 1)
-            for j in pair:
-                image_pub.publish(image_msg(frames[j], stamps[j]))
-            # the first image of the pair is taken and held; its timer then waits in the executor
-            while not node._held and time.monotonic() < deadline:
-                executor.spin_once(timeout_sec=0.05)
-            for j in pair:
-                mask = Image(header=header(stamps[j], "cam_optical_frame"), height=h, width=w, encoding="mono8",
-                             step=w)
-                mask.data = occluded.tobytes()
-                mask_pub.publish(mask)
+        for k in range(0, len(rig.frames) - 1, 2):
+            rig.publish_image(k)
+            rig.publish_image(k + 1)
+            rig.spin_until(lambda: bool(rig.node._held))   # the first image is taken and held; its timer waits
+            rig.publish_mask(k)
+            rig.publish_mask(k + 1)
             time.sleep(0.3)                          # the node kept from running past mask_wait_s
-            while len(received) < k + 2 and time.monotonic() < deadline + 10:
-                executor.spin_once(timeout_sec=0.05)
-        assert [stamp_to_ns(m.header.stamp) for m in received] == stamps[: len(received)]
-        assert len(received) >= 4 and node.stats.frames_without_mask == 0
+            rig.spin_until(lambda: len(received) >= k + 2)
+        assert [stamp_to_ns(m.header.stamp) for m in received] == rig.stamps[: len(received)]
+        assert len(received) >= 4 and rig.node.stats.frames_without_mask == 0
         half = features_from_msg(received[0]).map_shape[1] // 2
         for msg in received[3:]:                     # after the background frames: the right half is hidden
             assert not np.any(features_from_msg(msg).llr[:, :, half:])
     finally:
-        executor.shutdown()
-        node.destroy_node()
-        probe.destroy_node()
+        rig.close()
