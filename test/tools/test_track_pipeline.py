@@ -200,6 +200,9 @@ def test_track_option_errors(tmp_path: Path, capsys):
                                 ("--lookahead", "-1", "--lookahead"), ("--likelihood-scale", "-1", "--likelihood-scale")):
         assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), option, value]) == 2
         assert text in capsys.readouterr().err
+    assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--follow-near", "nan", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "--follow-near" in err and "finite ground point" in err
 
 
 JUNK_PUBLISHER = """

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
 from awalker_tracker.errors import InputError
@@ -10,6 +9,7 @@ from awalker_tracker.errors import InputError
 
 def run(args: argparse.Namespace) -> int:
     from awalker_tools.pipeline import TrackOptions, run_tracking
+    from awalker_tracker.inference.autostart import AutoStartConfig
 
     if args.particles < 1:
         raise InputError(f"--particles must be >= 1, got {args.particles}")
@@ -19,15 +19,18 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--trust (gamma) must lie in [0, 1], got {args.trust}")
     if args.lookahead < 0:
         raise InputError(f"--lookahead must be >= 0, got {args.lookahead}")
-    if args.follow_near is not None and not all(math.isfinite(v) for v in args.follow_near):
-        raise InputError(f"--follow-near must be a ground point X Y in metres, got {args.follow_near}")
+    follow_near = tuple(args.follow_near) if args.follow_near is not None else None
+    try:
+        AutoStartConfig(follow_near=follow_near)      # the tracker node's check, before anything starts
+    except ValueError as exc:
+        raise InputError(f"--follow-near: {exc}") from None
     run_tracking(TrackOptions(
         bag=Path(args.bag), out=Path(args.out), start=Path(args.start) if args.start else None,
         body=Path(args.body) if args.body else None, particles=args.particles, lookahead=args.lookahead,
         trust=args.trust,
         seed=args.seed, likelihood_scale=args.likelihood_scale, recovery=not args.no_recovery,
         auto_start=args.auto_start or args.follow_near is not None,
-        follow_near=tuple(args.follow_near) if args.follow_near is not None else None, overlays=not args.no_overlay,
+        follow_near=follow_near, overlays=not args.no_overlay,
         storage=args.storage,
         share_topics=args.share_topics))
     return 0
