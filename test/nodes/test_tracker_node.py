@@ -97,3 +97,21 @@ def test_tracker_node_needs_cameras(ros_context):
 
     with pytest.raises(InputError, match="'cameras' is required"):
         TrackerNode(context=ros_context)
+
+
+def test_tracker_node_checks_follow_near(ros_context):
+    from rclpy.parameter import Parameter
+
+    from awalker_tracker.errors import InputError
+    from awalker_tracker.nodes.tracker import TrackerNode
+
+    for bad in ([1.0], [float("nan"), 0.0]):
+        with pytest.raises(InputError, match="parameter 'follow_near'"):
+            TrackerNode(context=ros_context, parameter_overrides=[
+                Parameter("cameras", value=["cam0"]), Parameter("follow_near", value=bad)])
+    node = TrackerNode(context=ros_context, parameter_overrides=[
+        Parameter("cameras", value=["cam0"]), Parameter("follow_near", value=[1.0, -2.0])])
+    try:
+        assert node.autostart_config.follow_near == (1.0, -2.0)
+    finally:
+        node.destroy_node()
