@@ -21,6 +21,7 @@ from awalker_tools.replay import (
     header_stamp_ns,
     iter_batches,
     run_replay,
+    unmatched_local_topics,
 )
 from awalker_tools.typestore import typestore
 from awalker_tracker.errors import InputError
@@ -157,6 +158,63 @@ def test_lockstep_frames_ahead_keeps_that_many_frames_unacknowledged(ros_context
     for bad in (-1, 100):
         with pytest.raises(InputError, match="frames_ahead must lie in"):
             ReplayConfig(lockstep=True, frames_ahead=bad).validated("replay test")
+
+
+def test_local_readers_start_the_replay_without_the_settle_time(ros_context, tmp_path: Path) -> None:
+    """Readers in this process are known to have matched (both ends), so the replay starts at once and
+    loses nothing; without ``local_nodes`` it sits out ``settle`` (here 1000 s) before the first message."""
+    bag = tmp_path / "bag"
+    stamps, images = make_bag(bag, frames=6)
+    receiver = Receiver(context=ros_context)
+    driver = Node("replay", context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(receiver)
+    executor.add_node(driver)
+    config = ReplayConfig(lockstep=True, wait_for_subscribers=5.0, settle=1000.0, ack_timeout=10.0)
+    try:
+        waiting = Replayer(driver, bag, config)
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end and waiting.step():
+            executor.spin_once(timeout_sec=waiting.next_wait())
+        assert not waiting.done and waiting.summary.published == {}
+        waiting.close()
+        replayer = Replayer(driver, bag, config, local_nodes=[receiver])
+        summary = run_replay(executor, replayer)
+        _spin_for(executor, 0.2)
+        assert summary.stopped is None and summary.frames == 6 and summary.acks == 6
+        for cam in CAMERAS:
+            assert [b for _, b in receiver.images[cam]] == _expected_bytes(images, cam)
+    finally:
+        executor.shutdown()
+
+
+class _Endpoint:
+    def __init__(self, topic: str, matched: int) -> None:
+        self.topic_name, self.matched = topic, matched
+
+    def get_subscription_count(self) -> int:
+        return self.matched
+
+    get_publisher_count = get_subscription_count
+
+
+class _Endpoints:
+    def __init__(self, publishers: list[_Endpoint], subscriptions: list[_Endpoint]) -> None:
+        self.publishers, self.subscriptions = publishers, subscriptions
+
+
+def test_unmatched_local_topics_needs_both_ends_of_every_local_pair() -> None:
+    # /a: one publisher, two local readers; /b: one pair; /only_pub and /only_sub: no local pair
+    def nodes(pub_a: int, sub_a: tuple[int, int], pub_b: int, sub_b: int) -> list[_Endpoints]:
+        return [_Endpoints([_Endpoint("/a", pub_a), _Endpoint("/b", pub_b), _Endpoint("/only_pub", 0)], []),
+                _Endpoints([], [_Endpoint("/a", sub_a[0]), _Endpoint("/b", sub_b), _Endpoint("/only_sub", 0)]),
+                _Endpoints([], [_Endpoint("/a", sub_a[1])])]
+
+    assert unmatched_local_topics(nodes(2, (1, 1), 1, 1)) == []
+    assert unmatched_local_topics(nodes(1, (1, 1), 1, 1)) == ["/a"]    # the writer saw one reader of two
+    assert unmatched_local_topics(nodes(2, (1, 0), 1, 1)) == ["/a"]    # a reader has not matched the writer
+    assert unmatched_local_topics(nodes(2, (1, 1), 1, 0)) == ["/b"]
+    assert unmatched_local_topics(nodes(5, (3, 3), 1, 1)) == []        # readers in other processes count too
 
 
 def test_topic_filter_and_ack_timeout(ros_context, tmp_path: Path) -> None:

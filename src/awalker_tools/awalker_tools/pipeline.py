@@ -284,8 +284,9 @@ def run_tracking(options: TrackOptions) -> TrackResult:
             if n not in features:
                 executor.add_node(n)
         feature_thread = _SpinThread(SingleThreadedExecutor(context=context), features, "awalker_features")
+        # every reader is in this process: start once they have matched, with no settle time
         replayer = Replayer(driver, bag, ReplayConfig(lockstep=True, wait_for_subscribers=10.0,
-                                                        frames_ahead=FRAMES_AHEAD))
+                                                        frames_ahead=FRAMES_AHEAD), local_nodes=nodes)
         last = streaming = time.monotonic()
         try:
             while replayer.step():

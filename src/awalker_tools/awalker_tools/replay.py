@@ -28,7 +28,7 @@ import struct
 import sys
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -217,6 +217,27 @@ def _qos(latched: bool, depth: int) -> QoSProfile:
     )
 
 
+def unmatched_local_topics(nodes: Sequence[Node]) -> list[str]:
+    """Topics on which a publisher and a subscription of ``nodes`` (one process) have not yet matched
+    each other at both ends. A reader that has not matched a writer drops what it sends, and the writer
+    side matches first, so each subscription must count every local publisher of its topic and each
+    publisher every local subscription."""
+    publishers: dict[str, list[Any]] = {}
+    subscriptions: dict[str, list[Any]] = {}
+    for node in nodes:
+        for pub in node.publishers:
+            publishers.setdefault(pub.topic_name, []).append(pub)
+        for sub in node.subscriptions:
+            subscriptions.setdefault(sub.topic_name, []).append(sub)
+    waiting = []
+    for topic in sorted(publishers.keys() & subscriptions.keys()):
+        pubs, subs = publishers[topic], subscriptions[topic]
+        if (any(p.get_subscription_count() < len(subs) for p in pubs)
+                or any(s.get_publisher_count() < len(pubs) for s in subs)):
+            waiting.append(topic)
+    return waiting
+
+
 class Replayer:
     """Publishes a bag through ``node``; drive it with ``step()`` / ``next_wait()`` (see run_replay)."""
 
@@ -226,10 +247,16 @@ class Replayer:
         bag_path: str | Path,
         config: ReplayConfig = ReplayConfig(),
         on_frame: Callable[[int], None] | None = None,
+        local_nodes: Sequence[Node] = (),
     ) -> None:
-        """``on_frame(stamp_ns)`` is called right after each frame's messages were published."""
+        """``on_frame(stamp_ns)`` is called right after each frame's messages were published.
+        ``local_nodes``: the nodes of this process that the replay feeds (they may also talk among
+        themselves). With them, the replay starts as soon as every publisher-subscription pair among
+        them and ``node`` has matched at both ends (``unmatched_local_topics``), without the
+        ``settle`` time that readers in other processes need."""
         self.node = node
         self._on_frame = on_frame
+        self._local_nodes = [node, *[n for n in local_nodes if n is not node]] if local_nodes else []
         self.path = Path(bag_path)
         self.config = config.validated(f"replay {self.path}")
         self.summary = ReplaySummary(str(self.path))
@@ -362,6 +389,9 @@ class Replayer:
             # between are lost, so wait ``settle`` seconds after the match.
             if self._matched_at is None:
                 ok, waiting = self._subscribers_matched()
+                if ok and self._local_nodes:
+                    waiting = unmatched_local_topics(self._local_nodes)
+                    ok = not waiting
                 if ok:
                     self._matched_at = now
                 elif now - self._started < cfg.wait_for_subscribers:
@@ -371,7 +401,7 @@ class Replayer:
                         f"no subscriber after {cfg.wait_for_subscribers:.1f} s on {', '.join(waiting)}; "
                         "replaying anyway")
                     self._matched_at = now - cfg.settle
-            if now - self._matched_at < cfg.settle:
+            if not self._local_nodes and now - self._matched_at < cfg.settle:
                 return True
             self._subscribers_ok = True
         while True:
