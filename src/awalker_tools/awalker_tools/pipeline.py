@@ -35,8 +35,10 @@ from awalker_tools import evaluation
 START_FILE, BODY_FILE, CALIBRATION_FILE, RUN_FILE = "start.yaml", "body.yaml", "calibration.yaml", "run.yaml"
 PROGRESS_PERIOD_S = 2.0
 #: Lockstep replay lets this many frames out beyond the oldest the tracker has not acknowledged, so the
-#: feature thread works on the next frame while the tracker filters this one.
-FRAMES_AHEAD = 1
+#: feature thread works on the next frames while the tracker filters this one, and a frame that takes the
+#: filter longer (a look-ahead re-simulation after resampling) does not leave the feature thread idle.
+#: The features depend on the images, masks and descriptions only, so the results do not depend on it.
+FRAMES_AHEAD = 3
 
 
 class _SpinThread:
