@@ -20,7 +20,8 @@ vpy="$venv/bin/python"
 req_hash=$(sha256sum "$root/requirements.txt" | cut -d' ' -f1)
 if [ "$(cat "$stamp_dir/requirements.sha256" 2>/dev/null)" != "$req_hash" ]; then
   log "installing pinned dependencies (first run: ~1-2 min)"
-  "$vpy" -m pip install --disable-pip-version-check -q -r "$root/requirements.txt" 2>&1 \
+  # --no-cache-dir: the downloaded wheels are not kept a second time in ~/.cache/pip (disk is tight on CI)
+  "$vpy" -m pip install --disable-pip-version-check --no-cache-dir -q -r "$root/requirements.txt" 2>&1 \
     | { grep -v "^WARNING: Location .* is ignored" || true; }
   # The ROS wheels bake their builder's header paths into cmake files; point them at this venv.
   py_inc=$("$vpy" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
