@@ -47,6 +47,22 @@ def test_pixels_to_normalised_inverts_projection(distortion):
     assert np.allclose(cam.pixels_to_normalised(uv), local[:, :2], atol=1e-8)
 
 
+@pytest.mark.parametrize("distortion", DISTORTIONS[1:])
+def test_pixels_to_normalised_matches_opencv_on_any_grid_shape(distortion):
+    """The compiled inversion against OpenCV's iterative undistortion, on an (H, W, 2) grid that
+    reaches the image corners, and the same for a single (2,) pixel."""
+    cam = make_camera(distortion)
+    v, u = np.mgrid[0:cam.height:37, 0:cam.width:41].astype(float)
+    grid = np.stack([u, v], axis=-1)
+    ours = cam.pixels_to_normalised(grid)
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-14)
+    expected = cv2.undistortPoints(grid.reshape(-1, 1, 2), cam.K, np.asarray(distortion, float),
+                                   criteria=criteria).reshape(grid.shape)
+    assert ours.shape == grid.shape
+    np.testing.assert_allclose(ours, expected, atol=1e-9)
+    np.testing.assert_allclose(cam.pixels_to_normalised(grid[2, 3]), expected[2, 3], atol=1e-9)
+
+
 def test_points_behind_the_camera_are_nan():
     cam = make_camera([])
     behind = cam.position - 2.0 * cam.rotation[:, 2]

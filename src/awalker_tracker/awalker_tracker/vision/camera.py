@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numba
 import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
@@ -104,8 +105,8 @@ class Camera:
     def pixels_to_normalised(self, uv: np.ndarray, iterations: int = 30) -> np.ndarray:
         """Pixels (..., 2) -> undistorted normalised coordinates (..., 2): the ray through a
         pixel is (x, y, 1) in the camera frame. Inverts the distortion by fixed-point iteration
-        (as OpenCV does, with more iterations, stopping once no point moves by more than 1e-12);
-        accurate to ~1e-9 for ordinary lenses."""
+        (as OpenCV does, with more iterations, stopping once no point moves by more than 1e-12; compiled,
+        ``_undistort_kernel``); accurate to ~1e-9 for ordinary lenses."""
         uv = np.asarray(uv, float)
         K = self.K
         yd = (uv[..., 1] - K[1, 2]) / K[1, 1]
@@ -114,19 +115,10 @@ class Camera:
         d[: self.distortion.size] = self.distortion
         if not d.any():
             return np.stack([xd, yd], axis=-1)
-        k1, k2, p1, p2, k3, k4, k5, k6 = d
-        x, y = xd.copy(), yd.copy()
-        for _ in range(iterations):
-            r2 = x * x + y * y
-            inverse_radial = (1 + r2 * (k4 + r2 * (k5 + r2 * k6))) / (1 + r2 * (k1 + r2 * (k2 + r2 * k3)))
-            dx = 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
-            dy = p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-            x_new, y_new = (xd - dx) * inverse_radial, (yd - dy) * inverse_radial
-            moved = max(np.max(np.abs(x_new - x), initial=0.0), np.max(np.abs(y_new - y), initial=0.0))
-            x, y = x_new, y_new
-            if moved < 1e-12:
-                break
-        return np.stack([x, y], axis=-1)
+        out = np.empty(xd.shape + (2,))
+        _undistort_kernel(np.ascontiguousarray(xd).reshape(-1), np.ascontiguousarray(yd).reshape(-1), d,
+                          int(iterations), out.reshape(-1, 2))
+        return out
 
     def _distort(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         d = np.zeros(8)
@@ -150,6 +142,29 @@ class Camera:
             "distortion": self.distortion.tolist(),
             "pose": {"position": self.position.tolist(), "orientation": self.quaternion.tolist()},
         }
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _undistort_kernel(xd: np.ndarray, yd: np.ndarray, d: np.ndarray, iterations: int, out: np.ndarray) -> None:
+    """Undistorted (x, y) of distorted normalised points (xd, yd) into ``out`` (M, 2): the fixed point of
+    x = (xd - tangential_x(x, y)) / radial(x, y) (OpenCV's model, d = k1 k2 p1 p2 k3 k4 k5 k6), all points
+    stepped together until none moves by 1e-12 or more, or ``iterations`` steps."""
+    k1, k2, p1, p2, k3, k4, k5, k6 = d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7]
+    for i in range(xd.size):
+        out[i, 0], out[i, 1] = xd[i], yd[i]
+    for _ in range(iterations):
+        moved = 0.0
+        for i in range(xd.size):
+            x, y = out[i, 0], out[i, 1]
+            r2 = x * x + y * y
+            inverse_radial = (1 + r2 * (k4 + r2 * (k5 + r2 * k6))) / (1 + r2 * (k1 + r2 * (k2 + r2 * k3)))
+            dx = 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+            dy = p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+            x_new, y_new = (xd[i] - dx) * inverse_radial, (yd[i] - dy) * inverse_radial
+            moved = max(moved, abs(x_new - x), abs(y_new - y))
+            out[i, 0], out[i, 1] = x_new, y_new
+        if moved < 1e-12:
+            break
 
 
 def _matrix(value: Any, shape: tuple[int, ...], where: str) -> np.ndarray:
