@@ -164,9 +164,10 @@ def test_body_follows_walker_legs_and_speed():
     walker_speed = PARAMS.step_length(0.35) / (16 / 30)
     travel = np.linalg.norm(poses[-1].markers[:, M["pelvis"], :2] - poses[0].markers[:, M["pelvis"], :2], axis=1)
     body_speed = travel / (63 / 30)
-    # Slower than the walker (~0.85x here): the swing knee (Table 1: k = 15, alpha = 0.9) is still
-    # bent at heel strike, so the foot lands short of where the knee-less walker puts it.
-    assert 0.75 * walker_speed < np.median(body_speed) < 1.02 * walker_speed
+    # Slower than the walker (~0.67x here): the swing knee (bent by the clearance, and Table 1's
+    # k = 15, alpha = 0.9) is still bent at heel strike, so the foot lands short of where the
+    # knee-less walker puts it.
+    assert 0.55 * walker_speed < np.median(body_speed) < 1.02 * walker_speed
     # Pelvis near the leg length above the ground.
     z = np.array([p.markers[:, M["pelvis"], 2] for p in poses])
     assert 0.8 * BODY.leg_length < z.min() and z.max() < BODY.leg_length + 0.03  # toe pivot lifts the hip a little
@@ -234,15 +235,26 @@ def test_pose_body_is_vectorised_consistently():
     assert np.allclose(pose.joint_angles[:, J["torso_yaw"]], kin.heading)
 
 
+def _mean_swing_knee(config: KinematicConfig) -> np.ndarray:
+    """Mean swing knee angle (deg) per frame over the prior on the hand-made walk."""
+    walkers, states, _ = run(64, 300, seed=8, config=config)
+    return np.degrees([np.where(w.stance_leg == LEFT, k.knee[:, 1], k.knee[:, 0]).mean()
+                       for w, k in zip(walkers, states)])
+
+
 def test_swing_knee_bends_early_in_the_stride_and_straightens_late():
-    walkers, states, _ = run(64, 300, seed=8)
-    swing_knee = np.degrees([np.where(w.stance_leg == LEFT, k.knee[:, 1], k.knee[:, 0]).mean()
-                             for w, k in zip(walkers, states)])
-    for stride in (swing_knee[16:32], swing_knee[32:48]):
+    # The paper's rest angle 5 psi_hip: the knee bends through it early and straightens late.
+    paper = _mean_swing_knee(KinematicConfig(swing_knee_rest_gain=5.0))
+    for stride in (paper[16:32], paper[32:48]):
         assert stride[0] < 30                      # nearly straight at toe-off (bent only to clear the floor)
         assert stride.max() > 45                   # bends through the rest angle 5 psi_hip
         assert np.argmax(stride) < 13              # peaks before the end of the swing
         assert stride[-1] < stride.max() - 20      # and straightens towards heel strike
+    # Ours (gain 2.5): a smaller bend that still peaks before the end of the swing.
+    ours = _mean_swing_knee(KinematicConfig())
+    for stride, theirs in ((ours[16:32], paper[16:32]), (ours[32:48], paper[32:48])):
+        assert 30 < stride.max() < theirs.max() - 10
+        assert np.argmax(stride) < 13
     assert RIGHT == 1
 
 
