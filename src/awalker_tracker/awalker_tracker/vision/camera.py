@@ -111,8 +111,7 @@ class Camera:
         K = self.K
         yd = (uv[..., 1] - K[1, 2]) / K[1, 1]
         xd = (uv[..., 0] - K[0, 2] - K[0, 1] * yd) / K[0, 0]
-        d = np.zeros(8)
-        d[: self.distortion.size] = self.distortion
+        d = self.distortion_coefficients()
         if not d.any():
             return np.stack([xd, yd], axis=-1)
         out = np.empty(xd.shape + (2,))
@@ -120,9 +119,14 @@ class Camera:
                           int(iterations), out.reshape(-1, 2))
         return out
 
-    def _distort(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def distortion_coefficients(self) -> np.ndarray:
+        """The distortion as OpenCV's 8 coefficients (k1 k2 p1 p2 k3 k4 k5 k6), zeros where not given."""
         d = np.zeros(8)
         d[: self.distortion.size] = self.distortion
+        return d
+
+    def _distort(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        d = self.distortion_coefficients()
         if not d.any():
             return x, y
         k1, k2, p1, p2, k3, k4, k5, k6 = d

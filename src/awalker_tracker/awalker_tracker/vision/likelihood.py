@@ -368,8 +368,7 @@ class _CameraArrays:
 
     def __init__(self, camera: Camera):
         K = camera.K
-        distortion = np.zeros(8)
-        distortion[: camera.distortion.size] = camera.distortion   # 0, 4, 5 or 8 coefficients
+        distortion = camera.distortion_coefficients()
         self.params = np.concatenate([np.asarray(camera.rotation, np.float64).reshape(9),
                                       np.asarray(camera.position, np.float64).reshape(3),
                                       [K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]], distortion])
