@@ -304,7 +304,7 @@ def track_steps(track: PoseTrack, stance_leg: np.ndarray | None = None,
                 strike_fraction: np.ndarray | None = None) -> list:
     """The steps of a pose track (``inference.gait``): from its stance legs (0 left / 1 right per frame)
     when given (the tracker's own strikes, timed within the frame by ``strike_fraction``, the heel strike
-    half a human double support before: ``gait.HUMAN_DOUBLE_SUPPORT``), else from its heel markers."""
+    a human double support before: ``gait.WALKER_STRIKE_DELAY``), else from its heel markers."""
     from awalker_tracker.inference import gait
 
     from awalker_tracker.model.body import MARKER_NAMES
@@ -313,7 +313,7 @@ def track_steps(track: PoseTrack, stance_leg: np.ndarray | None = None,
     if stance_leg is None:
         return gait.steps(track.frames, track.stamps_ns, markers, gait.stance_from_heels(markers))
     return gait.steps(track.frames, track.stamps_ns, markers, np.asarray(stance_leg), strike_fraction,
-                      gait.HUMAN_DOUBLE_SUPPORT)
+                      gait.WALKER_STRIKE_DELAY)
 
 
 def write_gait(out: Path, track: PoseTrack, stance_leg: np.ndarray, strike_fraction: np.ndarray | None = None) -> list:

@@ -25,7 +25,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from awalker_tracker.inference.gait import HUMAN_DOUBLE_SUPPORT, Step, StepCounter
+from awalker_tracker.inference.gait import WALKER_STRIKE_DELAY, Step, StepCounter
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.nodes.convert import cloud_positions, points_from_msg, points_to_msg, stamp_to_ns
 from awalker_tracker.nodes.spin import run_node
@@ -170,7 +170,7 @@ class PosePublisherNode(Node):
         self.rep155_pub = self.create_publisher(JointState, f"/humans/bodies/{body_id}/joint_states", qos)
         self.marker_pub = self.create_publisher(MarkerArray, "/awalker/markers", qos)
         self.gait_pub = self.create_publisher(GaitStep, "/awalker/gait_steps", qos)
-        self.steps = StepCounter(HUMAN_DOUBLE_SUPPORT)      # heel strikes half a double support early
+        self.steps = StepCounter(WALKER_STRIKE_DELAY)       # heel strikes a double support early
         self._first_stamp_ns: int | None = None
         self.tf_broadcaster = _tf_broadcaster(self)
         self.count = 0
