@@ -161,3 +161,21 @@ def test_bad_inputs(scene):
 def test_sampling_settings_are_validated():
     with pytest.raises(ValueError, match="points_along"):
         LikelihoodConfig(points_along=0)
+
+
+def test_cut_batches_score_the_same_bit_for_bit(scene, monkeypatch):
+    """2500 poses cut into two blocks on two threads (``awalker_tracker.blocks``): the same
+    log-likelihoods, appearance and flow, as in one block."""
+    from awalker_tracker import blocks
+
+    cameras, poses, features = scene
+    rng = np.random.default_rng(5)
+    batch = stacked([perturbed(poses[FRAME], GROUPS[i % len(GROUPS)], rng) for i in range(2500)])
+    prev = repeat(poses[FRAME - 1].segments(), 2500)
+    assert len(blocks.block_bounds(2500, 2)) == 2
+    values = {}
+    for threads in ("1", "2"):
+        monkeypatch.setenv("AWALKER_THREADS", threads)
+        values[threads] = log_likelihood(BODY.parts, batch.segments(), prev, cameras, features)
+    assert np.isfinite(values["1"]).all() and np.ptp(values["1"]) > 0
+    np.testing.assert_array_equal(values["1"], values["2"])

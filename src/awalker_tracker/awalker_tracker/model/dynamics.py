@@ -55,6 +55,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from awalker_tracker.blocks import over_blocks
+
 from .walker import WalkerParams, WalkerState
 
 #: Walkers are flagged fallen when no heel strike happened for this long (s).
@@ -234,6 +236,14 @@ def _integrate(kc, p1, p2, w1, w2, kappa, first_step, steps, h, detect):
     return q1, q2, r1, r2, strike_step, theta
 
 
+def _integrate_blocks(kc, p1, p2, w1, w2, kappa, first_step, steps, h, detect):
+    """``_integrate`` over blocks of walkers at once (``blocks.over_blocks``; per-walker arrays (N,)
+    contiguous): the same result."""
+    parts = over_blocks(p1.shape[0], lambda rows: _integrate(
+        kc, p1[rows], p2[rows], w1[rows], w2[rows], kappa[rows], first_step[rows], steps[rows], h, detect))
+    return parts[0] if len(parts) == 1 else tuple(np.concatenate(column) for column in zip(*parts))
+
+
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _accelerations(kc, p1, p2, w1, w2, kappa):
     """Eq. (17)'s q'' (rad/s^2) of N walkers, (N, 2)."""
@@ -405,7 +415,7 @@ def integrate(params: WalkerParams, state: WalkerState, stiffness: np.ndarray | 
               steps: int) -> WalkerState:
     """``steps`` RK4 steps of ``step`` seconds for N walkers, ignoring heel strikes (kappa scalar or (N,))."""
     n = len(state)
-    q1, q2, r1, r2, _, _ = _integrate(
+    q1, q2, r1, r2, _, _ = _integrate_blocks(
         _kernel_consts(_consts(params)), *(_per_walker(v, n) for v in (
             state.stance_angle, state.swing_angle, state.stance_rate, state.swing_rate, stiffness)),
         np.zeros(n), np.full(n, int(steps), np.int64), float(step), False)
@@ -470,7 +480,7 @@ def advance(
     iota = toe_off_impulse if callable(toe_off_impulse) else _per_walker(toe_off_impulse, n)
     tss = np.zeros(n) if time_since_strike is None else np.asarray(time_since_strike, float)
 
-    p1, p2, w1, w2, strike_step, theta = _integrate(
+    p1, p2, w1, w2, strike_step, theta = _integrate_blocks(
         kc, *(_per_walker(v, n) for v in (state.stance_angle, state.swing_angle, state.stance_rate,
                                           state.swing_rate)),
         kappa, np.zeros(n), np.full(n, substeps, np.int64), h, True)
@@ -486,7 +496,7 @@ def advance(
         post, used = _strike(params, idx, pre, iota)
         sub, th = strike_step[idx], theta[idx]
         # the rest of the strike's sub-step from the post-impact state, then the frame's remaining sub-steps
-        p1[idx], p2[idx], w1[idx], w2[idx], _, _ = _integrate(
+        p1[idx], p2[idx], w1[idx], w2[idx], _, _ = _integrate_blocks(
             kc, post.stance_angle, post.swing_angle, post.stance_rate, post.swing_rate, kappa[idx],
             (1.0 - th) * h, substeps - 1 - sub, h, False)
         origin[idx], leg[idx] = post.contact_origin, post.stance_leg
@@ -526,7 +536,7 @@ def simulate_to_strike(
     n = len(state)
     iota = toe_off_impulse if callable(toe_off_impulse) else _per_walker(toe_off_impulse, n)
     steps = max(1, int(np.ceil(max_time / step - 1e-9)))
-    q1, q2, r1, r2, strike_step, theta = _integrate(
+    q1, q2, r1, r2, strike_step, theta = _integrate_blocks(
         _kernel_consts(_consts(params)), *(_per_walker(v, n) for v in (
             state.stance_angle, state.swing_angle, state.stance_rate, state.swing_rate, stiffness)),
         np.zeros(n), np.full(n, steps, np.int64), float(step), True)

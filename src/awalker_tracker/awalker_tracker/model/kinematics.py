@@ -89,6 +89,7 @@ import numba
 import numpy as np
 from scipy.special import ndtr, ndtri
 
+from awalker_tracker.blocks import over_blocks
 from awalker_tracker.model.body import (
     JOINT_NAMES,
     MARKER_NAMES,
@@ -498,11 +499,14 @@ def _sample_kinematics(
     beta = np.empty(n)
     plane_origin = np.empty((n, 2))
     pose = _empty_pose(n)
-    _sample_kernel(
-        _geometry(body), legs, new, previous,
-        np.ascontiguousarray(kin.contact_point, float), np.ascontiguousarray(kin.contact_roll, float),
-        contact_leg, stance_leg, margin, np.ascontiguousarray(stance_contact_x(params, walker), float),
-        contact, beta, plane_origin, pose.markers, pose.joint_angles, pose.segments.origin, pose.segments.rotation)
+    geometry = _geometry(body)
+    contact_point, contact_roll = (np.ascontiguousarray(kin.contact_point, float),
+                                   np.ascontiguousarray(kin.contact_roll, float))
+    stance_x = np.ascontiguousarray(stance_contact_x(params, walker), float)
+    over_blocks(n, lambda rows: _sample_kernel(
+        geometry, legs[rows], new[rows], previous[rows], contact_point[rows], contact_roll[rows], contact_leg[rows],
+        stance_leg[rows], margin[rows], stance_x[rows], contact[rows], beta[rows], plane_origin[rows],
+        pose.markers[rows], pose.joint_angles[rows], pose.segments.origin[rows], pose.segments.rotation[rows]))
     named = KinematicState.unpack(new)
     state = KinematicState(
         heading=named["heading"], torso_lean=named["torso_lean"], hip_abduction=named["hip_abduction"],
@@ -522,9 +526,13 @@ def pose_body(body: BodyDescription, params: WalkerParams, walker: WalkerState, 
     """
     del params  # the sagittal leg angles come from the walker; the geometry from ``body``
     pose = _empty_pose(len(kin))
-    _pose_kernel(_geometry(body), leg_angles(walker), kin.dofs(), np.ascontiguousarray(kin.contact_leg, np.int8),
-                 np.ascontiguousarray(kin.contact_roll, float), np.ascontiguousarray(kin.contact_point, float),
-                 pose.markers, pose.joint_angles, pose.segments.origin, pose.segments.rotation)
+    geometry, legs, dofs = _geometry(body), leg_angles(walker), kin.dofs()
+    contact_leg, contact_roll, contact_point = (np.ascontiguousarray(kin.contact_leg, np.int8),
+                                                np.ascontiguousarray(kin.contact_roll, float),
+                                                np.ascontiguousarray(kin.contact_point, float))
+    over_blocks(len(kin), lambda rows: _pose_kernel(
+        geometry, legs[rows], dofs[rows], contact_leg[rows], contact_roll[rows], contact_point[rows],
+        pose.markers[rows], pose.joint_angles[rows], pose.segments.origin[rows], pose.segments.rotation[rows]))
     return pose
 
 
@@ -552,8 +560,8 @@ def _empty_pose(n: int) -> BodyPoseBatch:
 
 # ---- compiled per-particle geometry ---------------------------------------------------------
 # Serial numba kernels: one pass per particle, its pose in two small scratch arrays that are
-# reused for every particle (no prange: on the tracker's 2 cores threads cost more than they
-# save). Arrays are indexed, never sliced, inside the loops: a view costs a reference count.
+# reused for every particle (no prange: on the tracker's 2 cores its threads cost more than they
+# saved; large batches are instead cut into one block of particles per core, ``blocks.over_blocks``). Arrays are indexed, never sliced, inside the loops: a view costs a reference count.
 # The small per-particle helpers are inlined into the kernels (``inline="always"``): the pose
 # kernel runs ~1.6x faster than with calls (measured at 5000 particles), for a longer first
 # compilation (cached afterwards).

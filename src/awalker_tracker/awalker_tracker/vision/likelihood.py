@@ -47,6 +47,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from awalker_tracker.blocks import over_blocks
 from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import BodySegments, PartShape
 from awalker_tracker.vision.camera import Camera
@@ -424,14 +425,19 @@ def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, 
     radii = np.array([[*p.radii_start, *p.radii_end] for p in parts], np.float64).reshape(n_parts, 4)
     occludees, occluders = (np.ascontiguousarray(a) for a in occluder_pairs(parts))
     out = np.empty(n)
-    _score_states(origin, rotation, lengths, radii,
-                  cam.params, cam.distorted, cam.focal,
-                  occludees, occluders, bool(config.self_occlusion),
-                  int(config.points_along), int(config.points_across), int(config.flow_row_step),
-                  appearance.values, appearance.h, appearance.w, appearance.inv_ds, appearance.offsets,
-                  flow is not None, np.ascontiguousarray(prev_axes), table.fx, table.fy,
-                  table.i00, table.i01, table.i11, table.log0, table.valid, table.rows, table.cols, table.inv_cell,
-                  float(config.appearance_weight), float(config.flow_weight), axes, out)
+    prev_axes = np.ascontiguousarray(prev_axes)
+
+    def score(rows: slice) -> None:
+        _score_states(origin[rows], rotation[rows], lengths, radii,
+                      cam.params, cam.distorted, cam.focal,
+                      occludees, occluders, bool(config.self_occlusion),
+                      int(config.points_along), int(config.points_across), int(config.flow_row_step),
+                      appearance.values, appearance.h, appearance.w, appearance.inv_ds, appearance.offsets,
+                      flow is not None, prev_axes[rows], table.fx, table.fy,
+                      table.i00, table.i01, table.i11, table.log0, table.valid, table.rows, table.cols,
+                      table.inv_cell, float(config.appearance_weight), float(config.flow_weight), axes[rows], out[rows])
+
+    over_blocks(n, score)
     return out
 
 
