@@ -3,8 +3,8 @@
 lower-body occluder and a CMU mocap render, 40 frames at 320x240, 500 particles (the settings
 of `benchmarks/bench_accuracy.py --quick`). Each sequence is made and tracked once per module.
 
-Bounds: measured over synthesis seeds 1-3 and tracker seeds 0-2 (figures above BOUNDS), set
-above the worst seen yet tight enough that the image likelihood switched off, or a walker with
+Bounds: measured over tracker seeds 0-9 (figures above BOUNDS), set at least 15 % above the worst
+seen (except where a known gap fails a seed: the occluder) yet tight enough that the image likelihood switched off, or a walker with
 legs 30 % too long, fails every case. Absolute errors of a single camera are dominated by depth,
 which one camera observes weakly, so the relative error and the stance leg carry most of the
 discrimination there.
@@ -63,12 +63,20 @@ class Bounds:
 # Without the image likelihood (scale 1e-6, seeds 1, 0): stance 0.58, 0.58, 0.54, 0.56, 0.58, 0.69 -> every case
 # fails its stance bound. Walker legs 30 % too long in the tracker (mocap, seeds 1, 0): 615/354 mm, stance 0.56;
 # with the earlier prior: relative 209, 176, 177, 226, 206, 57 mm.
+# Tracker seeds 0-9 (2026-11-26, main at cce69ce; median and worst of the ten, mean absolute / mean relative mm,
+# stance): mono_straight 100 / 20 (worst 214 / 34, 0.95), two cameras 47 / 18 (81 / 26, 0.95), speed_change 95 / 23
+# (214 / 34, 0.89), turn 125 / 40 (205 / 79, 0.96), occluder 152 / 34 (447 / 179, 0.41 at seed 6, where the legs
+# are lost behind the occluder: README "Known gaps"; seed 8: stance 0.78), mocap 173 / 52 (309 / 68, 0.84). The
+# bounds before, set over seeds 0-4 with no margin, failed at four of seeds 5-9 (mono_straight 214 and 205 mm,
+# speed_change stance 0.89, the automatic start 545 mm): a change that only alters the random numbers drawn fails
+# them as often. Now each holds over seeds 0-9 with >= 15 % margin (stance: >= 3 frames of 37), except the
+# occluder's at seed 6; without the image likelihood every case still fails its stance bound (above).
 BOUNDS = {
-    "mono_straight": Bounds(200.0, 35.0, 0.18, 0.9),
-    "two_camera_straight": Bounds(90.0, 40.0, 0.18, 0.9),
-    "speed_change": Bounds(280.0, 45.0, 0.24, 0.9),
+    "mono_straight": Bounds(250.0, 40.0, 0.18, 0.9),
+    "two_camera_straight": Bounds(100.0, 40.0, 0.18, 0.9),
+    "speed_change": Bounds(280.0, 45.0, 0.24, 0.8),
     "turn": Bounds(330.0, 95.0, 0.28, 0.85),       # the second half of the turn is followed loosely
-    "occluder": Bounds(300.0, 62.0, 0.18, 0.85),   # the occluded stretch delays the stance switch
+    "occluder": Bounds(300.0, 62.0, 0.18, 0.75),   # the occluded stretch delays the stance switch
     # real gait: the walker's legs and feet differ from the mocap's. Since the mocap walk faces the walking
     # direction over a stride (synth, b5b794d) and the shadow model (0e43ec0, 4d2c087), tracker seeds 0-4 give
     # mean absolute 146-273 mm, relative 55-82, stance 0.78-0.97 (the bounds before, 75 mm and 0.85, held for
@@ -145,7 +153,8 @@ def test_feet_on_the_ground(runs, name: str):
     # measured: skate mean 0.2-0.7 mm, max <= 3.9 mm; penetration 0; float mean 1.3-4.5 mm (truth: 1.3-3.6).
     # Turning: the heading turns the planted foot about its contact point, so heel and toe markers slip a
     # little, as in the truth walker (skate mean 1.5 mm, max 13.5 mm); tracker seeds 0-4: mean 1.4-2.0, max 8.3-12.6.
-    mean_bound, max_bound = (2.5, 16.0) if name == "turn" else (1.5, 8.0)
+    # Tracker seeds 0-9 (2026-11-26): worst mean 1.18 mm (speed_change, mocap), max 7.8 (mocap); turn 2.2 and 14.6.
+    mean_bound, max_bound = (2.5, 18.0) if name == "turn" else (1.5, 10.0)
     assert feet["skate_mm"]["mean"] < mean_bound and feet["skate_mm"]["max"] < max_bound
     assert feet["penetration_mm"]["max"] < 2.0
     assert feet["float_mm"]["mean"] < 8.0
@@ -252,9 +261,10 @@ def test_automatic_start_without_empty_frames(tmp_path):
     # Absolute median over tracker seeds 0-4: 224-459 mm (swing knee rest 2.5 psi_hip; with the paper's
     # 5: 78-289; 212-347 with the median background and the start fitted over 0.7 s; 71-373 before the
     # background explained the shadow's penumbra). At seed 1 the particles' best start is 0.5 m off
-    # in depth for the first 7 frames and comes within 0.37 m by the end. A track lost or walking off
-    # from a wrong start: > 500 mm, and its pelvis stays or ends more than 0.5 m away.
-    assert result["absolute_mm"]["median"] < 500.0
+    # in depth for the first 7 frames and comes within 0.37 m by the end. Tracker seeds 0-9 (2026-11-26):
+    # 208-545 mm, median 242 (the bound before, 500, held for seeds 0-4 only). A track lost or walking off
+    # from a wrong start: its pelvis stays or ends more than 0.5 m away (the last check).
+    assert result["absolute_mm"]["median"] < 650.0
     assert result["walk"]["fallen_frames"] == 0 and not result["walk"]["end"]["off_person"]
     estimate = evaluation.read_poses_csv(out / "poses.csv")
     ground_error = np.linalg.norm(pelvis_offsets(estimate, truth)[:, :2], axis=1)
