@@ -45,6 +45,19 @@ def test_blocks_run_on_several_threads_and_come_back_in_order(monkeypatch):
     assert blocks.over_blocks(n, work) == [n]
 
 
+def test_an_error_in_a_worker_block_reaches_the_caller(monkeypatch):
+    monkeypatch.setenv("AWALKER_THREADS", "2")
+    n = 2 * blocks.MIN_BLOCK
+
+    def work(rows: slice) -> int:
+        if rows.start > 0:
+            raise FloatingPointError(f"block at {rows.start}")
+        return rows.stop
+
+    with pytest.raises(FloatingPointError, match=f"block at {blocks.MIN_BLOCK}"):
+        blocks.over_blocks(n, work)
+
+
 @pytest.mark.parametrize("value", ["0", "two", "-1"])
 def test_a_bad_thread_count_is_named(monkeypatch, value: str):
     monkeypatch.setenv("AWALKER_THREADS", value)
