@@ -2,6 +2,7 @@
 same particles out of the compiled kernels whether a batch is cut or not."""
 from __future__ import annotations
 
+import os
 import threading
 from dataclasses import fields, is_dataclass
 
@@ -56,6 +57,28 @@ def test_an_error_in_a_worker_block_reaches_the_caller(monkeypatch):
 
     with pytest.raises(FloatingPointError, match=f"block at {blocks.MIN_BLOCK}"):
         blocks.over_blocks(n, work)
+
+
+def _cut_in_child(n: int, result) -> None:
+    result.put(blocks.over_blocks(n, lambda rows: rows.stop))
+
+
+@pytest.mark.skipif(not hasattr(os, "register_at_fork"), reason="fork only")
+def test_a_forked_child_cuts_its_batches_too(monkeypatch):
+    """The parent's worker threads are not in a forked child: without a pool of its own it would wait forever."""
+    import multiprocessing
+
+    monkeypatch.setenv("AWALKER_THREADS", "2")
+    n = 2 * blocks.MIN_BLOCK
+    assert blocks.over_blocks(n, lambda rows: rows.stop) == [blocks.MIN_BLOCK, n]     # the parent's pool exists
+    context = multiprocessing.get_context("fork")
+    result = context.Queue()
+    child = context.Process(target=_cut_in_child, args=(n, result))
+    child.start()
+    child.join(timeout=20)
+    if child.is_alive():
+        child.kill()
+    assert child.exitcode == 0 and result.get(timeout=1) == [blocks.MIN_BLOCK, n]
 
 
 @pytest.mark.parametrize("value", ["0", "two", "-1"])

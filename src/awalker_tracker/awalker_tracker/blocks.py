@@ -24,6 +24,16 @@ _pool: ThreadPoolExecutor | None = None
 _pool_workers = 0
 
 
+def _forget_pool() -> None:
+    """In a forked child the parent's worker threads do not exist: start a pool of its own when needed."""
+    global _pool, _pool_workers
+    _pool, _pool_workers = None, 0
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pool)
+
+
 def thread_count() -> int:
     """Threads a batch may use: ``AWALKER_THREADS`` if set, else the cores this process may run on."""
     value = os.environ.get("AWALKER_THREADS", "").strip()
