@@ -240,7 +240,8 @@ def compare_with_baseline(args, results: dict) -> dict:
             mine = ours.get(key(table, entry))
             if mine is not None:
                 speedup.append({"table": table, "particles": entry["particles"], "cameras": entry.get("cameras", 0),
-                                "frame_rate_hz": entry.get("frame_rate_hz", 30.0), "frames_per_s": mine["frames_per_s"], "baseline_frames_per_s": entry["frames_per_s"],
+                                "frame_rate_hz": entry.get("frame_rate_hz", 30.0), "frames_per_s": mine["frames_per_s"],
+                                "baseline_frames_per_s": entry["frames_per_s"],
                                 "speedup": round(mine["frames_per_s"] / entry["frames_per_s"], 2)})
     return {"revision": args.baseline, "speedup": speedup, "figures": theirs}
 

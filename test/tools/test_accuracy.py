@@ -4,8 +4,8 @@ lower-body occluder and a CMU mocap render, 40 frames at 320x240, 500 particles 
 of `benchmarks/bench_accuracy.py --quick`). Each sequence is made and tracked once per module.
 
 Bounds: measured over tracker seeds 0-9 (figures above BOUNDS), set at least 15 % above the worst
-seen (except where a known gap fails a seed: the occluder) yet tight enough that the image likelihood switched off, or a walker with
-legs 30 % too long, fails every case. Absolute errors of a single camera are dominated by depth,
+seen (except where a known gap fails a seed: the occluder) yet tight enough that the image
+likelihood switched off, or a walker with legs 30 % too long, fails every case. Absolute errors of a single camera are dominated by depth,
 which one camera observes weakly, so the relative error and the stance leg carry most of the
 discrimination there.
 """

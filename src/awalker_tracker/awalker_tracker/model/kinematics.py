@@ -561,7 +561,8 @@ def _empty_pose(n: int) -> BodyPoseBatch:
 # ---- compiled per-particle geometry ---------------------------------------------------------
 # Serial numba kernels: one pass per particle, its pose in two small scratch arrays that are
 # reused for every particle (no prange: on the tracker's 2 cores its threads cost more than they
-# saved; large batches are instead cut into one block of particles per core, ``blocks.over_blocks``). Arrays are indexed, never sliced, inside the loops: a view costs a reference count.
+# saved; large batches are instead cut into one block of particles per core, ``blocks.over_blocks``).
+# Arrays are indexed, never sliced, inside the loops: a view costs a reference count.
 # The small per-particle helpers are inlined into the kernels (``inline="always"``): the pose
 # kernel runs ~1.6x faster than with calls (measured at 5000 particles), for a longer first
 # compilation (cached afterwards).
