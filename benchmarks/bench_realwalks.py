@@ -28,6 +28,9 @@ body description (`synth --no-descriptions --background-frames 0`), tracked with
 Adds the start delay (s after the first frame, where the person is already in view) and, where the
 hand-started runs of the same --out exist, their absolute error for comparison. The hands-off runs are
 scored from the frame the tracker started at; the hand-started ones from the first frame.
+
+--carry backpack|shoulder-bag (issue 10 §4, unmodelled foreground): the same walks with the person carrying
+a bag the tracker's body does not have (`synth --carry`; the sequences and runs get the bag's name).
 """
 from __future__ import annotations
 
@@ -45,6 +48,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 MOCAP_DIR = REPO_ROOT / "test" / "data" / "mocap"
 sys.path.insert(0, str(REPO_ROOT / "benchmarks"))
 
+from awalker_tools.person_render import CARRIED  # noqa: E402
 from bench_accuracy import evaluate_run  # noqa: E402  (one `awalker eval` wrapper for both benchmarks)
 
 WALKS = ("07_01", "07_02")
@@ -57,19 +61,20 @@ def log(text: str) -> None:
 
 
 def sequence(root: Path, walk: str, variant: str, cameras: int, size: tuple[int, int], rate: float,
-             background: int, hands_off: bool = False) -> Path:
+             background: int, hands_off: bool = False, carry: str = "none") -> Path:
     """The bag of one sequence, synthesised on first use (kept in ``root``). ``hands_off``: no
-    background-only frames and no start or body description."""
+    background-only frames and no start or body description; ``carry``: what the person carries."""
     from awalker_tools.synth import VARIANTS, SynthConfig, synthesise
 
-    seq = root / (f"{walk}_{variant}_{cameras}cam" + ("_handsoff" if hands_off else ""))
+    seq = root / (f"{walk}_{variant}_{cameras}cam" + ("_handsoff" if hands_off else "")
+                  + (f"_{carry}" if carry != "none" else ""))
     bag = seq / "synth.bag"
     if not bag.exists():
         frames = int(np.ceil(max(3.0, VARIANTS[variant][2] + 0.2) * rate))
         synthesise(SynthConfig(out_dir=seq, cameras=cameras, rate=rate, frames=frames,
                                background_frames=0 if hands_off else background, descriptions=not hands_off, seed=1, mocap=(MOCAP_DIR / "07.asf", MOCAP_DIR / f"{walk}.amc"), width=size[0],
                                height=size[1], person="dressed", variant=variant, user_start=True,
-                               tape_measure=True), progress=False)
+                               tape_measure=True, carry=carry), progress=False)
     return bag
 
 
@@ -123,24 +128,28 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-dead-reckoning", action="store_true", help="skip the no-image baseline")
     parser.add_argument("--hands-off", action="store_true",
                         help="no background-only frames, no start or body description: the automatic start")
+    parser.add_argument("--carry", choices=CARRIED, default="none",
+                        help="the person carries a backpack or a shoulder bag (synth --carry): unmodelled foreground")
     args = parser.parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
     args.out.mkdir(parents=True, exist_ok=True)
     report: dict = {"benchmark": "realwalks", "settings": {
         "particles": args.particles, "size": list(args.size), "rate": args.rate, "seeds": args.seeds,
         "background_frames": 0 if args.hands_off else args.background_frames, "hands_off": args.hands_off,
+        "carry": args.carry,
         "cpus": os.cpu_count()}, "runs": {}, "summary": {}}
     jobs = [(w, v, s) for w in args.walks for v in args.variants for s in args.settings]
     for k, (walk, variant, setting) in enumerate(jobs):
         name = f"{walk} {variant} {setting}"
         started = time.monotonic()
         bag = sequence(args.out / "sequences", walk, variant, SETTINGS[setting], tuple(args.size), args.rate,
-                       args.background_frames, args.hands_off)
+                       args.background_frames, args.hands_off, args.carry)
         modes = [("tracker", seed, True) for seed in args.seeds]
         if not (args.no_dead_reckoning or args.hands_off):    # dead reckoning needs a start description
             modes += [("dead_reckoning", seed, False) for seed in args.seeds]
         for mode, seed, images in modes:
-            run_dir = args.out / "runs" / f"{walk}_{variant}_{setting}_{mode}{'_handsoff' if args.hands_off else ''}_s{seed}"
+            run_dir = args.out / "runs" / (f"{walk}_{variant}_{setting}_{mode}{'_handsoff' if args.hands_off else ''}"
+                                           f"{'_' + args.carry if args.carry != 'none' else ''}_s{seed}")
             if not (run_dir / "eval.json").exists():
                 with contextlib.redirect_stdout(sys.stderr):
                     run_tracking(TrackOptions(bag=bag, out=run_dir, particles=args.particles, seed=seed,

@@ -180,6 +180,38 @@ def test_dressed_person_is_not_the_model_body(tmp_path):
     assert not np.array_equal(model_frames[3 + k][1]["cam0"], frames[3 + k][1]["cam0"])
 
 
+@pytest.mark.parametrize("carry", ["shoulder-bag", "backpack"])
+def test_a_carried_bag_is_drawn_where_it_is_carried(tmp_path, carry):
+    """`--carry`: the same sequence (the same random numbers) plus a bag the tracker's body lacks: the
+    frames differ only around it, by enough pixels to matter, beside the right hip (a shoulder bag) or
+    behind the torso (a backpack); the truth is the person's alone."""
+    common = [*MOCAP, "--seed", "2", "--person", "dressed", "--image-format", "raw", "--size", "320", "240"]
+    assert synth(tmp_path / "plain", *common) == 0
+    assert synth(tmp_path / carry, *common, "--carry", carry) == 0
+    cameras, plain, _, markers, _, _ = read(tmp_path / "plain")
+    _, carrying, _, carrying_markers, _, _ = read(tmp_path / carry)
+    np.testing.assert_array_equal(markers, carrying_markers)
+    assert np.array_equal(plain[0][1]["cam0"], carrying[0][1]["cam0"])          # the empty room, noise and all
+    k = 8
+    image, other = (frames[3 + k][1]["cam0"].astype(int) for frames in (plain, carrying))
+    rows, cols = np.nonzero(np.abs(image - other).sum(axis=2) > 30)
+    assert len(rows) > 40
+    centroid = np.array([cols.mean(), rows.mean()])
+    walk = markers[k + 1, M["pelvis"]] - markers[k - 1, M["pelvis"]]
+    walk[2] = 0.0
+    walk /= np.linalg.norm(walk)
+    if carry == "shoulder-bag":
+        uv, _ = cameras[0].project(markers[k, [M["right_hip"], M["thorax"]]])
+        hip, thorax = uv
+        assert np.linalg.norm(centroid - hip) < 0.5 * np.linalg.norm(centroid - thorax)
+    else:
+        back = 0.5 * (markers[k, M["pelvis"]] + markers[k, M["thorax"]])
+        uv, _ = cameras[0].project(np.array([back, back + 0.3 * walk]))
+        ahead = uv[1] - uv[0]
+        assert (centroid - uv[0]) @ ahead < 0                                    # behind the torso's middle
+    assert synth(tmp_path / "model", "--carry", carry) == 2                      # the model body carries nothing
+
+
 @pytest.mark.parametrize(("variant", "turn_deg", "speed_factor"),
                          [("u-turn", 180.0, 1.0), ("veer-left", 35.0, 1.0), ("veer-right", -35.0, 1.0),
                           ("fast", 0.0, 1.2), ("slow", 0.0, 0.8)])

@@ -7,6 +7,10 @@ capsule (a sphere swept along the bone, per-person radii), a shirt with horizont
 torso and upper arms, jeans of one colour on both legs and the hips, dark shoes, skin on the neck,
 face, forearms and hands; Lambert shading under a light from above, a soft contact shadow on the
 floor under the feet and the body, and a slight lens blur (sensor noise is added by ``synth``).
+Optionally the person carries something the tracker's body has even less of (``Outfit.carry``): a
+backpack on the back, or a shoulder bag hanging by the right hip from a strap over the left shoulder,
+brown leather either way (a fixed colour, so that a sequence with a bag draws the same random numbers
+as one without).
 
 Ray casting per pixel (within each capsule's projected box): the ray's closest approach to the
 bone gives the hit where it passes within the capsule's radius; the nearest hit wins. Units: m,
@@ -28,6 +32,9 @@ POINT_NAMES: tuple[str, ...] = MARKER_NAMES + tuple(EXTRA_POINTS)
 _P = {n: i for i, n in enumerate(POINT_NAMES)}
 LIGHT = np.array([0.3, -0.4, 0.85]) / np.linalg.norm([0.3, -0.4, 0.85])
 UP = np.array([0.0, 0.0, 1.0])
+#: What the person may carry (``Outfit.carry``).
+CARRIED = ("none", "backpack", "shoulder-bag")
+BAG_COLOUR = (110.0, 72.0, 42.0)
 
 
 @dataclass(frozen=True)
@@ -41,10 +48,16 @@ class Outfit:
     skin: tuple[float, float, float]
     hair: tuple[float, float, float]
     radii: dict[str, float]
+    carry: str = "none"          # one of CARRIED
+
+    def __post_init__(self) -> None:
+        if self.carry not in CARRIED:
+            raise ValueError(f"Outfit.carry must be one of {', '.join(CARRIED)}, got {self.carry!r}")
 
     @classmethod
-    def random(cls, rng: np.random.Generator) -> "Outfit":
-        """A person: clothes colours and body widths drawn around typical values (widths +- 10 %)."""
+    def random(cls, rng: np.random.Generator, carry: str = "none") -> "Outfit":
+        """A person: clothes colours and body widths drawn around typical values (widths +- 10 %),
+        carrying ``carry`` (one of ``CARRIED``; drawn without random numbers)."""
         base = {"torso": 0.11, "flank": 0.075, "hips": 0.1, "neck": 0.05, "head": 0.1, "upper_arm": 0.045,
                 "forearm": 0.036, "hand": 0.04, "thigh": 0.075, "shin": 0.052, "foot": 0.038}
         radii = {k: v * float(rng.uniform(0.9, 1.1)) for k, v in base.items()}
@@ -53,7 +66,7 @@ class Outfit:
         return cls(shirt=(tuple(light), tuple(dark)), stripe_m=float(rng.uniform(0.05, 0.09)),
                    jeans=tuple(np.array([55.0, 75.0, 125.0]) * rng.uniform(0.8, 1.2)),
                    shoes=tuple(rng.uniform(25, 60, 3)), skin=tuple(np.array([205.0, 160.0, 130.0]) * rng.uniform(0.75, 1.05)),
-                   hair=tuple(rng.uniform(20, 70, 3)), radii=radii)
+                   hair=tuple(rng.uniform(20, 70, 3)), radii=radii, carry=carry)
 
 
 def capsules(points: np.ndarray, outfit: Outfit) -> list[tuple[np.ndarray, np.ndarray, float, str]]:
@@ -80,7 +93,33 @@ def capsules(points: np.ndarray, outfit: Outfit) -> list[tuple[np.ndarray, np.nd
             (p[f"{side}_knee"], p[f"{side}_ankle"], r["shin"], "jeans"),
             (lift(p[f"{side}_heel"], r["foot"]), lift(p[f"{side}_toe"], 0.7 * r["foot"]), r["foot"], "shoes"),
         ]
-    return out
+    return out + carried(p, outfit)
+
+
+def carried(p: dict[str, np.ndarray], outfit: Outfit) -> list[tuple[np.ndarray, np.ndarray, float, str]]:
+    """Capsules of what the person carries (``outfit.carry``), placed in the torso's frame: ``up`` from the
+    pelvis to the neck, ``left`` from the right hip to the left, ``forward`` = left x up."""
+    if outfit.carry == "none":
+        return []
+    up = p["neck"] - p["pelvis"]
+    up /= np.linalg.norm(up)
+    left = p["left_hip"] - p["right_hip"]
+    left -= (left @ up) * up
+    left /= np.linalg.norm(left)
+    forward = np.cross(left, up)
+    r = outfit.radii
+    if outfit.carry == "backpack":
+        # two upright capsules side by side on the back: about 0.34 m wide, 0.45 m high, 0.17 m deep
+        centre = 0.5 * (p["pelvis"] + p["neck"]) + 0.05 * up - (r["torso"] + 0.09) * forward
+        return [(centre + s * 0.085 * left - 0.14 * up, centre + s * 0.085 * left + 0.14 * up, 0.085, "bag")
+                for s in (-1.0, 1.0)]
+    # shoulder bag: a 0.42 m long, 0.18 m high bag lying along the walk outside the right hip, its strap
+    # from the left shoulder across the chest and back
+    centre = p["right_hip"] - (r["hips"] + 0.1) * left - 0.02 * up
+    strap_end = centre + 0.08 * up
+    return [(centre - 0.12 * forward, centre + 0.12 * forward, 0.09, "bag"),
+            (p["left_shoulder"] + 0.02 * forward, strap_end, 0.015, "bag"),
+            (p["left_shoulder"] - 0.02 * forward, strap_end, 0.015, "bag")]
 
 
 def _colour(material: str, hit: np.ndarray, centre: np.ndarray, outfit: Outfit) -> np.ndarray:
@@ -95,7 +134,7 @@ def _colour(material: str, hit: np.ndarray, centre: np.ndarray, outfit: Outfit) 
     if material == "head":
         hair = (hit[:, 2] - centre[2]) > -0.01
         return np.where(hair[:, None], np.array(outfit.hair), np.array(outfit.skin))
-    colour = {"skin": outfit.skin, "shoes": outfit.shoes}[material]
+    colour = {"skin": outfit.skin, "shoes": outfit.shoes, "bag": BAG_COLOUR}[material]
     return np.broadcast_to(np.array(colour, float), (k, 3))
 
 

@@ -32,7 +32,7 @@ from awalker_tracker.vision.render import pixel_rays, render, render_rgb
 
 from awalker_tools import bagio
 from awalker_tools.overlay import save_overlay_png
-from awalker_tools.person_render import Outfit, PersonRenderer
+from awalker_tools.person_render import CARRIED, Outfit, PersonRenderer
 
 _M = {n: i for i, n in enumerate(MARKER_NAMES)}
 ROOM_HALF_SIZE = 8.0   # m: the room spans [-8, 8] x [-8, 8]
@@ -71,6 +71,7 @@ class SynthConfig:
     tape_measure: bool = False       # body.yaml lengths with tape-measure errors (a few per cent)
     descriptions: bool = True        # False: a user's own video, no start/body description (file or topic)
     second_person: bool = False      # dressed mocap walks: another person walks the other way, further back
+    carry: str = "none"              # dressed person: carries nothing, a backpack or a shoulder bag (CARRIED)
 
     def __post_init__(self) -> None:
         if not 1 <= self.cameras <= 4:
@@ -88,6 +89,10 @@ class SynthConfig:
             raise InputError(f"synth: --person must be 'model' or 'dressed', got {self.person!r}")
         if self.variant not in VARIANTS:
             raise InputError(f"synth: --variant must be one of {', '.join(VARIANTS)}, got {self.variant!r}")
+        if self.carry not in CARRIED:
+            raise InputError(f"synth: --carry must be one of {', '.join(CARRIED)}, got {self.carry!r}")
+        if self.carry != "none" and self.person != "dressed":
+            raise InputError("synth: --carry needs --person dressed (and --from-mocap)")
         if self.second_person and self.person != "dressed":
             raise InputError("synth: --second-person needs --person dressed (and --from-mocap)")
         if self.mocap is None and (self.person == "dressed" or self.variant != "straight" or self.tape_measure):
@@ -477,7 +482,7 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
     given_start = user_start(motion.start, rng) if config.user_start else motion.start
     painters = {}
     if config.person == "dressed":
-        outfit = Outfit.random(rng)
+        outfit = Outfit.random(rng, carry=config.carry)
         painters = {cam.name: PersonRenderer(cam, outfit) for cam in cameras}
     if other is not None:
         other_outfit = Outfit.random(rng)

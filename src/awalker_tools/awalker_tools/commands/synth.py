@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from awalker_tools.person_render import CARRIED
 from awalker_tools.synth import VARIANTS, SynthConfig, synthesise
 
 
@@ -47,6 +48,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="--person dressed: a second person (other clothes) walks the same walk the other way "
                              "1.2 m further back, crossing behind the first; the truth and start are the first's (the second's "
                              "truth: DIR/second_person.csv)")
+    parser.add_argument("--carry", choices=CARRIED, default="none",
+                        help="--person dressed: carries a backpack or a shoulder bag (by the right hip, strap over "
+                             "the left shoulder), something the tracker's body does not have (default none)")
     parser.add_argument("--no-descriptions", action="store_true",
                         help="a user's own video: no start.yaml, body.yaml or description topics (track it with the "
                              "automatic start; add --background-frames 0 for no empty frames either)")
@@ -68,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         noise_sigma=args.noise, storage=args.storage, compressed=args.image_format != "raw",
         image_format="png" if args.image_format == "raw" else args.image_format,
         person=args.person, variant=args.variant, user_start=args.user_start, tape_measure=args.tape_measure,
-        descriptions=not args.no_descriptions, second_person=args.second_person,
+        descriptions=not args.no_descriptions, second_person=args.second_person, carry=args.carry,
     )
     paths = synthesise(config)
     for kind, path in paths.items():
