@@ -108,10 +108,12 @@ def test_a_failure_in_the_feature_thread_stops_track_with_its_error(synth_bag: P
         raise RuntimeError("feature extraction broke")
 
     monkeypatch.setattr(FeatureNode, "_process", broken)
+    switch_interval = sys.getswitchinterval()
     started = time.monotonic()
     with pytest.raises(RuntimeError, match="feature extraction broke"):
         run_tracking(TrackOptions(bag=synth_bag, out=tmp_path / "run", particles=50, overlays=False, quiet=True))
     assert time.monotonic() - started < 30.0      # the replay would wait 60 s for the first ack
+    assert sys.getswitchinterval() == switch_interval     # the pipeline's shorter GIL slice is undone
 
 
 def test_track_with_nodes_in_two_processes(synth_bag: Path, localhost_context, tmp_path: Path):
