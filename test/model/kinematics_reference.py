@@ -163,7 +163,7 @@ def _eq6(config: KinematicConfig, walker: WalkerState, current: np.ndarray, prev
     psi_hip = walker.stance_angle - walker.swing_angle
     swing_values = {
         "alpha": config.alpha("swing_knee"), "stiffness": swing.stiffness,
-        "rest": config.swing_knee_rest_gain * psi_hip[:, None], "sigma": swing.sigma * config.sigma_unit,
+        "rest": config.swing_knee_rest_gain * psi_hip[:, None], "sigma": swing.sigma * config.noise_scale("swing_knee") * config.sigma_unit,
         "lower": swing.lower, "upper": swing.upper,
     }
     for key, value in swing_values.items():

@@ -63,6 +63,29 @@ def test_alpha_is_square_rooted_at_60_hz():
     assert KinematicConfig(dt=1 / 30).alpha("torso_up") == pytest.approx(0.75)
 
 
+@pytest.mark.parametrize("dof", ["heading", "left_hip_abduction", "right_ankle_flexion"])
+def test_the_prior_spreads_a_joint_as_fast_per_second_at_60_as_at_30_hz(dof: str):
+    """Eq. (6) is a discretised stochastic process: half a second of it moves a joint as far (in
+    spread over particles) at 60 frames/s as at 30. With sigma per frame unchanged at 60 Hz (no
+    ``noise_scale``) the spread is sqrt(1/2) as large."""
+    n, seconds = 4000, 0.5
+    spreads = {}
+    for fps in (30.0, 60.0):
+        config = KinematicConfig(dt=1.0 / fps)
+        frames = int(round(seconds * fps)) + 1
+        # one stance within the half second (no heel strike: no new turn rate)
+        walkers = hand_made_walk(frames, n, step_frames=int(fps), fps=fps)
+        rng = np.random.default_rng(3)
+        kin = initial_kinematics(config, walkers[0], [0.0, 0.0], 0.0, n, rng, body=BODY, heading_spread=0.0,
+                                 joint_spread=0.0, turn_rate_spread=0.0)
+        start = kin.dofs()[:, DOF_NAMES.index(dof)].copy()
+        for f in range(1, frames):
+            kin = sample_kinematics(config, BODY, PARAMS, walkers[f - 1], walkers[f], None, kin, rng)
+        spreads[fps] = float(np.std(kin.dofs()[:, DOF_NAMES.index(dof)] - start))
+    assert spreads[30.0] > 0
+    assert spreads[60.0] / spreads[30.0] == pytest.approx(1.0, abs=0.1), spreads
+
+
 def test_truncated_normal_matches_scipy_and_bounds():
     rng = np.random.default_rng(1)
     lower, upper, mean, sigma = -0.2, 1.5, 0.4, 0.7

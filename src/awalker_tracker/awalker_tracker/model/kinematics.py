@@ -11,7 +11,11 @@ Each DOF psi follows eq. (6):
     eta ~ N(0, sigma^2) truncated so that psi_t stays within its joint limits,
 with Table 1's parameters (``TABLE1``; the joint column reconstructed as in MODEL.md Sec. 5).
 alpha is given for dt = 1/30 s; at another dt we use alpha^(30 dt) (square root at 1/60 s,
-as the paper does). k is in 1/s^2. The swing knee's rest angle is gain x psi_hip with
+as the paper does), and sigma scaled so that the joint velocity eq. (6) drives keeps Table 1's
+stationary variance dt^2 sigma^2 / (1 - alpha^2) at any dt (``KinematicConfig.noise_scale``: 1.41-1.63
+at 1/60 s for Table 1's alphas 0.9-0.5; the paper says only that its 60 Hz parameters were "adjusted to
+account for a difference in frame rate"). With sigma unchanged, 60 Hz had half that variance or less:
+less freedom to follow a veer (real walks at 60 Hz, README). k is in 1/s^2. The swing knee's rest angle is gain x psi_hip with
 psi_hip = phi1 - phi2, the sagittal angle of the swing leg behind the stance leg (bent knee
 early in the stride, straight towards its end). The paper's gain is 5; ours is 2.5
 (``KinematicConfig.swing_knee_rest_gain``), measured on real walks (CMU subject 7, rendered by
@@ -180,6 +184,19 @@ class KinematicConfig:
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"KinematicConfig.dt must be > 0 s, got {self.dt!r}")
 
+    def noise_scale(self, row: str) -> float:
+        """Factor on Table 1's sigma of ``row`` at this dt (1 at 1/30 s): eta is the discretised noise of a
+        damped velocity (per frame v_t = alpha v_{t-1} + dt eta), scaled so that the velocity's stationary
+        variance, dt^2 sigma^2 / (1 - alpha^2), is Table 1's at any dt: (1/30 s / dt) sqrt((1 - alpha_dt^2) /
+        (1 - alpha_30^2)), which tends to sqrt(1/30 s / dt) (white noise in acceleration) as alpha -> 1.
+        Exactly 1 when dt is 1/30 s to within a millionth (a frame interval from stamps in whole ns)."""
+        alpha_30, ratio = self.table[row].alpha, (1.0 / 30.0) / self.dt
+        if abs(ratio - 1.0) < 1e-6:
+            return 1.0
+        if alpha_30 >= 1.0 - 1e-9:
+            return float(np.sqrt(ratio))
+        return float(ratio * np.sqrt((1.0 - self.alpha(row) ** 2) / (1.0 - alpha_30 ** 2)))
+
     def alpha(self, row: str) -> float:
         """alpha for this dt: Table 1 value (for 1/30 s) ^ (30 dt)."""
         return float(self.table[row].alpha ** (30.0 * self.dt))
@@ -191,7 +208,7 @@ class KinematicConfig:
             "alpha": np.array([self.alpha(r) for r in _DOF_ROWS]),
             "stiffness": np.array([r.stiffness for r in rows]),
             "rest": np.array([r.rest for r in rows]),
-            "sigma": np.array([r.sigma for r in rows]) * self.sigma_unit,
+            "sigma": np.array([r.sigma * self.noise_scale(name) for name, r in zip(_DOF_ROWS, rows)]) * self.sigma_unit,
             "lower": np.array([r.lower for r in rows]),
             "upper": np.array([r.upper for r in rows]),
         }
@@ -304,7 +321,7 @@ def _eq6_table(config: KinematicConfig) -> np.ndarray:
         table[:_D, column] = p[key]
     swing = config.table["swing_knee"]
     table[_SWING_KNEE_ROW] = (config.alpha("swing_knee"), swing.stiffness, config.swing_knee_rest_gain,
-                              swing.sigma * config.sigma_unit, swing.lower, swing.upper)
+                              swing.sigma * config.noise_scale("swing_knee") * config.sigma_unit, swing.lower, swing.upper)
     return table
 
 
