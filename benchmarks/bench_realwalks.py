@@ -60,14 +60,18 @@ def log(text: str) -> None:
     print(f"bench_realwalks: {text}", file=sys.stderr, flush=True)
 
 
+def suffix(hands_off: bool, carry: str) -> str:
+    """What the names of a sequence and its runs add for ``--hands-off`` and ``--carry``."""
+    return ("_handsoff" if hands_off else "") + (f"_{carry}" if carry != "none" else "")
+
+
 def sequence(root: Path, walk: str, variant: str, cameras: int, size: tuple[int, int], rate: float,
              background: int, hands_off: bool = False, carry: str = "none") -> Path:
     """The bag of one sequence, synthesised on first use (kept in ``root``). ``hands_off``: no
     background-only frames and no start or body description; ``carry``: what the person carries."""
     from awalker_tools.synth import VARIANTS, SynthConfig, synthesise
 
-    seq = root / (f"{walk}_{variant}_{cameras}cam" + ("_handsoff" if hands_off else "")
-                  + (f"_{carry}" if carry != "none" else ""))
+    seq = root / f"{walk}_{variant}_{cameras}cam{suffix(hands_off, carry)}"
     bag = seq / "synth.bag"
     if not bag.exists():
         frames = int(np.ceil(max(3.0, VARIANTS[variant][2] + 0.2) * rate))
@@ -148,8 +152,7 @@ def main(argv: list[str] | None = None) -> int:
         if not (args.no_dead_reckoning or args.hands_off):    # dead reckoning needs a start description
             modes += [("dead_reckoning", seed, False) for seed in args.seeds]
         for mode, seed, images in modes:
-            run_dir = args.out / "runs" / (f"{walk}_{variant}_{setting}_{mode}{'_handsoff' if args.hands_off else ''}"
-                                           f"{'_' + args.carry if args.carry != 'none' else ''}_s{seed}")
+            run_dir = args.out / "runs" / f"{walk}_{variant}_{setting}_{mode}{suffix(args.hands_off, args.carry)}_s{seed}"
             if not (run_dir / "eval.json").exists():
                 with contextlib.redirect_stdout(sys.stderr):
                     run_tracking(TrackOptions(bag=bag, out=run_dir, particles=args.particles, seed=seed,

@@ -32,6 +32,7 @@ def recorded_features(run: Path) -> dict[str, dict[int, object]]:
     from rosbags.rosbag2 import Reader
 
     from awalker_tracker.errors import InputError
+    from awalker_tracker.nodes.convert import stamp_to_ns
     from awalker_tracker.nodes.features import features_from_msg
 
     bag = run / "result.bag"
@@ -44,8 +45,7 @@ def recorded_features(run: Path) -> dict[str, dict[int, object]]:
             raise InputError(f"{bag}: no /<camera>/features topic recorded")
         for connection, _, raw in reader.messages(connections=connections):
             msg = deserialize_message(raw, ImageFeatures)
-            stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
-            out.setdefault(msg.camera_name, {})[stamp] = features_from_msg(msg)
+            out.setdefault(msg.camera_name, {})[stamp_to_ns(msg.header.stamp)] = features_from_msg(msg)
     return out
 
 
@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
         for name, direction in (("along_view", view), ("across_view", np.array([-view[1], view[0], 0.0]))):
             total, used = np.zeros(len(OFFSETS)), 0
             for k in range(1, len(truth.frames), 2):
-                stamp, before = int(truth.stamps_ns[k]), int(truth.stamps_ns[k - 1])
+                stamp = int(truth.stamps_ns[k])
                 if stamp not in seen:
                     continue
                 now = segments_from_markers(true_body, truth.markers[k][None])

@@ -12,7 +12,7 @@ Each DOF psi follows eq. (6):
 with Table 1's parameters (``TABLE1``; the joint column reconstructed as in MODEL.md Sec. 5).
 alpha is given for dt = 1/30 s; at another dt we use alpha^(30 dt) (square root at 1/60 s,
 as the paper does), and sigma scaled so that the joint velocity eq. (6) drives keeps Table 1's
-stationary variance dt^2 sigma^2 / (1 - alpha^2) at any dt (``KinematicConfig.noise_scale``: 1.41-1.63
+stationary variance dt^2 sigma^2 / (1 - alpha^2) at any dt (``KinematicConfig.noise_scale``: 1.45-1.63
 at 1/60 s for Table 1's alphas 0.9-0.5; the paper says only that its 60 Hz parameters were "adjusted to
 account for a difference in frame rate"). With sigma unchanged, 60 Hz had half that variance or less:
 less freedom to follow a veer (real walks at 60 Hz, README). k is in 1/s^2. The swing knee's rest angle is gain x psi_hip with
