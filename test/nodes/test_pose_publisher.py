@@ -1,6 +1,7 @@
 """Pose publisher node and summary message conversion (in-process, private rclpy context)."""
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -61,27 +62,39 @@ def test_cylinder_geometry():
     shin = [m for m in cyl if np.isclose(m.scale.z, np.linalg.norm(ankle - knee))]
     assert len(shin) == 1
     assert np.allclose([shin[0].pose.position.x, shin[0].pose.position.y, shin[0].pose.position.z], (knee + ankle) / 2)
-    clouds = [m for m in array.markers if "/cloud/" in m.ns]
-    assert len(clouds) == 1 and len(clouds[0].points) == 20 and len(clouds[0].colors) == 20
-    assert np.allclose(np.sort([p.x for p in clouds[0].points]), np.sort(s.clouds[0].points[:, 0]), atol=1e-6)
-    # drawn heaviest first; opacity follows the weight (quantised): the heaviest sample is opaque
-    order = np.argsort(-s.clouds[0].weights, kind="stable")
-    weights, alpha = s.clouds[0].weights[order], np.array([c.a for c in clouds[0].colors])
-    assert np.allclose([[p.x, p.y, p.z] for p in clouds[0].points], s.clouds[0].points[order], atol=1e-6)
-    assert alpha[0] == 1.0 and np.all(np.diff(alpha) <= 0)
-    assert np.allclose(alpha, np.clip(weights / weights.max(), 0.05, 1.0), atol=1.0 / 20)
-    # only the heaviest samples when asked for fewer
-    few = marker_array_from_summary(summary_to_msg(s), body_cylinders(body), cloud_points=5)
-    drawn = [m for m in few.markers if "/cloud/" in m.ns][0]
-    assert np.allclose([[p.x, p.y, p.z] for p in drawn.points], s.clouds[0].points[order[:5]], atol=1e-6)
+    assert not [m for m in array.markers if "cloud" in m.ns]         # the clouds go out as a PointCloud2
     assert all(m.header.stamp.nanosec == 10 for m in array.markers)
+
+
+def test_particle_clouds_pack_into_a_pointcloud2_heaviest_first():
+    from awalker_tracker.nodes.convert import PARTICLE_POINT, particles_to_pointcloud2, summary_to_msg
+
+    rng = np.random.default_rng(3)
+    s = dataclasses.replace(make_summary(10, 0, rng), clouds=(
+        MarkerCloud("head", rng.normal(size=(20, 3)), rng.random(20) / 20),
+        MarkerCloud("left_ankle", rng.normal(size=(30, 3)), rng.random(30) / 30)))
+    msg = summary_to_msg(s)
+    cloud = particles_to_pointcloud2(msg.header, msg.clouds, 8)
+    assert cloud.header.stamp.nanosec == 10 and cloud.header.frame_id == "world"
+    assert (cloud.height, cloud.width, cloud.point_step) == (1, 16, 20) and cloud.row_step == 16 * 20
+    assert [(f.name, f.offset, f.datatype) for f in cloud.fields] == [
+        ("x", 0, 7), ("y", 4, 7), ("z", 8, 7), ("weight", 12, 7), ("marker", 16, 6)]   # FLOAT32, UINT32
+    points = np.frombuffer(bytes(cloud.data), PARTICLE_POINT)
+    for index, source in enumerate(s.clouds):
+        mine = points[points["marker"] == index]
+        order = np.argsort(-source.weights, kind="stable")[:8]     # the 8 heaviest, heaviest first
+        assert np.allclose(mine["weight"], source.weights[order], atol=1e-7)
+        assert np.allclose(np.stack([mine["x"], mine["y"], mine["z"]], 1), source.points[order], atol=1e-6)
+    everything = particles_to_pointcloud2(msg.header, msg.clouds, 1000)
+    assert everything.width == 50 and len(everything.data) == 50 * 20
+    assert particles_to_pointcloud2(msg.header, [], 8).width == 0
 
 
 def test_node_publishes_joint_states_and_markers_with_image_stamp(ros_context):
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
-    from sensor_msgs.msg import JointState
+    from sensor_msgs.msg import JointState, PointCloud2
     from visualization_msgs.msg import MarkerArray
 
     from awalker_msgs.msg import PosteriorSummary as SummaryMsg
@@ -90,11 +103,12 @@ def test_node_publishes_joint_states_and_markers_with_image_stamp(ros_context):
 
     node = PosePublisherNode(context=ros_context)
     probe = Node("probe", context=ros_context)
-    got: dict[str, list] = {"joints": [], "rep155": [], "markers": []}
+    got: dict[str, list] = {"joints": [], "rep155": [], "markers": [], "particles": []}
     qos = QoSProfile(depth=50)
     probe.create_subscription(JointState, "/awalker/joint_states", got["joints"].append, qos)
     probe.create_subscription(JointState, "/humans/bodies/walker/joint_states", got["rep155"].append, qos)
     probe.create_subscription(MarkerArray, "/awalker/markers", got["markers"].append, qos)
+    probe.create_subscription(PointCloud2, "/awalker/particles", got["particles"].append, qos)
     pub = probe.create_publisher(SummaryMsg, "/awalker/posterior", qos)
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(node)
@@ -112,6 +126,8 @@ def test_node_publishes_joint_states_and_markers_with_image_stamp(ros_context):
         assert [stamp_to_ns(m.header.stamp) for m in got["joints"]] == stamps
         assert [stamp_to_ns(m.header.stamp) for m in got["rep155"]] == stamps
         assert [stamp_to_ns(m.markers[0].header.stamp) for m in got["markers"]] == stamps
+        assert [stamp_to_ns(m.header.stamp) for m in got["particles"]] == stamps
+        assert got["particles"][0].width == 20 and got["particles"][0].header.frame_id == "world"
         assert list(got["joints"][0].name) == list(JOINT_NAMES)
         assert all(m.header.frame_id == "world" for m in got["markers"][0].markers)
     finally:

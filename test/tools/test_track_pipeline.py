@@ -68,6 +68,7 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     assert [_stamp(m) for m in result["/awalker/joint_states"]] == tracked
     assert [_stamp(m) for m in result["/humans/bodies/walker/joint_states"]] == tracked
     assert [_stamp(m.markers[0]) for m in result["/awalker/markers"]] == tracked
+    assert [_stamp(m) for m in result["/awalker/particles"]] == tracked
     assert [_stamp(m) for m in result["/awalker/ack"]] == stamps           # every frame acknowledged
     assert [_stamp(m) for m in result["/cam0/features"]] == stamps
     poses = evaluation.read_poses_csv(out / "poses.csv")

@@ -273,7 +273,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
             Parameter("body_description", value=str(out / BODY_FILE) if body is not None else "")])
         nodes.append(poser)
         from awalker_msgs.msg import GaitStep, ImageFeatures, PosteriorSummary
-        from sensor_msgs.msg import JointState
+        from sensor_msgs.msg import JointState, PointCloud2
         from std_msgs.msg import Header
         from visualization_msgs.msg import MarkerArray
 
@@ -282,6 +282,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
             "/awalker/joint_states": (JointState, "sensor_msgs/msg/JointState"),
             f"/humans/bodies/{poser.body_id}/joint_states": (JointState, "sensor_msgs/msg/JointState"),
             "/awalker/markers": (MarkerArray, "visualization_msgs/msg/MarkerArray"),
+            "/awalker/particles": (PointCloud2, "sensor_msgs/msg/PointCloud2"),
             "/awalker/gait_steps": (GaitStep, "awalker_msgs/msg/GaitStep"),
             "/awalker/ack": (Header, "std_msgs/msg/Header"),
         }
@@ -319,7 +320,8 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         while time.monotonic() < deadline and (
                 recorder.counts["/awalker/posterior"] < tracker.stats.summaries
                 or recorder.counts["/awalker/joint_states"] < tracker.stats.summaries
-                or recorder.counts["/awalker/markers"] < tracker.stats.summaries):
+                or recorder.counts["/awalker/markers"] < tracker.stats.summaries
+                or recorder.counts["/awalker/particles"] < tracker.stats.summaries):
             executor.spin_once(timeout_sec=0.05)
         result.seconds_streaming = time.monotonic() - streaming
         executor.shutdown()

@@ -11,6 +11,7 @@ import numpy as np
 from awalker_msgs.msg import BodyPose, FootContact, ParticleCloud, PosteriorSummary, WalkerState
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, Pose
+from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header
 
 from awalker_tracker.inference import posterior as core
@@ -123,6 +124,34 @@ def summary_from_msg(msg: PosteriorSummary) -> core.PosteriorSummary:
 def cloud_positions(cloud: ParticleCloud) -> np.ndarray:
     """(K, 3) sample positions (m) of an awalker_msgs/ParticleCloud."""
     return np.asarray(cloud.positions, float).reshape(-1, 3)
+
+
+#: One sample of the published particle cloud (sensor_msgs/PointCloud2, little endian): position (m,
+#: world frame), weight (normalised over the full particle set) and marker, the index of the sample's
+#: cloud in the PosteriorSummary (which body marker it is a sample of).
+PARTICLE_POINT = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("weight", "<f4"), ("marker", "<u4")])
+_POINT_FIELD_TYPES = {"<f4": PointField.FLOAT32, "<u4": PointField.UINT32}
+
+
+def particles_to_pointcloud2(hdr: Header, clouds: list[ParticleCloud], per_cloud: int) -> PointCloud2:
+    """sensor_msgs/PointCloud2 of the ``per_cloud`` heaviest samples of each awalker_msgs/ParticleCloud,
+    fields as ``PARTICLE_POINT``: one packed buffer (a geometry_msgs/Point per sample in a MarkerArray
+    cost the pose publisher ~4 ms a frame for 300 samples)."""
+    parts = []
+    for index, cloud in enumerate(clouds):
+        weights = np.asarray(cloud.weights, np.float32)
+        heaviest = np.argsort(-weights, kind="stable")[:max(int(per_cloud), 0)]
+        part = np.empty(heaviest.size, PARTICLE_POINT)
+        xyz = np.asarray(cloud.positions, np.float32).reshape(-1, 3)[heaviest]
+        part["x"], part["y"], part["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+        part["weight"], part["marker"] = weights[heaviest], index
+        parts.append(part)
+    points = np.concatenate(parts) if parts else np.empty(0, PARTICLE_POINT)
+    fields = [PointField(name=name, offset=int(offset), datatype=_POINT_FIELD_TYPES[dtype.str], count=1)
+              for name, (dtype, offset) in PARTICLE_POINT.fields.items()]
+    return PointCloud2(header=hdr, height=1, width=int(points.size), fields=fields, is_bigendian=False,
+                       point_step=PARTICLE_POINT.itemsize, row_step=PARTICLE_POINT.itemsize * int(points.size),
+                       data=array.array("B", points.tobytes()), is_dense=True)
 
 
 def camera_from_msgs(name: str, info, pose_stamped) -> "Camera":

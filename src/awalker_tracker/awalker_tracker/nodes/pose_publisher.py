@@ -5,8 +5,10 @@ the image stamp of each summary:
 - ``/awalker/joint_states`` and ``/humans/bodies/<body_id>/joint_states`` (REP 155 style),
   sensor_msgs/JointState with the MAP pose's joint names and angles;
 - ``/awalker/markers`` visualization_msgs/MarkerArray in the world frame: skeleton lines and
-  joints of the MAP pose, body cylinders (sizes from the body description), particle clouds of
-  head/pelvis/knees/ankles coloured by weight, foot contacts (heel strikes larger);
+  joints of the MAP pose, body cylinders (sizes from the body description), foot contacts (heel
+  strikes larger);
+- ``/awalker/particles`` sensor_msgs/PointCloud2 in the world frame: the heaviest samples of the
+  posterior's head/pelvis/knee/ankle clouds, fields x, y, z, weight, marker (``convert.PARTICLE_POINT``);
 - ``/awalker/gait_steps`` awalker_msgs/GaitStep at every heel strike the posterior reports (the foot
   whose strike carries more than half the weight): where the heel came down, step length and width,
   step and stride time, cadence and speed (``inference.gait.StepCounter``; online, from the filter at
@@ -21,13 +23,13 @@ from awalker_msgs.msg import GaitStep, PosteriorSummary
 from geometry_msgs.msg import Point, Vector3
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import JointState, PointCloud2
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from awalker_tracker.inference.gait import WALKER_STRIKE_DELAY, Step, StepCounter
 from awalker_tracker.model.body import BodyDescription
-from awalker_tracker.nodes.convert import cloud_positions, points_from_msg, points_to_msg, stamp_to_ns
+from awalker_tracker.nodes.convert import particles_to_pointcloud2, points_from_msg, stamp_to_ns
 from awalker_tracker.nodes.spin import run_node
 
 BONES = (("pelvis", "thorax"), ("thorax", "head"), ("pelvis", "left_hip"), ("pelvis", "right_hip"),
@@ -35,12 +37,7 @@ BONES = (("pelvis", "thorax"), ("thorax", "head"), ("pelvis", "left_hip"), ("pel
          ("left_heel", "left_toe"), ("left_ankle", "left_toe"),
          ("right_hip", "right_knee"), ("right_knee", "right_ankle"), ("right_ankle", "right_heel"),
          ("right_heel", "right_toe"), ("right_ankle", "right_toe"))
-CLOUD_COLOURS = {"head": (0.2, 0.4, 1.0), "pelvis": (0.2, 0.4, 1.0), "left_knee": (0.1, 0.9, 0.1),
-                 "right_knee": (1.0, 0.1, 0.1), "left_ankle": (1.0, 1.0, 1.0), "right_ankle": (1.0, 0.9, 0.1)}
-#: Opacity levels of the cloud samples (weight relative to the cloud's heaviest, floored at 0.05).
-CLOUD_ALPHA_LEVELS = 20
-#: Samples per particle cloud drawn in the MarkerArray (the heaviest; the posterior message carries all):
-#: 6 clouds of 200 samples as geometry_msgs/Point cost the pose publisher ~10 ms per frame.
+#: Samples per body marker's cloud in /awalker/particles (the heaviest; the posterior message carries 200).
 DEFAULT_CLOUD_POINTS = 50
 
 
@@ -84,10 +81,9 @@ def joint_state_from_summary(msg: PosteriorSummary) -> JointState:
 
 
 def marker_array_from_summary(msg: PosteriorSummary, cylinders: tuple[tuple[str, str, float], ...],
-                              body_id: str = "walker", clouds: bool = True,
-                              cloud_points: int = DEFAULT_CLOUD_POINTS) -> MarkerArray:
-    """MarkerArray of one posterior summary (ids stable per namespace, so each frame replaces the last);
-    each particle cloud drawn with its ``cloud_points`` heaviest samples."""
+                              body_id: str = "walker") -> MarkerArray:
+    """MarkerArray of one posterior summary's MAP pose and foot contacts (ids stable per namespace, so
+    each frame replaces the last). The particle clouds go out as a PointCloud2 (``particles_to_pointcloud2``)."""
     hdr = msg.header
     names = list(msg.map_pose.marker_names)
     xyz = points_from_msg(msg.map_pose.markers)
@@ -119,22 +115,6 @@ def marker_array_from_summary(msg: PosteriorSummary, cylinders: tuple[tuple[str,
         q = quaternion_z_to(end - start)
         cyl.pose.orientation.x, cyl.pose.orientation.y, cyl.pose.orientation.z, cyl.pose.orientation.w = q
         out.append(cyl)
-    if clouds:
-        for i, cloud in enumerate(msg.clouds):
-            weights = np.asarray(cloud.weights, float)
-            heaviest = np.argsort(-weights, kind="stable")[:max(int(cloud_points), 0)]
-            weights = weights[heaviest]
-            rgb = CLOUD_COLOURS.get(cloud.marker_name, (0.8, 0.8, 0.8))
-            pts = marker(f"cloud/{cloud.marker_name}", i, Marker.POINTS, (*rgb, 1.0), (0.01, 0.01, 0))
-            pts.points = points_to_msg(cloud_positions(cloud)[heaviest])
-            top = weights.max() if weights.size else 1.0
-            intensity = np.clip(weights / top, 0.05, 1.0) if top > 0 else np.ones_like(weights)
-            # opacity in 20 levels: one shared ColorRGBA per level instead of one per sample
-            palette = [ColorRGBA(r=rgb[0], g=rgb[1], b=rgb[2], a=(level + 1) / CLOUD_ALPHA_LEVELS)
-                       for level in range(CLOUD_ALPHA_LEVELS)]
-            levels = np.ceil(intensity * CLOUD_ALPHA_LEVELS).astype(int) - 1
-            pts.colors = [palette[level] for level in levels]
-            out.append(pts)
     for i, contact in enumerate(msg.contacts):
         if not np.isfinite(contact.position.x):
             continue
@@ -156,9 +136,10 @@ class PosePublisherNode(Node):
         self.declare_parameter("body_id", "walker", descriptor_text("REP 155 body id: /humans/bodies/<id>/..."))
         self.declare_parameter("body_description", "",
                                descriptor_text("body YAML (segment sizes, m) for the cylinders; empty = default"))
-        self.declare_parameter("publish_clouds", True, descriptor_text("publish posterior particle clouds"))
+        self.declare_parameter("publish_clouds", True,
+                               descriptor_text("publish the posterior particle clouds on /awalker/particles"))
         self.declare_parameter("cloud_points", DEFAULT_CLOUD_POINTS,
-                               descriptor_text("samples drawn per particle cloud marker (the heaviest)"))
+                               descriptor_text("samples per body marker's cloud on /awalker/particles (the heaviest)"))
         body_id = self.get_parameter("body_id").value
         body_path = self.get_parameter("body_description").value
         self.body_id = body_id
@@ -169,6 +150,7 @@ class PosePublisherNode(Node):
         self.joint_pub = self.create_publisher(JointState, "/awalker/joint_states", qos)
         self.rep155_pub = self.create_publisher(JointState, f"/humans/bodies/{body_id}/joint_states", qos)
         self.marker_pub = self.create_publisher(MarkerArray, "/awalker/markers", qos)
+        self.particles_pub = self.create_publisher(PointCloud2, "/awalker/particles", qos)
         self.gait_pub = self.create_publisher(GaitStep, "/awalker/gait_steps", qos)
         self.steps = StepCounter(WALKER_STRIKE_DELAY)       # heel strikes a double support early
         self._first_stamp_ns: int | None = None
@@ -183,8 +165,9 @@ class PosePublisherNode(Node):
         joints = joint_state_from_summary(msg)
         self.joint_pub.publish(joints)
         self.rep155_pub.publish(joints)
-        self.marker_pub.publish(marker_array_from_summary(msg, self.cylinders, self.body_id, self.publish_clouds,
-                                                         self.cloud_points))
+        self.marker_pub.publish(marker_array_from_summary(msg, self.cylinders, self.body_id))
+        if self.publish_clouds:
+            self.particles_pub.publish(particles_to_pointcloud2(msg.header, msg.clouds, self.cloud_points))
         stamp = stamp_to_ns(msg.header.stamp)
         if self._first_stamp_ns is None:
             self._first_stamp_ns = stamp
