@@ -317,11 +317,8 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         tracker.flush()
         # let the pose publisher and the recorder receive everything published so far
         deadline = time.monotonic() + 10.0
-        while time.monotonic() < deadline and (
-                recorder.counts["/awalker/posterior"] < tracker.stats.summaries
-                or recorder.counts["/awalker/joint_states"] < tracker.stats.summaries
-                or recorder.counts["/awalker/markers"] < tracker.stats.summaries
-                or recorder.counts["/awalker/particles"] < tracker.stats.summaries):
+        per_posterior = ("/awalker/posterior", "/awalker/joint_states", "/awalker/markers", "/awalker/particles")
+        while time.monotonic() < deadline and any(recorder.counts[t] < tracker.stats.summaries for t in per_posterior):
             executor.spin_once(timeout_sec=0.05)
         result.seconds_streaming = time.monotonic() - streaming
         executor.shutdown()

@@ -142,7 +142,7 @@ def particles_to_pointcloud2(hdr: Header, clouds: list[ParticleCloud], per_cloud
         weights = np.asarray(cloud.weights, np.float32)
         heaviest = np.argsort(-weights, kind="stable")[:max(int(per_cloud), 0)]
         part = np.empty(heaviest.size, PARTICLE_POINT)
-        xyz = np.asarray(cloud.positions, np.float32).reshape(-1, 3)[heaviest]
+        xyz = cloud_positions(cloud)[heaviest]
         part["x"], part["y"], part["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
         part["weight"], part["marker"] = weights[heaviest], index
         parts.append(part)
