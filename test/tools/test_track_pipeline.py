@@ -15,6 +15,7 @@ import yaml
 
 from awalker_tools import evaluation
 from awalker_tools.cli import main
+from awalker_tracker.model.body import BodyDescription
 
 FRAMES, BACKGROUND = 10, 4
 
@@ -97,6 +98,37 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     assert page.count("data:image/png;base64,") >= 3 and page.count("<tr>") >= len(steps) + 2
     assert main(["report", str(tmp_path)]) == 2
     assert "no summary.csv, gait.csv, gait.json" in capsys.readouterr().err
+    # the leg length fitted to the features the run recorded (issue 12 §3)
+    assert main(["fitbody", str(out), "--particles", "100", "--frames", "6", "--factors", "0.9", "1.0", "1.1"]) == 0
+    fitted = yaml.safe_load(capsys.readouterr().out)["fitbody"]
+    given, got = (BodyDescription.from_yaml(out / name) for name in ("body.yaml", "body_fitted.yaml"))
+    assert fitted["leg_factor"] in (0.9, 1.0, 1.1) and fitted["frames"] == 6
+    assert got.upper_leg_length == pytest.approx(fitted["leg_factor"] * given.upper_leg_length)
+    assert got.lower_leg_length == pytest.approx(fitted["leg_factor"] * given.lower_leg_length)
+    assert got.torso_length == given.torso_length
+    evidence = fitted["log_evidence"]
+    assert len(evidence) == 3 and len(set(evidence.values())) == 3
+    assert evidence[f"{fitted['leg_factor']:.2f}"] == max(evidence.values())
+
+
+def test_fit_body_input_errors(synth_bag: Path, tmp_path: Path, capsys):
+    assert main(["fitbody", str(tmp_path / "nowhere")]) == 2
+    assert "not a directory" in capsys.readouterr().err
+    run = tmp_path / "run"
+    run.mkdir()
+    assert main(["fitbody", str(run)]) == 2
+    assert "run.yaml: not found" in capsys.readouterr().err
+    (run / "run.yaml").write_text("particles: 100\n")
+    for name in ("calibration.yaml", "start.yaml", "body.yaml"):
+        (run / name).write_text((synth_bag.parent / name).read_text())
+    assert main(["fitbody", str(run)]) == 2
+    assert "result.bag: bag not found" in capsys.readouterr().err
+    # a bag without the recorded features (the input bag itself)
+    (run / "result.bag").symlink_to(synth_bag.resolve(), target_is_directory=synth_bag.is_dir())
+    assert main(["fitbody", str(run)]) == 2
+    assert "no /cam0/features" in capsys.readouterr().err
+    assert main(["fitbody", str(run), "--factors", "2.0"]) == 2
+    assert "leg factors must lie in (0.5, 1.5)" in capsys.readouterr().err
 
 
 def test_a_failure_in_the_feature_thread_stops_track_with_its_error(synth_bag: Path, tmp_path: Path, monkeypatch):

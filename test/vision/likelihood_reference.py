@@ -180,6 +180,22 @@ def _chunk_log_likelihood(parts: tuple[PartShape, ...], sil: "_Silhouettes", pre
     for a in range(1, A):
         part_sums = part_sums + row_sums[a]
     total = config.appearance_weight / (A * J) * np.sum(scale * part_sums, axis=0, dtype=np.float64)
+    names = [p.name for p in parts]
+    if config.head_top_weight > 0 and "head" in names:
+        # the person's foreground just above the head's top (0.75 map pixels out along the image axis)
+        # counts against the body, at half the head's end width across (n,)
+        h = names.index("head")
+        ok = in_front[h] & long_enough[h]
+        margin = np.float32(0.75) / (inv_ds * np.where(ok, length[h], np.float32(1)))
+        top_col = (sil.bx[h] + margin * dx[h] + np.float32(0.5)) * inv_ds + np.float32(1)
+        top_row = (sil.by[h] + margin * dy[h] + np.float32(0.5)) * inv_ds + np.float32(1)
+        above = np.zeros(top_col.shape, np.float64)
+        for j in range(J):
+            col = np.clip(top_col + s[j] * np.float32(0.5) * sil.hb[h] * nx[h] * inv_ds, 0, tab.w + 1)
+            row = np.clip(top_row + s[j] * np.float32(0.5) * sil.hb[h] * ny[h] * inv_ds, 0, tab.h + 1)
+            at = tab.offsets[h] + row.astype(np.int32) * (tab.w + 2) + col.astype(np.int32)
+            above += np.maximum(np.take(tab.values, at), 0)
+        total -= np.where(ok, config.appearance_weight * config.head_top_weight / J * above, 0.0)
     # ---- flow at the axis points of every flow_row_step-th row (rows, P, n) ---------------
     if flow is not None and prev is not None:
         pick = slice(None, None, config.flow_row_step)       # flow cells are coarser than the rows

@@ -116,6 +116,8 @@ CASES = [
     ("none", 0.0, True, True, LikelihoodConfig(points_along=7, points_across=3, flow_row_step=2,
                                                appearance_weight=0.7, flow_weight=2.0)),
     ("eight", 0.0, False, True, LikelihoodConfig(appearance_weight=0.0)),
+    ("five", 0.0, True, True, LikelihoodConfig(head_top_weight=1.0)),
+    ("none", 0.0, False, True, LikelihoodConfig(head_top_weight=2.5)),
 ]
 
 
@@ -131,7 +133,11 @@ def test_compiled_likelihood_matches_numpy_reference(case):
     compiled = log_likelihood(BODY.parts, batch, prev, [camera], [features], [mask], config=config)
     reference = reference_log_likelihood(BODY.parts, batch, prev, [camera], [features], [mask], config=config)
     assert_agrees(compiled, reference)
-    # the test bodies do exercise the cases: behind the camera, outside the image, hidden rows
+    # the test bodies do exercise the cases: the head-top term, behind the camera, outside the image, hidden rows
+    if config.head_top_weight > 0 and config.appearance_weight > 0:
+        without = log_likelihood(BODY.parts, batch, prev, [camera], [features], [mask],
+                                 config=dataclasses.replace(config, head_top_weight=0.0))
+        assert np.mean(compiled < without - 1e-6) > 0.05 and np.all(compiled <= without + 1e-6)
     axes = _project_segments(BODY.parts, batch, _CameraArrays(camera))
     assert (axes[..., 4:] <= 0).any(axis=(1, 2)).mean() > 0.03
     assert ((axes[..., 0] > WIDTH) & (axes[..., 4] > 0)).any(axis=1).mean() > 0.03

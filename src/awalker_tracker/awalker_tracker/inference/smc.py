@@ -133,6 +133,7 @@ class FilterStep(Generic[States]):
     effective_sample_size: float  # N_eff of w_t
     lookahead_ess: float          # N_eff of the look-ahead weights w_{t:t+tau} that decided resampling
     observation: Any = field(repr=False, default=None)
+    log_evidence: float = float("nan")   # log p(z_t | z_1:t-1) ~ log sum_j w_{t-1,j} p(z_t | s_t^j)
 
     @property
     def weights(self) -> np.ndarray:
@@ -249,12 +250,15 @@ class ParticleFilter(Generic[States]):
             resampled = True
             self.num_resamples += 1
         current = self._window.popleft()
-        log_w = normalize_log_weights(self._prev_log_weights + current.log_likelihood)
+        unnormalised = self._prev_log_weights + current.log_likelihood
+        top = float(np.max(unnormalised))
+        log_evidence = top + float(np.log(np.sum(np.exp(unnormalised - top)))) if np.isfinite(top) else -np.inf
+        log_w = normalize_log_weights(unnormalised)
         step = FilterStep(
             frame=self._next_frame, states=current.states, info=current.info, log_weights=log_w,
             log_likelihood=current.log_likelihood, ancestors=ancestors, resampled=resampled,
             effective_sample_size=float(1.0 / np.sum(np.exp(2.0 * log_w))),
-            lookahead_ess=lookahead_ess, observation=current.obs)
+            lookahead_ess=lookahead_ess, observation=current.obs, log_evidence=log_evidence)
         self._prev_states, self._prev_log_weights = current.states, log_w
         self._initial = None
         self._next_frame += 1

@@ -20,7 +20,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, fields, is_dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
@@ -32,6 +32,10 @@ from awalker_tracker.inference.recovery import (
 from awalker_tracker.inference.smc import AncestryHistory, FilterStep, ParticleFilter, SMCConfig
 from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription, BodyPoseBatch
 from awalker_tracker.model.walker import LEFT, RIGHT, WalkerParams, WalkerState
+
+if TYPE_CHECKING:
+    from awalker_tracker.vision.likelihood import LikelihoodConfig
+
 
 # ----------------------------------------------------------------------------- start description
 
@@ -508,20 +512,22 @@ class ImageObservation:
     occlusion_masks: tuple[np.ndarray | None, ...] = ()
 
 
-def image_likelihood(body: BodyDescription, cameras: list[Any]) -> LikelihoodFn:
+def image_likelihood(body: BodyDescription, cameras: list[Any],
+                     config: LikelihoodConfig | None = None) -> LikelihoodFn:
     """The image likelihood of paper Sec. 5.1 (eq. 9-12) over ``cameras`` (vision.likelihood), divided by the
-    number of cameras: with the tempering (``TrackerConfig.likelihood_scale``) this keeps the weight of the
+    number of cameras (``config``: the likelihood's, default ``LikelihoodConfig()``): with the tempering (``TrackerConfig.likelihood_scale``) this keeps the weight of the
     evidence the same for any number of cameras. Summed as in eq. (12), two cameras at scale 0.1 lost the
     walker in 1 of 6 tracker seeds (205 mm); averaged, 17-51 mm (mean 30) over the same seeds."""
-    from awalker_tracker.vision.likelihood import SilhouetteMemo, log_likelihood
+    from awalker_tracker.vision.likelihood import LikelihoodConfig, SilhouetteMemo, log_likelihood
 
     parts = body.parts
+    config = LikelihoodConfig() if config is None else config
     memo = SilhouetteMemo()   # each frame's poses are the next frame's previous poses
 
     def loglik(prev: TrackerStates | None, states: TrackerStates, obs: ImageObservation) -> np.ndarray:
         prev_segments = states.pose.segments if prev is None else prev.pose.segments
         masks = list(obs.occlusion_masks) or [None] * len(cameras)
         return log_likelihood(parts, states.pose.segments, prev_segments, cameras, list(obs.features), masks,
-                              memo=memo) / len(cameras)
+                              config=config, memo=memo) / len(cameras)
 
     return loglik
