@@ -14,9 +14,10 @@ above the head against the body (``LikelihoodConfig.head_top_weight`` 1): withou
 preferred legs 3 % short on our own renders, where the drawn body is the tracker's.
 
 Measured (2026-11-26; ``awalker fitbody`` on the real-walks benchmark's hand-started runs, tracker seeds
-0-2, then tracked with the fitted body; README "Where the two-camera error is"): two cameras, median of
-the walk medians 79 mm against 93 with the tape's body (better on 8 of 12 walks); one camera 114 against
-129 (9 of 12).
+0-2, then ``awalker track --body`` the fitted body; README "Where the two-camera error is"): two cameras,
+median of the walk medians 83 mm against 91 with the tape's body (better on 7 of 12 walks, worse on 4),
+relative 51 against 56; one camera 130 against 118 (better on 6, worse on 5: depth, seed noise), relative
+53 against 58. Our own renders: the drawn length kept in 11 of 12 runs.
 """
 from __future__ import annotations
 
