@@ -81,11 +81,13 @@ def fit_leg_length(body: BodyDescription, start: StartDescription, likelihood_fo
         model = TrackerModel(candidate, start, likelihood_for(candidate), run_config,
                              cameras=list(cameras) if cameras is not None else None)
         pf = ParticleFilter(model, smc)
-        steps = [s for obs in used for s in pf.push(obs)] + pf.finish()
-        evidence[factor] = float(sum(s.log_evidence for s in steps))
+        log_evidence = [step.log_evidence for obs in used for step in pf.push(obs)]   # (the steps are not kept)
+        log_evidence += [step.log_evidence for step in pf.finish()]
+        count = len(log_evidence)
+        evidence[factor] = float(np.sum(log_evidence))
         if progress is not None:
             progress(f"legs x{factor:.2f} (leg length {candidate.leg_length:.3f} m): log evidence "
-                     f"{evidence[factor]:.1f} over {len(steps)} frames")
+                     f"{evidence[factor]:.1f} over {count} frames")
     finite = {f: e for f, e in evidence.items() if np.isfinite(e)}
     if not finite:
         raise ValueError("fit_leg_length: every candidate lost the person (evidence -inf)")
