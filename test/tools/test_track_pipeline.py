@@ -111,6 +111,21 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     assert evidence[f"{fitted['leg_factor']:.2f}"] == max(evidence.values())
 
 
+def test_track_fit_body_tracks_again_with_the_fitted_legs(synth_bag: Path, tmp_path: Path):
+    out = tmp_path / "run"
+    assert main(["track", str(synth_bag), "--out", str(out), "--particles", "100", "--no-overlay", "--fit-body"]) == 0
+    fitted = out / "first_pass" / "body_fitted.yaml"
+    given, got = (BodyDescription.from_yaml(p) for p in (out / "first_pass" / "body.yaml", fitted))
+    # a body given with the bag: the candidates around it (GIVEN_BODY_FACTORS), thigh and shank alike
+    factor = got.upper_leg_length / given.upper_leg_length
+    assert min(abs(factor - f) for f in (0.91, 0.94, 0.97, 1.0, 1.03)) < 1e-6
+    assert got.lower_leg_length == pytest.approx(factor * given.lower_leg_length)
+    run = yaml.safe_load((out / "run.yaml").read_text())
+    assert str(fitted) in run["body_source"]
+    assert BodyDescription.from_yaml(out / "body.yaml").upper_leg_length == pytest.approx(got.upper_leg_length)
+    assert evaluation.read_poses_csv(out / "poses.csv").markers.shape == (FRAMES, 13, 3)
+
+
 def test_fit_body_input_errors(synth_bag: Path, tmp_path: Path, capsys):
     assert main(["fitbody", str(tmp_path / "nowhere")]) == 2
     assert "not a directory" in capsys.readouterr().err

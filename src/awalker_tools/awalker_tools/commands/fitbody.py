@@ -10,13 +10,21 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import yaml
 
 from awalker_tracker.errors import InputError, parse_yaml
 
+if TYPE_CHECKING:
+    from awalker_tracker.inference.bodyfit import BodyFitConfig
+
 FITTED_FILE = "body_fitted.yaml"
+# Candidate leg scales by where the run's body came from (run.yaml body_source): a body given (a tape
+# measure: the real-walks benchmark's legs 6 % long) or one scaled to the seen height (legs 6-9 % short).
+GIVEN_BODY_FACTORS = (0.91, 0.94, 0.97, 1.0, 1.03)
+HEIGHT_SCALED_FACTORS = (0.97, 1.0, 1.03, 1.06, 1.09, 1.12)
 
 
 def _features(run_dir: Path, camera_names: list[str]) -> tuple[list[int], list[tuple]]:
@@ -56,9 +64,15 @@ def _yaml_file(path: Path) -> dict:
     return data
 
 
-def run(args: argparse.Namespace) -> int:
+def fit_run_dir(run_dir: Path, fit_config: BodyFitConfig, default_factors: bool = False) -> dict:
+    """Fit the leg length of the tracking run in ``run_dir`` (module docstring), write
+    ``run_dir/body_fitted.yaml`` and return a summary (factor, leg lengths, evidence, the file written).
+    ``default_factors``: the candidates by the body's source (``GIVEN_BODY_FACTORS`` or
+    ``HEIGHT_SCALED_FACTORS``) instead of ``fit_config``'s. Progress goes to stderr."""
+    from dataclasses import replace
+
     from awalker_tracker.inference.autostart import AUTO_SPREAD
-    from awalker_tracker.inference.bodyfit import BodyFitConfig, fit_leg_length
+    from awalker_tracker.inference.bodyfit import fit_leg_length
     from awalker_tracker.inference.recovery import RecoveryConfig
     from awalker_tracker.inference.smc import SMCConfig
     from awalker_tracker.inference.tracker import ImageObservation, StartDescription, TrackerConfig, image_likelihood
@@ -66,12 +80,6 @@ def run(args: argparse.Namespace) -> int:
     from awalker_tracker.vision.camera import load_calibration
     from awalker_tracker.vision.likelihood import LikelihoodConfig
 
-    try:
-        fit_config = BodyFitConfig(leg_factors=tuple(args.factors), frames=args.frames, particles=args.particles,
-                                   seed=args.seed)
-    except ValueError as exc:
-        raise InputError(f"fitbody options: {exc}") from None
-    run_dir = Path(args.dir)
     if not run_dir.is_dir():
         raise InputError(f"{run_dir}: not a directory (expected the --out DIR of `awalker track`)")
     info = _yaml_file(run_dir / "run.yaml")
@@ -88,6 +96,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"{run_dir / 'start.yaml'}: start frame {first}, but result.bag has features for "
                          f"{len(features)} frames")
     auto = str(info.get("start_source", "")).startswith("found automatically")
+    if default_factors:
+        scaled = str(info.get("body_source", "")).startswith("scaled to the person's height")
+        fit_config = replace(fit_config, leg_factors=HEIGHT_SCALED_FACTORS if scaled else GIVEN_BODY_FACTORS)
     # the run's settings (run.yaml), so that each candidate is tracked as the run was
     recovery = bool(info.get("recovery", True))
     config = TrackerConfig(
@@ -97,16 +108,32 @@ def run(args: argparse.Namespace) -> int:
         recovery=RecoveryConfig(reseed_fallen=recovery, reacquire=recovery, hold_still=recovery))
     likelihood = LikelihoodConfig(head_top_weight=1.0)
     observations = [ImageObservation(features=f) for f in features[first:]]
-    print(f"awalker fitbody: {len(fit_config.leg_factors)} leg lengths x {min(args.frames, len(observations))} "
-          f"frames from frame {first}, {args.particles} particles each", file=sys.stderr)
+    print(f"awalker fitbody: {len(fit_config.leg_factors)} leg lengths x {min(fit_config.frames, len(observations))} "
+          f"frames from frame {first}, {fit_config.particles} particles each", file=sys.stderr)
     fit = fit_leg_length(body, start, lambda b: image_likelihood(b, cameras, likelihood), observations, config,
                          fit_config, cameras=cameras, progress=lambda m: print(f"  {m}", file=sys.stderr))
     out = run_dir / FITTED_FILE
     out.write_text(fit.body.to_yaml_text())
-    summary = {"leg_factor": fit.factor, "leg_length_m": round(fit.body.leg_length, 4),
-               "given_leg_length_m": round(body.leg_length, 4), "frames": fit.frames,
-               "log_evidence": {f"{k:.2f}": round(v, 2) for k, v in fit.log_evidence.items()},
-               "written": str(out)}
+    return {"leg_factor": fit.factor, "leg_length_m": round(fit.body.leg_length, 4),
+            "given_leg_length_m": round(body.leg_length, 4), "frames": fit.frames,
+            "log_evidence": {f"{k:.2f}": round(v, 2) for k, v in fit.log_evidence.items()},
+            "written": str(out)}
+
+
+def fit_config_from(factors: list[float], frames: int, particles: int, seed: int) -> BodyFitConfig:
+    """The fit's settings from command-line values; InputError on bad ones."""
+    from awalker_tracker.inference.bodyfit import BodyFitConfig
+
+    try:
+        return BodyFitConfig(leg_factors=tuple(factors), frames=frames, particles=particles, seed=seed)
+    except ValueError as exc:
+        raise InputError(f"fitbody options: {exc}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    factors = GIVEN_BODY_FACTORS if args.factors is None else args.factors
+    fit_config = fit_config_from(factors, args.frames, args.particles, args.seed)
+    summary = fit_run_dir(Path(args.dir), fit_config, default_factors=args.factors is None)
     print(yaml.safe_dump({"fitbody": summary}, sort_keys=False), end="")
     return 0
 
@@ -119,8 +146,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "the images support best (the filter's evidence). Writes DIR/body_fitted.yaml; track again "
                     "with --body DIR/body_fitted.yaml.")
     parser.add_argument("dir", help="output directory of `awalker track`")
-    parser.add_argument("--factors", type=float, nargs="+", default=[0.91, 0.94, 0.97, 1.0, 1.03],
-                        help="candidate scales of thigh and shank (default 0.91 0.94 0.97 1.0 1.03)")
+    parser.add_argument("--factors", type=float, nargs="+",
+                        help="candidate scales of thigh and shank (default 0.91 0.94 0.97 1.0 1.03 for a body "
+                             "given to the run, 0.97 1.0 1.03 1.06 1.09 1.12 for one scaled to the seen height)")
     parser.add_argument("--frames", type=int, default=60, help="frames of evidence from the start (default 60)")
     parser.add_argument("--particles", type=int, default=5000, help="particles per candidate (default 5000)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 from awalker_tracker.errors import InputError
@@ -24,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
         AutoStartConfig(follow_near=follow_near)      # the tracker node's check, before anything starts
     except ValueError as exc:
         raise InputError(f"--follow-near: {exc}") from None
-    run_tracking(TrackOptions(
+    options = TrackOptions(
         bag=Path(args.bag), out=Path(args.out), start=Path(args.start) if args.start else None,
         body=Path(args.body) if args.body else None, particles=args.particles, lookahead=args.lookahead,
         trust=args.trust,
@@ -32,7 +33,18 @@ def run(args: argparse.Namespace) -> int:
         auto_start=args.auto_start or args.follow_near is not None,
         follow_near=follow_near, overlays=not args.no_overlay,
         storage=args.storage,
-        share_topics=args.share_topics))
+        share_topics=args.share_topics)
+    if not args.fit_body:
+        run_tracking(options)
+        return 0
+    # two passes: track, fit the leg length to the features recorded (`awalker fitbody`), track again with it
+    from awalker_tools.commands.fitbody import GIVEN_BODY_FACTORS, fit_config_from, fit_run_dir
+
+    first = Path(args.out) / "first_pass"
+    run_tracking(replace(options, out=first, overlays=False))
+    summary = fit_run_dir(first, fit_config_from(list(GIVEN_BODY_FACTORS), 60, args.particles, args.seed),
+                          default_factors=True)
+    run_tracking(replace(options, body=Path(summary["written"])))
     return 0
 
 
@@ -67,6 +79,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "stands still (the exact filter of the paper)")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="result bag storage")
     parser.add_argument("--no-overlay", action="store_true", help="skip overlay images and video")
+    parser.add_argument("--fit-body", action="store_true",
+                        help="track twice: fit the body's leg length to the images of the first pass (as "
+                             "`awalker fitbody` does, DIR/first_pass/) and track again with it")
     parser.add_argument("--share-topics", action="store_true",
                         help="let other ROS 2 processes on this host (RViz, ros2 topic echo) see the pipeline's "
                              "topics on ROS_DOMAIN_ID; by default the in-process pipeline is isolated")

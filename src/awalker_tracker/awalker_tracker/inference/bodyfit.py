@@ -17,7 +17,9 @@ Measured (2026-11-26; ``awalker fitbody`` on the real-walks benchmark's hand-sta
 0-2, then ``awalker track --body`` the fitted body; README "Where the two-camera error is"): two cameras,
 median of the walk medians 83 mm against 91 with the tape's body (better on 7 of 12 walks, worse on 4),
 relative 51 against 56; one camera 130 against 118 (better on 6, worse on 5: depth, seed noise), relative
-53 against 58. Our own renders: the drawn length kept in 11 of 12 runs.
+53 against 58. Hands off (the body scaled to the seen height, candidates 0.97-1.12): one camera 147 against
+191 (relative 60 against 72), two cameras 84 against 84 (relative 53 against 60). Our own renders: the
+drawn length kept in 11 of 12 runs.
 """
 from __future__ import annotations
 
