@@ -9,16 +9,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import yaml
 
 from awalker_tracker.errors import InputError, parse_yaml
-
-if TYPE_CHECKING:
-    from awalker_tracker.inference.bodyfit import BodyFitConfig
 
 FITTED_FILE = "body_fitted.yaml"
 # Candidate leg scales by where the run's body came from (run.yaml body_source): a body given (a tape
@@ -64,15 +61,14 @@ def _yaml_file(path: Path) -> dict:
     return data
 
 
-def fit_run_dir(run_dir: Path, fit_config: BodyFitConfig, default_factors: bool = False) -> dict:
+def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **settings: int) -> dict:
     """Fit the leg length of the tracking run in ``run_dir`` (module docstring), write
     ``run_dir/body_fitted.yaml`` and return a summary (factor, leg lengths, evidence, the file written).
-    ``default_factors``: the candidates by the body's source (``GIVEN_BODY_FACTORS`` or
-    ``HEIGHT_SCALED_FACTORS``) instead of ``fit_config``'s. Progress goes to stderr."""
-    from dataclasses import replace
-
+    ``leg_factors``: the candidates; None: by the body's source (``GIVEN_BODY_FACTORS`` or
+    ``HEIGHT_SCALED_FACTORS``). ``settings``: the other ``BodyFitConfig`` fields (frames, particles,
+    seed). Progress goes to stderr."""
     from awalker_tracker.inference.autostart import AUTO_SPREAD
-    from awalker_tracker.inference.bodyfit import fit_leg_length
+    from awalker_tracker.inference.bodyfit import BodyFitConfig, fit_leg_length
     from awalker_tracker.inference.recovery import RecoveryConfig
     from awalker_tracker.inference.smc import SMCConfig
     from awalker_tracker.inference.tracker import ImageObservation, StartDescription, TrackerConfig, image_likelihood
@@ -83,6 +79,13 @@ def fit_run_dir(run_dir: Path, fit_config: BodyFitConfig, default_factors: bool 
     if not run_dir.is_dir():
         raise InputError(f"{run_dir}: not a directory (expected the --out DIR of `awalker track`)")
     info = _yaml_file(run_dir / "run.yaml")
+    if leg_factors is None:
+        scaled = str(info.get("body_source", "")).startswith("scaled to the person's height")
+        leg_factors = HEIGHT_SCALED_FACTORS if scaled else GIVEN_BODY_FACTORS
+    try:
+        fit_config = BodyFitConfig(leg_factors=tuple(leg_factors), **settings)
+    except ValueError as exc:
+        raise InputError(f"fitbody options: {exc}") from None
     for name in ("calibration.yaml", "start.yaml", "body.yaml"):
         if not (run_dir / name).is_file():
             raise InputError(f"{run_dir / name}: not found (expected the output of `awalker track`)")
@@ -96,9 +99,6 @@ def fit_run_dir(run_dir: Path, fit_config: BodyFitConfig, default_factors: bool 
         raise InputError(f"{run_dir / 'start.yaml'}: start frame {first}, but result.bag has features for "
                          f"{len(features)} frames")
     auto = str(info.get("start_source", "")).startswith("found automatically")
-    if default_factors:
-        scaled = str(info.get("body_source", "")).startswith("scaled to the person's height")
-        fit_config = replace(fit_config, leg_factors=HEIGHT_SCALED_FACTORS if scaled else GIVEN_BODY_FACTORS)
     # the run's settings (run.yaml), so that each candidate is tracked as the run was
     recovery = bool(info.get("recovery", True))
     config = TrackerConfig(
@@ -120,20 +120,8 @@ def fit_run_dir(run_dir: Path, fit_config: BodyFitConfig, default_factors: bool 
             "written": str(out)}
 
 
-def fit_config_from(factors: list[float], frames: int, particles: int, seed: int) -> BodyFitConfig:
-    """The fit's settings from command-line values; InputError on bad ones."""
-    from awalker_tracker.inference.bodyfit import BodyFitConfig
-
-    try:
-        return BodyFitConfig(leg_factors=tuple(factors), frames=frames, particles=particles, seed=seed)
-    except ValueError as exc:
-        raise InputError(f"fitbody options: {exc}") from None
-
-
 def run(args: argparse.Namespace) -> int:
-    factors = GIVEN_BODY_FACTORS if args.factors is None else args.factors
-    fit_config = fit_config_from(factors, args.frames, args.particles, args.seed)
-    summary = fit_run_dir(Path(args.dir), fit_config, default_factors=args.factors is None)
+    summary = fit_run_dir(Path(args.dir), args.factors, frames=args.frames, particles=args.particles, seed=args.seed)
     print(yaml.safe_dump({"fitbody": summary}, sort_keys=False), end="")
     return 0
 

@@ -38,12 +38,11 @@ def run(args: argparse.Namespace) -> int:
         run_tracking(options)
         return 0
     # two passes: track, fit the leg length to the features recorded (`awalker fitbody`), track again with it
-    from awalker_tools.commands.fitbody import GIVEN_BODY_FACTORS, fit_config_from, fit_run_dir
+    from awalker_tools.commands.fitbody import fit_run_dir
 
     first = Path(args.out) / "first_pass"
     run_tracking(replace(options, out=first, overlays=False))
-    summary = fit_run_dir(first, fit_config_from(list(GIVEN_BODY_FACTORS), 60, args.particles, args.seed),
-                          default_factors=True)
+    summary = fit_run_dir(first, particles=args.particles, seed=args.seed)
     run_tracking(replace(options, body=Path(summary["written"])))
     return 0
 

@@ -79,13 +79,19 @@ class SMCConfig:
 
 def normalize_log_weights(log_weights: np.ndarray) -> np.ndarray:
     """Shift log weights so that sum(exp) = 1; all -inf (every particle impossible) -> uniform."""
+    return _normalized_and_log_sum(log_weights)[0]
+
+
+def _normalized_and_log_sum(log_weights: np.ndarray) -> tuple[np.ndarray, float]:
+    """``normalize_log_weights`` and the log of the sum it divided by (-inf when all are -inf)."""
     log_weights = np.asarray(log_weights, float)
     top = np.max(log_weights)
     if not np.isfinite(top):
         if np.any(np.isnan(log_weights)) or top == np.inf:
             raise ValueError("log weights contain NaN or +inf")
-        return np.full(log_weights.shape, -np.log(log_weights.size))
-    return log_weights - (top + np.log(np.sum(np.exp(log_weights - top))))
+        return np.full(log_weights.shape, -np.log(log_weights.size)), -np.inf
+    log_sum = top + np.log(np.sum(np.exp(log_weights - top)))
+    return log_weights - log_sum, float(log_sum)
 
 
 def effective_sample_size(log_weights: np.ndarray) -> float:
@@ -250,10 +256,8 @@ class ParticleFilter(Generic[States]):
             resampled = True
             self.num_resamples += 1
         current = self._window.popleft()
-        unnormalised = self._prev_log_weights + current.log_likelihood
-        top = float(np.max(unnormalised))
-        log_evidence = top + float(np.log(np.sum(np.exp(unnormalised - top)))) if np.isfinite(top) else -np.inf
-        log_w = normalize_log_weights(unnormalised)
+        # log p(z_t | z_1:t-1) is the log of the sum that normalises w_{t-1} p(z_t | s_t)
+        log_w, log_evidence = _normalized_and_log_sum(self._prev_log_weights + current.log_likelihood)
         step = FilterStep(
             frame=self._next_frame, states=current.states, info=current.info, log_weights=log_w,
             log_likelihood=current.log_likelihood, ancestors=ancestors, resampled=resampled,

@@ -514,9 +514,10 @@ class ImageObservation:
 
 def image_likelihood(body: BodyDescription, cameras: list[Any],
                      config: LikelihoodConfig | None = None) -> LikelihoodFn:
-    """The image likelihood of paper Sec. 5.1 (eq. 9-12) over ``cameras`` (vision.likelihood), divided by the
-    number of cameras (``config``: the likelihood's, default ``LikelihoodConfig()``): with the tempering (``TrackerConfig.likelihood_scale``) this keeps the weight of the
-    evidence the same for any number of cameras. Summed as in eq. (12), two cameras at scale 0.1 lost the
+    """The image likelihood of paper Sec. 5.1 (eq. 9-12) over ``cameras`` (vision.likelihood; ``config``:
+    its settings, default ``LikelihoodConfig()``), divided by the number of cameras: with the tempering
+    (``TrackerConfig.likelihood_scale``) this keeps the weight of the evidence the same for any number of
+    cameras. Summed as in eq. (12), two cameras at scale 0.1 lost the
     walker in 1 of 6 tracker seeds (205 mm); averaged, 17-51 mm (mean 30) over the same seeds."""
     from awalker_tracker.vision.likelihood import LikelihoodConfig, SilhouetteMemo, log_likelihood
 
