@@ -83,6 +83,8 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     # timings: streaming is part of the whole command, the filter part of streaming
     run = yaml.safe_load((out / "run.yaml").read_text())
     assert 0 < run["seconds_in_filter"] < run["seconds_streaming"] < run["seconds"]
+    # a body description came with the bag: one pass, no leg length fitted (fit_body's default)
+    assert not (out / "first_pass").exists() and "body_fit" not in run
     # the pictures are drawn after tracking and timed apart
     assert run["seconds_pictures"] > 0 and (out / "gait.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "while streaming" in capsys.readouterr().err
@@ -122,6 +124,7 @@ def test_track_fit_body_tracks_again_with_the_fitted_legs(synth_bag: Path, tmp_p
     assert got.lower_leg_length == pytest.approx(factor * given.lower_leg_length)
     run = yaml.safe_load((out / "run.yaml").read_text())
     assert str(fitted) in run["body_source"]
+    assert run["body_fit"]["leg_factor"] == pytest.approx(factor) and run["body_fit"]["seconds_first_pass_and_fit"] > 0
     assert BodyDescription.from_yaml(out / "body.yaml").upper_leg_length == pytest.approx(got.upper_leg_length)
     assert evaluation.read_poses_csv(out / "poses.csv").markers.shape == (FRAMES, 13, 3)
 

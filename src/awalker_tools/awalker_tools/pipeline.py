@@ -12,6 +12,11 @@ Writes into the output directory:
 - ``calibration.yaml``, ``start.yaml``, ``body.yaml`` (what was used) and ``run.yaml`` (input,
   settings, timings);
 - ``overlay/frame_XXXXX.png`` and ``overlay.mp4``: the MAP body drawn on the first camera's frames.
+
+With no body description (the tracker scales one to the person's height seen in the images), or with
+``TrackOptions.fit_body``, it tracks twice: a first pass into ``first_pass/``, the leg length fitted to
+the image features that pass recorded (``awalker_tools.fit_body``, issue 12 §3), and the run again
+with the fitted body, whose outputs are the ones above (run.yaml's ``body_fit`` says what the fit chose).
 """
 from __future__ import annotations
 
@@ -19,7 +24,7 @@ import os
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -90,6 +95,9 @@ class TrackOptions:
     follow_near: tuple[float, float] | None = None   # automatic start: follow the person first seen near this ground point (m)
     recovery: bool = True           # re-seed fallen walkers and re-acquire a lost track (inference/recovery.py)
     overlays: bool = True
+    # two passes, the second with the leg length fitted to the first one's images (module docstring);
+    # None: when no body description is found, so that the body would only be scaled to the seen height
+    fit_body: bool | None = None
     storage: str = "mcap"
     quiet: bool = False
     # False: the pipeline's DDS participants see nothing outside this process (another publisher of
@@ -106,6 +114,7 @@ class TrackResult:
     seconds_pictures: float = 0.0   # drawing gait.png and the overlays afterwards
     seconds_streaming: float = 0.0  # from the first replayed message to the last posterior received
     seconds_in_filter: float = 0.0
+    seconds_first_pass: float = 0.0  # with a fitted body: the first pass and the fit, before this run
     sync_issues: list[str] = field(default_factory=list)
     recorded: dict[str, int] = field(default_factory=dict)
     features: dict[str, dict[str, str]] = field(default_factory=dict)   # per camera: how its models were learned
@@ -186,8 +195,47 @@ def _progress(options: TrackOptions, text: str) -> None:
         print(text, file=sys.stderr, flush=True)
 
 
+FIRST_PASS_DIR = "first_pass"
+
+
 def run_tracking(options: TrackOptions) -> TrackResult:
-    """Run the whole pipeline on ``options.bag``; write the outputs into ``options.out``."""
+    """Run the whole pipeline on ``options.bag``; write the outputs into ``options.out``. With a body
+    to fit (``TrackOptions.fit_body``), a first pass into ``out/first_pass``, the fit, and the run."""
+    from awalker_tools.bagio import SequenceReader
+    from awalker_tools.fit_body import fit_run_dir
+
+    bag, out = Path(options.bag), Path(options.out)
+    if not bag.exists():
+        raise InputError(f"{bag}: no such bag (expected a rosbag2 directory, .mcap or .db3)")
+    fit = options.fit_body
+    if fit is None:
+        with SequenceReader(bag) as reader:
+            try:
+                fit = resolve_descriptions(bag, reader, options.start, options.body, options.auto_start)[2] is None
+            except InputError:
+                fit = False          # the run itself reports what is missing
+    if not fit:
+        return _track_once(options)
+    if (out / "result.bag").exists():
+        raise InputError(f"{out / 'result.bag'}: exists already; choose a new --out directory or remove it")
+    started = time.monotonic()
+    first_dir = out / FIRST_PASS_DIR
+    _progress(options, f"awalker track: first pass into {first_dir}, to fit the body's leg length")
+    _track_once(replace(options, out=first_dir, overlays=False))
+    _progress(options, f"awalker track: fitting the leg length to the images of {first_dir}")
+    # the fit's own particle count (BodyFitConfig: 5000; fewer pick less reliably), whatever the run's
+    fitted = fit_run_dir(first_dir, seed=options.seed)
+    _progress(options, f"awalker track: legs x {fitted['leg_factor']:.2f} (leg length {fitted['leg_length_m']} m); "
+                       "tracking again with them")
+    seconds_first_pass = time.monotonic() - started
+    fitted["seconds_first_pass_and_fit"] = round(seconds_first_pass, 3)
+    result = _track_once(replace(options, body=Path(fitted["written"])), body_fit=fitted)
+    result.seconds_first_pass = seconds_first_pass
+    return result
+
+
+def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackResult:
+    """One pass of the pipeline (``run_tracking``); ``body_fit``: the fit that gave its body, for run.yaml."""
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -204,8 +252,6 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     from awalker_tools.replay import ReplayConfig, Replayer
 
     bag, out = Path(options.bag), Path(options.out)
-    if not bag.exists():
-        raise InputError(f"{bag}: no such bag (expected a rosbag2 directory, .mcap or .db3)")
     with SequenceReader(bag) as reader:
         cameras = reader.cameras
         num_frames = len(reader.frame_stamps)
@@ -364,7 +410,8 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         "frames": result.frames, "posteriors": result.summaries, "seconds": round(result.seconds, 3),
         "seconds_streaming": round(result.seconds_streaming, 3), "seconds_pictures": round(result.seconds_pictures, 3),
         "seconds_in_filter": round(result.seconds_in_filter, 3), "sync_issues": result.sync_issues,
-        "features": result.features, "recorded": result.recorded}, sort_keys=False))
+        "features": result.features, "recorded": result.recorded,
+        **({"body_fit": body_fit} if body_fit is not None else {})}, sort_keys=False))
     _progress(options, f"awalker track: {result.summaries} frames tracked in {result.seconds:.1f} s "
                        f"({result.frames_per_second:.2f} frames/s end to end, "
                        f"{result.streaming_frames_per_second:.2f} while streaming, filter "

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 from pathlib import Path
 
 from awalker_tracker.errors import InputError
@@ -31,19 +30,10 @@ def run(args: argparse.Namespace) -> int:
         trust=args.trust,
         seed=args.seed, likelihood_scale=args.likelihood_scale, recovery=not args.no_recovery,
         auto_start=args.auto_start or args.follow_near is not None,
-        follow_near=follow_near, overlays=not args.no_overlay,
+        follow_near=follow_near, overlays=not args.no_overlay, fit_body=args.fit_body,
         storage=args.storage,
         share_topics=args.share_topics)
-    if not args.fit_body:
-        run_tracking(options)
-        return 0
-    # two passes: track, fit the leg length to the features recorded (`awalker fitbody`), track again with it
-    from awalker_tools.commands.fitbody import fit_run_dir
-
-    first = Path(args.out) / "first_pass"
-    run_tracking(replace(options, out=first, overlays=False))
-    summary = fit_run_dir(first, particles=args.particles, seed=args.seed)
-    run_tracking(replace(options, body=Path(summary["written"])))
+    run_tracking(options)
     return 0
 
 
@@ -78,9 +68,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "stands still (the exact filter of the paper)")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="result bag storage")
     parser.add_argument("--no-overlay", action="store_true", help="skip overlay images and video")
-    parser.add_argument("--fit-body", action="store_true",
+    parser.add_argument("--fit-body", action=argparse.BooleanOptionalAction, default=None,
                         help="track twice: fit the body's leg length to the images of the first pass (as "
-                             "`awalker fitbody` does, DIR/first_pass/) and track again with it")
+                             "`awalker fitbody` does, DIR/first_pass/) and track again with it (default: only "
+                             "when there is no body description, so that the body is scaled to the person's "
+                             "height seen in the images)")
     parser.add_argument("--share-topics", action="store_true",
                         help="let other ROS 2 processes on this host (RViz, ros2 topic echo) see the pipeline's "
                              "topics on ROS_DOMAIN_ID; by default the in-process pipeline is isolated")
