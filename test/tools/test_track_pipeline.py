@@ -258,6 +258,18 @@ def test_track_option_errors(tmp_path: Path, capsys):
     assert "--follow-near" in err and "finite ground point" in err
 
 
+def test_track_fit_body_option_reaches_the_pipeline(tmp_path: Path, monkeypatch):
+    """--fit-body / --no-fit-body force the second pass on or off; without either the pipeline decides
+    (TrackOptions.fit_body None: fit when no body description is found)."""
+    from awalker_tools import pipeline
+
+    seen = []
+    monkeypatch.setattr(pipeline, "run_tracking", lambda options: seen.append(options.fit_body))
+    for extra, expected in (([], None), (["--fit-body"], True), (["--no-fit-body"], False)):
+        assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), *extra]) == 0
+        assert seen[-1] is expected
+
+
 JUNK_PUBLISHER = """
 import sys, time, rclpy
 from rclpy.node import Node
