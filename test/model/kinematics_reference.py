@@ -148,15 +148,15 @@ def _horizontal_direction(foot: np.ndarray) -> np.ndarray:
     norm = np.linalg.norm(xy, axis=1, keepdims=True)
     return xy / np.maximum(norm, 1e-9)
 
-def _eq6(config: KinematicConfig, walker: WalkerState, current: np.ndarray, previous: np.ndarray,
-         rng: np.random.Generator, turn_rates: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+def _eq6(config: KinematicConfig, body: BodyDescription, walker: WalkerState, current: np.ndarray,
+         previous: np.ndarray, rng: np.random.Generator, turn_rates: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     """One step of eq. (6) for all DOFs (N, 13) with truncated noise; knees by stance/swing role.
 
     The heading runs eq. (6) on its deviation from the turn (``turn_rates``: omega of this frame and
     of the previous one, rad/s): h_t = h_{t-1} + omega_t dt + alpha (h_{t-1} - h_{t-2} - omega_{t-1} dt)
     + dt^2 eta, so the turn is not amplified by eq. (6)'s velocity term."""
     n = current.shape[0]
-    p = {k: np.broadcast_to(v, (n, _D)).copy() for k, v in config.arrays().items()}
+    p = {k: np.broadcast_to(v, (n, _D)).copy() for k, v in config.arrays(body).items()}
     swing = config.table["swing_knee"]
     knee_cols = np.array([7, 8])
     is_swing = np.stack([walker.stance_leg != LEFT, walker.stance_leg == LEFT], axis=1)  # (N, 2) [left, right]
@@ -252,7 +252,7 @@ def sample_posed_kinematics_reference(
     turn_rate = kin.turn_rate
     if np.any(struck):      # a new step: a new turn rate
         turn_rate = np.where(struck, config.turning.sample(kin.turn_rate, rng), kin.turn_rate)
-    new = _eq6(config, walker, current, kin.previous, rng, (turn_rate, kin.turn_rate))
+    new = _eq6(config, body, walker, current, kin.previous, rng, (turn_rate, kin.turn_rate))
     if heading is not None:
         new[:, DOF_NAMES.index("heading")] = heading
     legs = leg_angles(walker)
@@ -379,7 +379,7 @@ def initial_kinematics_reference(
     body = body or BodyDescription.default()
     params = params or body.walker_params()
     # the sampling and the state assembly are the package's (not compiled); the sole geometry is the reference's
-    walker, dofs = _initial_dofs(config, walker, heading, n, rng, heading_spread, joint_spread)
+    walker, dofs = _initial_dofs(config, body, walker, heading, n, rng, heading_spread, joint_spread)
     local = _local_pose(body, leg_angles(walker), dofs)
     leg = walker.stance_leg.astype(np.int8)
     beta = _lowest_roll(body, _pick(local.foot, leg))

@@ -107,7 +107,7 @@ def test_joint_limits_hold_even_when_pushed():
     kin = initial_kinematics(config, walkers[0], [0.0, 0.0], 0.0, n, rng, body=BODY, joint_spread=0.3)
     # Large initial velocities drive limited joints into their limits.
     kin.previous += rng.normal(0, 0.3, kin.previous.shape)
-    arrays = config.arrays()
+    arrays = config.arrays(BODY)
     limited = np.isfinite(arrays["lower"])
     hit = np.zeros(limited.sum(), bool)
     for f in range(1, 40):
@@ -292,7 +292,7 @@ def test_initial_spread_places_pelvis_and_heading():
     assert np.allclose(pelvis.mean(axis=0), [1.0, -2.0], atol=0.01)
     assert np.allclose(pelvis.std(axis=0), 0.1, rtol=0.1)
     assert kin.heading.mean() == pytest.approx(0.5, abs=0.01) and kin.heading.std() == pytest.approx(0.2, rel=0.1)
-    limits = config.arrays()
+    limits = config.arrays(BODY)
     dofs = kin.dofs()
     limited = np.isfinite(limits["lower"])
     assert np.all(dofs[:, limited] >= limits["lower"][limited]) and np.all(dofs[:, limited] <= limits["upper"][limited])
@@ -300,3 +300,21 @@ def test_initial_spread_places_pelvis_and_heading():
     # The stance foot is on the ground at its contact point.
     contact = sole_point_world(BODY, walker.take(np.zeros(n, np.intp)), kin, kin.contact_leg, kin.contact_roll)
     assert np.allclose(contact[:, 2], 0.0, atol=1e-9) and np.allclose(contact[:, :2], kin.contact_point)
+
+
+@pytest.mark.parametrize("step_width", [0.10, None])
+def test_the_feet_tread_the_step_width_apart(step_width):
+    """KinematicConfig.step_width: with the hips resting adducted the ankles pass 0.10 m apart across the
+    walking direction (people's step width, ~0.1 m) instead of the hip joints' 0.18 m (Table 1's rest,
+    step_width None), through the walk and not only at its start pose."""
+    config = KinematicConfig(step_width=step_width)
+    walkers, states, poses = run(60, 100, seed=5, config=config)
+    widths = []
+    for kin, pose in zip(states[20:], poses[20:]):
+        across = np.stack([-np.sin(kin.heading), np.cos(kin.heading)], axis=1)       # the person's left
+        ankles = pose.markers[:, [M["left_ankle"], M["right_ankle"]], :2]
+        widths.append(np.sum((ankles[:, 0] - ankles[:, 1]) * across, axis=1))
+    expected = BODY.hip_width if step_width is None else step_width
+    assert np.median(widths) == pytest.approx(expected, abs=0.015)
+    rest = config.hip_abduction_rest(BODY)
+    assert rest == 0.0 if step_width is None else rest == pytest.approx(-np.arcsin(0.04 / BODY.leg_length))

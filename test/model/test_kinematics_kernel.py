@@ -42,7 +42,7 @@ def random_case(seed: int, n: int = 3000) -> tuple[WalkerState, KinematicState]:
         rng.uniform(-0.5, 0.5, n), rng.uniform(-0.6, 0.6, n), rng.normal(0, 1.5, n), rng.normal(0, 1.5, n),
         rng.normal(0, 2, n), rng.integers(0, 2, n))
     config = KinematicConfig()
-    lower, upper = config.arrays()["lower"], config.arrays()["upper"]
+    lower, upper = config.arrays(BODY)["lower"], config.arrays(BODY)["upper"]
     finite_lower, finite_upper = np.where(np.isfinite(lower), lower, -0.4), np.where(np.isfinite(upper), upper, 0.4)
     dofs = rng.uniform(finite_lower, finite_upper, (n, len(DOF_NAMES)))
     dofs[:, DOF_NAMES.index("heading")] = rng.uniform(-np.pi, np.pi, n)
@@ -91,7 +91,7 @@ def test_sample_posed_kinematics_matches_numpy_reference(seed, dt):
     assert 0.3 < switched.mean() < 0.7
     cleared = np.any(state.previous[:, KNEES] != kin.dofs()[:, KNEES], axis=1)   # knees bent by the bisection
     assert cleared.mean() > 0.1 and (cleared & switched).any() and (cleared & ~switched).any()
-    limits = KinematicConfig().arrays()
+    limits = KinematicConfig().arrays(BODY)
     new = state.dofs()
     assert np.sum(new == limits["lower"]) > 100 and np.sum(new == limits["upper"]) > 100
 

@@ -50,9 +50,13 @@ class Pose:
 
 
 def walking_poses(frames: int, x0: float = 0.0) -> list[Pose]:
-    """A stance phase: the stance leg sweeps from 0.25 to -0.2 rad, the swing leg forward."""
+    """A stance phase: the stance leg sweeps from 0.25 to -0.2 rad, the swing leg forward. The hips at
+    Table 1's rest (the feet the hip joints' distance apart), as ``synth`` draws its walks; with the
+    tracker's narrower step width the depth profile's flat top moves from 0.00-0.03 to 0.01-0.05 m (a
+    map row here is ~3 cm of depth)."""
     walker0 = WalkerState.from_arrays(0.25, -0.25, -1.2, 1.5)
-    kin0 = initial_kinematics(KinematicConfig(), walker0, [x0, 0.0], 0.0, 1, np.random.default_rng(0), body=BODY)
+    kin0 = initial_kinematics(KinematicConfig(step_width=None), walker0, [x0, 0.0], 0.0, 1, np.random.default_rng(0),
+                              body=BODY)
     poses = []
     for f in range(frames):
         phi1 = 0.25 - 0.035 * f

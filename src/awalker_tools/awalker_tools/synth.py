@@ -390,6 +390,8 @@ def walker_motion(config: SynthConfig, start_xy: np.ndarray, heading: float, rng
 
     The walker is steered along the gait table rather than sampled from the control prior, so
     that it follows the requested speed profile (and the tracker is not tested on its own prior).
+    The hips rest as Table 1 has them (unabducted: the feet tread the hip joints' distance apart), not
+    at the tracker's narrower step width (``KinematicConfig.step_width``).
     """
     from awalker_tracker.model import dynamics, gaits
     from awalker_tracker.model.kinematics import KinematicConfig, initial_kinematics, pose_body, sample_kinematics
@@ -403,7 +405,7 @@ def walker_motion(config: SynthConfig, start_xy: np.ndarray, heading: float, rng
     steps = config.step_length * (speeds / config.speed) ** 0.42  # preferred step length ~ speed^0.42
     walker = gaits.gait_initial_state(params, config.speed, config.step_length, contact_origin=0.0,
                                       stance_leg=LEFT, table=table)
-    kin_config = KinematicConfig(dt=dt)
+    kin_config = KinematicConfig(dt=dt, step_width=None)
     headings = _turn_schedule(config, heading)
     kin = initial_kinematics(kin_config, walker, start_xy, heading, 1, rng, body=body, params=params)
     since_strike = None

@@ -71,6 +71,13 @@ to confirm. Measured on a 180-degree turn in 1.7 s (walker render, 320x240, 2000
 error at most 16 degrees (Table 1 alone: lost, 160 degrees); straight walks unchanged (33-53 mm mean
 absolute against 46-64 over seeds 0-2).
 
+Step width (our change to Table 1's rest; ``KinematicConfig.step_width``): Table 1's hips rest
+unabducted, so the feet tread the hip joints' distance apart (0.18 m for the default body), where people
+tread about 0.1 m apart (centre to centre; the real walks' person 0.07 m). Both hips rest adducted by
+asin((hip_width - step_width) / (2 L)) (-0.044 rad for the default body at 0.10 m), from the start pose
+on (Table 1's hip spring, k = 5 1/s^2, would take seconds to get there). ``step_width=None`` keeps
+Table 1's rest (``synth`` draws its walker renders so).
+
 ``plane_origin`` maps the walker's sagittal x to the world: the walker's stance contact
 x (``walker.stance_contact_x``) lands on ``contact_point``, x grows along the heading.
 
@@ -111,6 +118,7 @@ DOF_NAMES: tuple[str, ...] = (
     "left_ankle_flexion", "right_ankle_flexion", "left_ankle_inversion", "right_ankle_inversion",
 )
 _D = len(DOF_NAMES)
+_LEFT_ABDUCTION = DOF_NAMES.index("left_hip_abduction")    # the right one follows it
 
 
 @dataclass(frozen=True)
@@ -179,10 +187,25 @@ class KinematicConfig:
     swing_knee_rest_gain: float = 2.5       # psi_bar_swing_knee = gain * psi_hip (the paper: 5; module doc)
     swing_clearance: float = 0.02           # m: the swing foot's sole stays this far above the ground
     turning: TurnPrior = TurnPrior()
+    # m: how far apart (centre to centre) the feet tread with the hips at rest (module doc, *Step width*);
+    # None: Table 1's rest, hips unabducted, so that the feet tread the hip joints' distance apart
+    step_width: float | None = 0.10
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"KinematicConfig.dt must be > 0 s, got {self.dt!r}")
+        if self.step_width is not None and not (np.isfinite(self.step_width) and 0.0 <= self.step_width <= 0.5):
+            raise ValueError(f"KinematicConfig.step_width must lie in 0-0.5 m (or be None), got {self.step_width!r}")
+
+    def hip_abduction_rest(self, body: BodyDescription) -> float:
+        """psi_bar of both hips' abduction (rad, away from the midline +): Table 1's, or with ``step_width``
+        the adduction that brings each foot (body.leg_length below its hip joint) to step_width / 2 from
+        the midline, within Table 1's limits."""
+        row = self.table["hip_front"]
+        if self.step_width is None:
+            return float(row.rest)
+        inward = 0.5 * (body.hip_width - self.step_width)
+        return float(np.clip(-np.arcsin(np.clip(inward / body.leg_length, -1.0, 1.0)), row.lower, row.upper))
 
     def noise_scale(self, row: str) -> float:
         """Factor on Table 1's sigma of ``row`` at this dt (1 at 1/30 s): eta is the discretised noise of a
@@ -201,13 +224,16 @@ class KinematicConfig:
         """alpha for this dt: Table 1 value (for 1/30 s) ^ (30 dt)."""
         return float(self.table[row].alpha ** (30.0 * self.dt))
 
-    def arrays(self) -> dict[str, np.ndarray]:
-        """Per-DOF (13,) arrays of alpha, k, rest, sigma (rad/s^2), lower, upper (stance knee rows)."""
+    def arrays(self, body: BodyDescription) -> dict[str, np.ndarray]:
+        """Per-DOF (13,) arrays of alpha, k, rest, sigma (rad/s^2), lower, upper (stance knee rows) for
+        ``body`` (the hips' rest abduction depends on its sizes: ``hip_abduction_rest``)."""
         rows = [self.table[r] for r in _DOF_ROWS]
+        rest = np.array([r.rest for r in rows])
+        rest[[_LEFT_ABDUCTION, _LEFT_ABDUCTION + 1]] = self.hip_abduction_rest(body)
         return {
             "alpha": np.array([self.alpha(r) for r in _DOF_ROWS]),
             "stiffness": np.array([r.stiffness for r in rows]),
-            "rest": np.array([r.rest for r in rows]),
+            "rest": rest,
             "sigma": np.array([r.sigma * self.noise_scale(name) for name, r in zip(_DOF_ROWS, rows)]) * self.sigma_unit,
             "lower": np.array([r.lower for r in rows]),
             "upper": np.array([r.upper for r in rows]),
@@ -311,11 +337,11 @@ _SWING_KNEE_ROW = _D
 _HEADING = DOF_NAMES.index("heading")
 
 
-def _eq6_table(config: KinematicConfig) -> np.ndarray:
-    """Eq. (6) parameters (14, 6): a row per DOF (knees: the stance knee) and a last row for the
-    swing knee, columns alpha (for dt), k (1/s^2), rest (rad; swing knee: the gain on psi_hip),
+def _eq6_table(config: KinematicConfig, body: BodyDescription) -> np.ndarray:
+    """Eq. (6) parameters (14, 6) for ``body``: a row per DOF (knees: the stance knee) and a last row for
+    the swing knee, columns alpha (for dt), k (1/s^2), rest (rad; swing knee: the gain on psi_hip),
     sigma (rad/s^2), lower, upper (rad)."""
-    p = config.arrays()
+    p = config.arrays(body)
     table = np.empty((_D + 1, 6))
     for column, key in enumerate(("alpha", "stiffness", "rest", "sigma", "lower", "upper")):
         table[:_D, column] = p[key]
@@ -325,16 +351,16 @@ def _eq6_table(config: KinematicConfig) -> np.ndarray:
     return table
 
 
-def _eq6(config: KinematicConfig, walker: WalkerState, current: np.ndarray, previous: np.ndarray,
-         rng: np.random.Generator, turn_rates: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-    """One step of eq. (6) for all DOFs (N, 13) with truncated noise; knees by stance/swing role.
+def _eq6(config: KinematicConfig, body: BodyDescription, walker: WalkerState, current: np.ndarray,
+         previous: np.ndarray, rng: np.random.Generator, turn_rates: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """One step of eq. (6) for all DOFs (N, 13) of ``body`` with truncated noise; knees by stance/swing role.
 
     The heading runs eq. (6) on its deviation from the turn (``turn_rates``: omega of this frame and
     of the previous one, rad/s): h_t = h_{t-1} + omega_t dt + alpha (h_{t-1} - h_{t-2} - omega_{t-1} dt)
     + dt^2 eta, so the turn is not amplified by eq. (6)'s velocity term. The means and the truncation
     bounds are compiled (``_eq6_mean_kernel``, ``_eq6_draw_kernel``); the noise is drawn in between."""
     n = current.shape[0]
-    table, dt2 = _eq6_table(config), config.dt**2
+    table, dt2 = _eq6_table(config, body), config.dt**2
     stance_leg = np.ascontiguousarray(walker.stance_leg, np.int8)
     psi_hip = np.ascontiguousarray(walker.stance_angle - walker.swing_angle, float)
     rate, previous_rate = (np.ascontiguousarray(np.broadcast_to(r, (n,)), float) for r in turn_rates)
@@ -389,7 +415,7 @@ def initial_kinematics(
     """
     body = body or BodyDescription.default()
     params = params or body.walker_params()
-    walker, dofs = _initial_dofs(config, walker, heading, n, rng, heading_spread, joint_spread)
+    walker, dofs = _initial_dofs(config, body, walker, heading, n, rng, heading_spread, joint_spread)
     leg = np.ascontiguousarray(walker.stance_leg, np.int8)
     beta = np.empty(n)
     point = np.empty((n, 3))
@@ -398,17 +424,19 @@ def initial_kinematics(
                           turn_rate_spread)
 
 
-def _initial_dofs(config: KinematicConfig, walker: WalkerState, heading: float | np.ndarray, n: int,
-                  rng: np.random.Generator, heading_spread: float, joint_spread: float
+def _initial_dofs(config: KinematicConfig, body: BodyDescription, walker: WalkerState, heading: float | np.ndarray,
+                  n: int, rng: np.random.Generator, heading_spread: float, joint_spread: float
                   ) -> tuple[WalkerState, np.ndarray]:
-    """``initial_kinematics``' walker broadcast to n entries and its sampled DOFs (n, 13)."""
+    """``initial_kinematics``' walker broadcast to n entries and its sampled DOFs (n, 13) for ``body``
+    (the hips at their rest abduction)."""
     if len(walker) == 1 and n > 1:
         walker = walker.take(np.zeros(n, dtype=np.intp))
     if len(walker) != n:
         raise ValueError(f"initial_kinematics: walker has {len(walker)} entries, expected 1 or {n}")
-    p = config.arrays()
+    p = config.arrays(body)
     dofs = np.zeros((n, _D))
     dofs[:, 2] = np.asarray(heading, float) + heading_spread * rng.standard_normal(n)
+    dofs[:, [_LEFT_ABDUCTION, _LEFT_ABDUCTION + 1]] = p["rest"][_LEFT_ABDUCTION]
     swing_knee = np.clip(config.swing_knee_rest_gain * (walker.stance_angle - walker.swing_angle), 0.05, 0.6)
     stance_knee = np.full(n, 0.05)
     left_stance = walker.stance_leg == LEFT
@@ -504,7 +532,7 @@ def _sample_kinematics(
     turn_rate = kin.turn_rate
     if np.any(struck):      # a new step: a new turn rate
         turn_rate = np.where(struck, config.turning.sample(kin.turn_rate, rng), kin.turn_rate)
-    new = _eq6(config, walker, current, kin.previous, rng, (turn_rate, kin.turn_rate))
+    new = _eq6(config, body, walker, current, kin.previous, rng, (turn_rate, kin.turn_rate))
     if heading is not None:
         new[:, DOF_NAMES.index("heading")] = heading
     legs = leg_angles(walker)
