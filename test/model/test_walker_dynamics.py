@@ -363,3 +363,15 @@ def test_compiled_impact_matches_the_jacobian_form(params: WalkerParams) -> None
     post = dynamics.heel_strike(params, pre, iota)
     np.testing.assert_allclose(np.stack([post.stance_rate, post.swing_rate], -1),
                                _reference_impact_rates(params, pre, iota), rtol=1e-11, atol=1e-12)
+
+
+def test_a_stance_leg_leaning_beyond_any_step_counts_as_fallen() -> None:
+    """fallen_mask: a stance leg leaning past MAX_STANCE_LEAN (0.9 rad) is a fall, forwards or backwards,
+    while every step the gait table solves (up to 1.2 m, for this leg length) strikes well within it."""
+    from awalker_tracker.model.gaits import double_support_angle
+
+    lean = dynamics.MAX_STANCE_LEAN
+    state = WalkerState.from_arrays([lean + 0.02, -lean - 0.02, lean - 0.02, 0.3], [-0.3, 0.3, -0.3, -0.3],
+                                    [0.0, 0.0, 0.0, -1.0], [0.0, 0.0, 0.0, 1.0])
+    assert dynamics.fallen_mask(PARAMS, state).tolist() == [True, True, False, False]
+    assert float(double_support_angle(PARAMS, 1.2)) < lean - 0.1

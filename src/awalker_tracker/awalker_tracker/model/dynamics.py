@@ -61,6 +61,10 @@ from .walker import WalkerParams, WalkerState
 
 #: Walkers are flagged fallen when no heel strike happened for this long (s).
 MAX_STRIKE_INTERVAL = 2.0
+#: Walkers whose stance leg leans further than this from vertical (rad) are flagged fallen: a 1.4 m step
+#: for a 0.9 m leg (the gait table's longest step, 1.2 m, strikes at 0.73 rad). A leg past horizontal, the
+#: test before, let a whole cloud tip over in the last frames of a sequence, too late to be re-seeded.
+MAX_STANCE_LEAN = 0.9
 #: Largest RK4 sub-step (s) used when ``substeps`` is not given: 4 sub-steps per 1/30 s frame.
 DEFAULT_MAX_SUBSTEP = 1.0 / 120.0
 
@@ -432,12 +436,13 @@ def _strike(params: WalkerParams, indices: np.ndarray, pre: WalkerState,
 
 def fallen_mask(params: WalkerParams, state: WalkerState, time_since_strike: np.ndarray | None = None,
                 max_strike_interval: float = MAX_STRIKE_INTERVAL) -> np.ndarray:
-    """Walkers that have fallen: non-finite state, a leg past horizontal, hip below ground, or no strike for long."""
+    """Walkers that have fallen: non-finite state, the stance leg leaning more than ``MAX_STANCE_LEAN``, the
+    swing leg past horizontal, hip below ground, or no strike for long."""
     k = _consts(params)
     p1, p2 = state.stance_angle, state.swing_angle
     finite = np.isfinite(p1) & np.isfinite(p2) & np.isfinite(state.stance_rate) & np.isfinite(state.swing_rate)
     with np.errstate(invalid="ignore"):
-        bad = ~finite | (np.abs(p1) > 0.5 * np.pi) | (np.abs(p2) > 0.5 * np.pi) | (k.R + k.a * np.cos(p1) < 0.0)
+        bad = ~finite | (np.abs(p1) > MAX_STANCE_LEAN) | (np.abs(p2) > 0.5 * np.pi) | (k.R + k.a * np.cos(p1) < 0.0)
         if time_since_strike is not None:
             bad |= np.asarray(time_since_strike) > max_strike_interval
     return bad
