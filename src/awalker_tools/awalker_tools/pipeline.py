@@ -50,6 +50,11 @@ FRAMES_AHEAD = 3
 #: of `awalker track bags/walk.bag --no-overlay` each, 2026-11-26): 500 particles 27.4-33.0 -> 29.5-33.8
 #: frames/s, 5000 14.9-16.7 -> 15.3-16.8 (no pair slower).
 GIL_SWITCH_INTERVAL_S = 0.001
+#: Seconds the replay waits for the tracker to acknowledge a frame before giving up. The first frames the
+#: tracker filters compile its numba kernels on a fresh install (~25 s on an idle 2-core machine; a first
+#: run beside three other jobs took over the replay's default 60 s and stopped, 2026-11-26); a failure in
+#: a node's thread stops the run at once, whatever this says.
+ACK_TIMEOUT_S = 600.0
 
 
 class _SpinThread:
@@ -342,7 +347,7 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
                 executor.add_node(n)
         feature_thread = _SpinThread(SingleThreadedExecutor(context=context), features, "awalker_features")
         # every reader is in this process: start once they have matched, with no settle time
-        replayer = Replayer(driver, bag, ReplayConfig(lockstep=True, wait_for_subscribers=10.0,
+        replayer = Replayer(driver, bag, ReplayConfig(lockstep=True, wait_for_subscribers=10.0, ack_timeout=ACK_TIMEOUT_S,
                                                         frames_ahead=FRAMES_AHEAD), local_nodes=nodes)
         last = streaming = time.monotonic()
         try:
