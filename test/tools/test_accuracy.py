@@ -279,7 +279,9 @@ def test_automatic_start_without_empty_frames(tmp_path):
     # background explained the shadow's penumbra). At seed 1 the particles' best start is 0.5 m off
     # in depth for the first 7 frames and comes within 0.37 m by the end. Tracker seeds 0-9 (2026-11-26):
     # 208-545 mm, median 242 (the bound before, 500, held for seeds 0-4 only). A track lost or walking off
-    # from a wrong start: its pelvis stays or ends more than 0.5 m away (the last check).
+    # from a wrong start: its pelvis stays or ends more than 0.5 m away (the last check). With the step width
+    # (d62eded) seeds 0-7 and 9 pass and seed 8 fails: the track starts ~0.6 m off in depth and stays there
+    # (599 mm, off the person on 38 of 40 frames; the fitted legs are the scaled ones, x1.00); not fixed.
     assert result["absolute_mm"]["median"] < 650.0
     assert result["walk"]["fallen_frames"] == 0 and not result["walk"]["end"]["off_person"]
     estimate = evaluation.read_poses_csv(out / "poses.csv")
