@@ -51,10 +51,15 @@ def _features(run_dir: Path, camera_names: list[str]) -> tuple[list[int], list[t
     return stamps, [tuple(c[s] for c in per_camera) for s in stamps]
 
 
-def _yaml_file(path: Path) -> dict:
+def _required(path: Path) -> Path:
+    """``path``, which a tracking run's output directory must hold."""
     if not path.is_file():
         raise InputError(f"{path}: not found (expected the output of `awalker track`)")
-    data = parse_yaml(path.read_text(), str(path))
+    return path
+
+
+def _yaml_file(path: Path) -> dict:
+    data = parse_yaml(_required(path).read_text(), str(path))
     if not isinstance(data, dict):
         raise InputError(f"{path}: expected a YAML mapping")
     return data
@@ -86,8 +91,7 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
     except ValueError as exc:
         raise InputError(f"fitbody options: {exc}") from None
     for name in ("calibration.yaml", "start.yaml", "body.yaml"):
-        if not (run_dir / name).is_file():
-            raise InputError(f"{run_dir / name}: not found (expected the output of `awalker track`)")
+        _required(run_dir / name)
     cameras = load_calibration(run_dir / "calibration.yaml")
     start = StartDescription.from_yaml(run_dir / "start.yaml")
     body = BodyDescription.from_yaml(run_dir / "body.yaml")

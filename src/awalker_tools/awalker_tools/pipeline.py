@@ -119,7 +119,6 @@ class TrackResult:
     seconds_pictures: float = 0.0   # drawing gait.png and the overlays afterwards
     seconds_streaming: float = 0.0  # from the first replayed message to the last posterior received
     seconds_in_filter: float = 0.0
-    seconds_first_pass: float = 0.0  # with a fitted body: the first pass and the fit, before this run
     sync_issues: list[str] = field(default_factory=list)
     recorded: dict[str, int] = field(default_factory=dict)
     features: dict[str, dict[str, str]] = field(default_factory=dict)   # per camera: how its models were learned
@@ -203,6 +202,14 @@ def _progress(options: TrackOptions, text: str) -> None:
 FIRST_PASS_DIR = "first_pass"
 
 
+def _new_result_bag(out: Path) -> Path:
+    """``out/result.bag``, refused if a run already wrote it."""
+    result_bag = out / "result.bag"
+    if result_bag.exists():
+        raise InputError(f"{result_bag}: exists already; choose a new --out directory or remove it")
+    return result_bag
+
+
 def run_tracking(options: TrackOptions) -> TrackResult:
     """Run the whole pipeline on ``options.bag``; write the outputs into ``options.out``. With a body
     to fit (``TrackOptions.fit_body``), a first pass into ``out/first_pass``, the fit, and the run."""
@@ -221,8 +228,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
                 fit = False          # the run itself reports what is missing
     if not fit:
         return _track_once(options)
-    if (out / "result.bag").exists():
-        raise InputError(f"{out / 'result.bag'}: exists already; choose a new --out directory or remove it")
+    _new_result_bag(out)         # before the first pass, not after it
     started = time.monotonic()
     first_dir = out / FIRST_PASS_DIR
     _progress(options, f"awalker track: first pass into {first_dir}, to fit the body's leg length")
@@ -232,11 +238,8 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     fitted = fit_run_dir(first_dir, seed=options.seed)
     _progress(options, f"awalker track: legs x {fitted['leg_factor']:.2f} (leg length {fitted['leg_length_m']} m); "
                        "tracking again with them")
-    seconds_first_pass = time.monotonic() - started
-    fitted["seconds_first_pass_and_fit"] = round(seconds_first_pass, 3)
-    result = _track_once(replace(options, body=Path(fitted["written"])), body_fit=fitted)
-    result.seconds_first_pass = seconds_first_pass
-    return result
+    fitted["seconds_first_pass_and_fit"] = round(time.monotonic() - started, 3)
+    return _track_once(replace(options, body=Path(fitted["written"])), body_fit=fitted)
 
 
 def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackResult:
@@ -265,9 +268,7 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
     if start is not None and start.frame >= num_frames:
         raise InputError(f"start description ({start_src}): start frame {start.frame} but {bag} has {num_frames} frames")
     out.mkdir(parents=True, exist_ok=True)
-    result_bag = out / "result.bag"
-    if result_bag.exists():
-        raise InputError(f"{result_bag}: exists already; choose a new --out directory or remove it")
+    result_bag = _new_result_bag(out)
     save_calibration(cameras, out / CALIBRATION_FILE)
     if start is not None:
         (out / START_FILE).write_text(start.to_yaml_text())

@@ -24,7 +24,7 @@ def run(args: argparse.Namespace) -> int:
         AutoStartConfig(follow_near=follow_near)      # the tracker node's check, before anything starts
     except ValueError as exc:
         raise InputError(f"--follow-near: {exc}") from None
-    options = TrackOptions(
+    run_tracking(TrackOptions(
         bag=Path(args.bag), out=Path(args.out), start=Path(args.start) if args.start else None,
         body=Path(args.body) if args.body else None, particles=args.particles, lookahead=args.lookahead,
         trust=args.trust,
@@ -32,8 +32,7 @@ def run(args: argparse.Namespace) -> int:
         auto_start=args.auto_start or args.follow_near is not None,
         follow_near=follow_near, overlays=not args.no_overlay, fit_body=args.fit_body,
         storage=args.storage,
-        share_topics=args.share_topics)
-    run_tracking(options)
+        share_topics=args.share_topics))
     return 0
 
 
