@@ -122,9 +122,12 @@ def test_monitor_does_not_trust_a_person_cut_by_the_image_border():
     assert all(monitor.update(f, [features[-1]], far) is None for f in range(5))
 
 
-def test_two_cameras_catch_a_depth_error_one_camera_cannot_see(seen):
-    """The pelvis 0.6 m off along the side camera's line of sight still projects onto the person there,
-    but cameras at two angles place the person on the ground: lost. 0.2 m off: kept."""
+def test_two_cameras_catch_a_depth_error_one_camera_catches_only_a_gross_one(seen):
+    """The pelvis off along the side camera's line of sight still projects onto the person there. Cameras
+    at two angles place the person on the ground: 0.6 m off is lost, 0.2 m kept. One camera places the
+    person by the feet row, to ~0.2 m: only a median distance over track_window_s beyond
+    lost_distance_one_camera_m (0.6 m) is lost, so 1.2 m off is lost after half a second, 0.4 m never,
+    and only where the blob is as tall as the body."""
     from test_detection import features_of as features_in
     from vision_scene import front_camera
 
@@ -135,10 +138,20 @@ def test_two_cameras_catch_a_depth_error_one_camera_cannot_see(seen):
     config = RecoveryConfig(lost_after_s=0.0)
     for offset, lost in ((0.6, True), (0.2, False)):
         behind = pelvis + np.array([0.0, offset, 0.0])        # the side camera looks along +y
-        mono = LostTrackMonitor([side], config, dt=1 / 30)
         both = LostTrackMonitor([side, front], config, dt=1 / 30)
-        assert mono.update(0, [side_features], behind) is None
         assert (both.update(0, [side_features, front_features], behind) is not None) == lost
+    # the blob stands as tall as the body (1.73 m of 1.74), so its feet row counts; for a body 1.5 times
+    # as tall it does not (legs hidden, the head lost: the feet row is not the feet), nor is 1.2 m lost then
+    for offset, height, lost in ((1.2, BODY.height, True), (0.4, BODY.height, False), (-0.4, BODY.height, False),
+                                 (1.2, 1.5 * BODY.height, False)):
+        mono = LostTrackMonitor([side], config, dt=1 / 30, body_height_m=height)
+        orders = [mono.update(f, [side_features], pelvis + np.array([0.0, offset, 0.0])) for f in range(20)]
+        fired = [f for f, order in enumerate(orders) if order is not None]
+        half_window = mono.track.span(config.track_window_s) // 2
+        assert fired[:1] == ([half_window] if lost else []), (offset, height, fired)
+        assert not lost or np.linalg.norm(orders[half_window].position - pelvis[:2]) < 0.3
+    with pytest.raises(ValueError, match="feet_row_height_ratio"):
+        RecoveryConfig(feet_row_height_ratio=(1.1, 0.85))
 
 
 def test_a_second_larger_person_does_not_count_as_losing_the_first():

@@ -78,12 +78,17 @@ class Bounds:
 # (245 / 47, 0.62 at seed 6), mocap 164 / 50 (319 / 76, 0.84; speed 0.216 at seed 6): absolute errors lower or the
 # same, relative ones 3-10 mm higher (the drawn stance is not the prior's). The bounds moved to keep >= 15 %
 # margin over these: mono_straight absolute 250 -> 265 and relative 40 -> 52, two cameras absolute 100 -> 115,
-# speed_change relative 45 -> 47, mocap absolute 360 -> 370 and speed 0.2 -> 0.25.
+# speed_change relative 45 -> 47, mocap absolute 360 -> 370 and speed 0.2 -> 0.25. With one camera's depth-drift
+# re-acquisition (recovery.RecoveryConfig.lost_distance_one_camera_m; 2026-11-26) every figure of seeds 0-9 is the
+# same but the turn's at seed 2: 317 / 57 mm (was 272 / 63). During the turn the person's blob puts the feet 0.2-0.7
+# m too far, the track was 0.3-0.5 m too near, and re-seeded at the blob it ends 0.96 m off (was 0.64); turn
+# absolute 330 -> 365. (The feet rows of these renders' blobs, which lose the head and part of the legs, stand
+# 0.8 of the body's height on most frames and do not count.)
 BOUNDS = {
     "mono_straight": Bounds(265.0, 52.0, 0.18, 0.9),
     "two_camera_straight": Bounds(115.0, 40.0, 0.18, 0.9),
     "speed_change": Bounds(280.0, 47.0, 0.24, 0.8),
-    "turn": Bounds(330.0, 95.0, 0.28, 0.85),       # the second half of the turn is followed loosely
+    "turn": Bounds(365.0, 95.0, 0.28, 0.85),       # the second half of the turn is followed loosely
     "occluder": Bounds(300.0, 62.0, 0.18, 0.75),   # the occluded stretch delays the stance switch
     # real gait: the walker's legs and feet differ from the mocap's. Since the mocap walk faces the walking
     # direction over a stride (synth, b5b794d) and the shadow model (0e43ec0, 4d2c087), tracker seeds 0-4 give
@@ -257,7 +262,8 @@ def test_automatic_start_without_empty_frames(tmp_path):
     assert str(out / "first_pass" / "body_fitted.yaml") in run["body_source"]
     from awalker_tools.fit_body import HEIGHT_SCALED_FACTORS
     assert min(abs(run["body_fit"]["leg_factor"] - f) for f in HEIGHT_SCALED_FACTORS) < 1e-9
-    # measured (tracker seed 0): legs 0.417 m scaled to the height, XXX fitted, true 0.41
+    # measured (tracker seed 0, 2026-11-26): thigh and shank 0.413 m scaled to the height, 0.401 fitted
+    # (leg factor 0.97), true 0.41
     body, true_body = BodyDescription.from_yaml(out / "body.yaml"), BodyDescription.from_yaml(seq / "body.yaml")
     scaled = BodyDescription.from_yaml(out / "first_pass" / "body.yaml")
     assert scaled.leg_length == pytest.approx(true_body.leg_length, rel=0.1)

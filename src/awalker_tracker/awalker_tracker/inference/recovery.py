@@ -13,7 +13,14 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   sees the person, or, where cameras
   at different angles place the person on the ground (``PersonDetection.triangulated``), lies more
   than ``lost_distance_m`` from that place over the ground, for ``lost_after_s``,
-  the track is lost: a fraction of the particles (the lowest weights) are re-seeded around the
+  the track is lost. With one camera the person's ground position comes from the blob's feet row, 0.06-0.25
+  m too near on the real walks (``benchmarks/bench_realwalks.py``, median per walk) and scattered by
+  ~0.1 m: a body drifting along the line of sight stays on the person's image, so there the track is
+  also lost when the pelvis's median ground distance from those positions over ``track_window_s``
+  exceeds ``lost_distance_one_camera_m`` (0.6 m; before, 8 of 60 one-camera runs ended 0.5-1.6 m
+  off). A feet row counts only where the blob stands as tall as the body (``feet_row_height_ratio``,
+  0.85-1.10 of its height; a walking person's blob is 0.91-0.96 on the real walks): legs hidden
+  behind something, or a blob that lost the head or merged with a shadow, misplace it by metres. Then a fraction of the particles (the lowest weights) are re-seeded around the
   detected ground position, with the heading and speed of the detections' recent ground track
   (when it moves), then the image likelihood decides. At most once per ``cooldown_s``.
 - **A person who stops.** The walker only walks (the paper's model has no standing still): with
@@ -52,6 +59,8 @@ class RecoveryConfig:
     heading_spread_rad: float = 0.25
     box_margin: float = 0.25           # the blob box is widened by this fraction of its size on each side
     lost_distance_m: float = 0.4       # triangulated detections: the pelvis this far off over the ground is lost
+    lost_distance_one_camera_m: float = 0.6  # feet-row detections (one camera): the median over track_window_s
+    feet_row_height_ratio: tuple[float, float] = (0.85, 1.10)  # ... of frames whose blob is this tall (x body height)
     track_window_s: float = 0.5        # detections over this time give the person's ground velocity
     moving_m_s: float = 0.3            # slower ground tracks give no heading (and do not end a stop)
     hold_still: bool = True            # hold the walkers while the person stands still
@@ -59,10 +68,15 @@ class RecoveryConfig:
     still_window_s: float = 0.3
 
     def __post_init__(self) -> None:
+        low, high = self.feet_row_height_ratio
+        if not 0.0 < low < high:
+            raise ValueError(f"RecoveryConfig.feet_row_height_ratio must be (low, high) with 0 < low < high, "
+                             f"got {self.feet_row_height_ratio}")
         if not 0.0 < self.reacquire_fraction <= 1.0:
             raise ValueError(f"RecoveryConfig.reacquire_fraction must lie in (0, 1], got {self.reacquire_fraction}")
         if min(self.lost_after_s, self.cooldown_s, self.position_spread_m, self.heading_spread_rad,
-               self.box_margin, self.track_window_s, self.moving_m_s, self.lost_distance_m, self.still_m_s,
+               self.box_margin, self.track_window_s, self.moving_m_s, self.lost_distance_m,
+               self.lost_distance_one_camera_m, self.still_m_s,
                self.still_window_s) < 0:
             raise ValueError("RecoveryConfig: times, spreads and margins must be >= 0")
 
@@ -93,23 +107,36 @@ class LostTrackMonitor:
     Frames are identified by their index; a frame seen again (the filter re-simulates its
     look-ahead window after resampling) gets the decision made the first time."""
 
-    def __init__(self, cameras: list[Camera], config: RecoveryConfig, dt: float) -> None:
+    def __init__(self, cameras: list[Camera], config: RecoveryConfig, dt: float,
+                 body_height_m: float | None = None) -> None:
         self.cameras = list(cameras)
+        self.body_height_m = body_height_m
         self.config = config
         self.dt = float(dt)
         self.track = GroundTrack(dt)
         self._run: dict[int, int] = {}
         self._orders: dict[int, Reacquisition | None] = {}
         self._still: dict[int, bool] = {}
+        self._gaps: dict[int, float] = {}   # one camera: the pelvis's ground distance from the feet-row position
         self._quiet_until = -1
         self.reacquisitions = 0
 
-    def _off_person(self, detection: PersonDetection, pelvis: np.ndarray, features: list[Any]) -> bool:
-        """True when the pelvis is off the triangulated ground position, or projects outside every widened
-        box of every person-sized blob (so a second, larger person in view does not count as losing the
-        one followed)."""
+    def _off_person(self, frame: int, detection: PersonDetection, pelvis: np.ndarray, features: list[Any]) -> bool:
+        """True when the pelvis is off the triangulated ground position; without one, when over
+        ``track_window_s`` its median ground distance from the feet-row positions exceeds
+        ``lost_distance_one_camera_m`` (drift along the line of sight, which leaves the body on the
+        person's image; only frames whose blob is as tall as the body, ``feet_row_height_ratio``, count,
+        and at least half the window), or when it projects outside every widened box of every person-sized blob (so a
+        second, larger person in view does not count as losing the one followed)."""
         if detection.triangulated:
             return bool(np.linalg.norm(pelvis[:2] - detection.position) > self.config.lost_distance_m)
+        low, high = self.config.feet_row_height_ratio
+        if self.body_height_m is None or low <= detection.height / self.body_height_m <= high:
+            self._gaps[frame] = float(np.linalg.norm(pelvis[:2] - detection.position))
+        span = self.track.span(self.config.track_window_s)
+        gaps = [g for f in range(frame - span + 1, frame + 1) if (g := self._gaps.get(f)) is not None]
+        if 2 * len(gaps) >= span and float(np.median(gaps)) > self.config.lost_distance_one_camera_m:
+            return True
         by_name = {c.name: c for c in self.cameras}
         margin = self.config.box_margin
         blobs = [b for f, c in zip(features, self.cameras) for b in person_blobs(f, c.name)]
@@ -142,7 +169,7 @@ class LostTrackMonitor:
         # hysteresis: a stop starts below still_m_s and lasts until the track moves at moving_m_s
         self._still[frame] = cfg.hold_still and recent_speed is not None and (
             recent_speed < (cfg.moving_m_s if was_still else cfg.still_m_s))
-        off = cfg.reacquire and reliable and self._off_person(detection, pelvis, list(features))
+        off = cfg.reacquire and reliable and self._off_person(frame, detection, pelvis, list(features))
         self._run[frame] = self._run.get(frame - 1, 0) + 1 if off else 0
         order = None
         if off and self._run[frame] * self.dt >= cfg.lost_after_s and frame >= self._quiet_until:
@@ -153,7 +180,7 @@ class LostTrackMonitor:
             self._quiet_until = frame + max(1, int(round(self.config.cooldown_s / self.dt)))
             self.reacquisitions += 1
         self._orders[frame] = order
-        for store in (self._run, self._orders, self._still):     # keep a few seconds of history
+        for store in (self._run, self._orders, self._still, self._gaps):     # keep a few seconds of history
             for old in [f for f in store if f < frame - 300]:
                 del store[old]
         return order

@@ -229,7 +229,7 @@ class TrackerModel:
         self._control = control
         self._gaits = gaits
         self._kin = kin_mod
-        self.monitor = (LostTrackMonitor(cameras, config.recovery, config.dt)
+        self.monitor = (LostTrackMonitor(cameras, config.recovery, config.dt, body_height_m=self.body.height)
                         if cameras and (config.recovery.reacquire or config.recovery.hold_still) else None)
         self.reseeded_fallen = 0     # particles re-seeded after a fall, over the run
 
