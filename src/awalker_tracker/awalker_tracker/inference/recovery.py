@@ -9,20 +9,20 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   speed (clamped to the gait table), standing on its current stance foot, with its heading.
 - **Lost tracks.** The person followed is, in each camera, the foreground blob nearest to where the
   particles' weighted-mean pelvis projects (``vision.detection``; a second person elsewhere in view
-  is not mixed in). When that pelvis projects outside every person-sized blob in every camera that
-  sees the person, or, where cameras
-  at different angles place the person on the ground (``PersonDetection.triangulated``), lies more
-  than ``lost_distance_m`` from that place over the ground, for ``lost_after_s``,
-  the track is lost. With one camera the person's ground position comes from the blob's feet row, 0.06-0.25
-  m too near on the real walks (``benchmarks/bench_realwalks.py``, median per walk) and scattered by
-  ~0.1 m: a body drifting along the line of sight stays on the person's image, so there the track is
-  also lost when the pelvis's median ground distance from those positions over ``track_window_s``
-  exceeds ``lost_distance_one_camera_m`` (0.6 m; before, 8 of 60 one-camera runs ended 0.5-1.6 m
+  is not mixed in). The track is lost when, for ``lost_after_s``, that pelvis projects outside every
+  person-sized blob in every camera that sees the person; or, where cameras at different angles place
+  the person on the ground (``PersonDetection.triangulated``), lies more than ``lost_distance_m`` from
+  that place over the ground; or, with one camera, lies a median ``lost_distance_one_camera_m`` (0.6 m)
+  over ``track_window_s`` from where the blob's feet row places the person. One camera's feet row is
+  0.06-0.25 m too near on the real walks (``benchmarks/bench_realwalks.py``, median per walk) and
+  scattered by ~0.1 m, too coarse to hold the depth, but a body drifting along the line of sight stays
+  on the person's image and the blob test alone never fired (8 of 60 one-camera runs ended 0.5-1.6 m
   off). A feet row counts only where the blob stands as tall as the body (``feet_row_height_ratio``,
-  0.85-1.10 of its height; a walking person's blob is 0.91-0.96 on the real walks): legs hidden
-  behind something, or a blob that lost the head or merged with a shadow, misplace it by metres. Then a fraction of the particles (the lowest weights) are re-seeded around the
-  detected ground position, with the heading and speed of the detections' recent ground track
-  (when it moves), then the image likelihood decides. At most once per ``cooldown_s``.
+  0.85-1.10 of its height; a walking person's blob is 0.91-0.96 on the real walks): legs hidden behind
+  something, or a blob that lost the head or merged with a shadow, misplace it by metres. When lost, a
+  fraction of the particles (the lowest weights) are re-seeded around the detected ground position,
+  with the heading and speed of the detections' recent ground track (when it moves), then the image
+  likelihood decides. At most once per ``cooldown_s``.
 - **A person who stops.** The walker only walks (the paper's model has no standing still): with
   ``hold_still``, while the detections' ground track moves slower than ``still_m_s`` over
   ``still_window_s`` (and until it moves faster than ``moving_m_s`` again), each frame's particles
