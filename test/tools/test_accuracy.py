@@ -569,14 +569,16 @@ def test_one_camera_reacquires_a_track_started_too_far_along_its_view(dressed_si
     summary = evaluation.read_summary_csv(out / "summary.csv")
     along_view = along_camera_view(seq, out)
     one_second_in, last_half = float(np.median(along_view[20:40])), float(np.median(along_view[45:]))
-    # measured (synthesis seed 1, tracker seeds 0-4, 2026-11-26; the pelvis's median offset along the view
+    # measured (synthesis seed 1, tracker seeds 0-9, 2026-11-26; the pelvis's median offset along the view
     # 0.67-1.33 s after the start / over the last half, m): with recovery re-acquired 13 frames after the
-    # start (seed 3 again at 28), +0.09/-0.05/+0.11/-0.15/+0.10 and +0.19/-0.08/+0.02/-0.01/+0.23; without
-    # +0.81/+0.86/+0.87/+0.95/+0.91 and +0.94/+0.96/+0.85/+0.98/+1.02 (the images alone do not bring it back)
+    # start (seeds 3, 5, 8, 9 again at 28), +0.09/-0.05/+0.11/-0.15/+0.10/+0.18/+0.14/0.00/-0.13/-0.03 and
+    # +0.19/-0.08/+0.02/-0.01/+0.23/+0.25/+0.22/+0.02/-0.23/-0.05; without +0.81/+0.86/+0.87/+0.95/+0.91/
+    # +0.98/+1.33/+0.88/+1.02/+0.86 and +0.94/+0.96/+0.85/+0.98/+1.02/+1.14/+1.28/-0.06/+1.30/+1.09 (at seed 7
+    # the images alone brought it back over the second half, so only the first second is compared)
     if recovery:
         fired = summary["frame"][summary["reacquired"] > 0] - summary["frame"][0]
         assert fired.size and fired[0] <= 20, f"re-acquired at {fired} frames after the start"
         assert abs(one_second_in) < 0.4 and abs(last_half) < 0.4, (one_second_in, last_half)
     else:
         assert (summary["reacquired"] == 0).all()
-        assert one_second_in > 0.5 and last_half > 0.5, (one_second_in, last_half)
+        assert one_second_in > 0.5, one_second_in
