@@ -348,8 +348,9 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
                 executor.add_node(n)
         feature_thread = _SpinThread(SingleThreadedExecutor(context=context), features, "awalker_features")
         # every reader is in this process: start once they have matched, with no settle time
-        replayer = Replayer(driver, bag, ReplayConfig(lockstep=True, wait_for_subscribers=10.0, ack_timeout=ACK_TIMEOUT_S,
-                                                        frames_ahead=FRAMES_AHEAD), local_nodes=nodes)
+        replayer = Replayer(driver, bag, ReplayConfig(lockstep=True, wait_for_subscribers=10.0,
+                                                        ack_timeout=ACK_TIMEOUT_S, frames_ahead=FRAMES_AHEAD),
+                            local_nodes=nodes)
         last = streaming = time.monotonic()
         try:
             while replayer.step():

@@ -122,12 +122,13 @@ class LostTrackMonitor:
         self.reacquisitions = 0
 
     def _off_person(self, frame: int, detection: PersonDetection, pelvis: np.ndarray, features: list[Any]) -> bool:
-        """True when the pelvis is off the triangulated ground position; without one, when over
+        """True when the pelvis is off the triangulated ground position. Without one: when over
         ``track_window_s`` its median ground distance from the feet-row positions exceeds
-        ``lost_distance_one_camera_m`` (drift along the line of sight, which leaves the body on the
+        ``lost_distance_one_camera_m`` (a drift along the line of sight, which leaves the body on the
         person's image; only frames whose blob is as tall as the body, ``feet_row_height_ratio``, count,
-        and at least half the window), or when it projects outside every widened box of every person-sized blob (so a
-        second, larger person in view does not count as losing the one followed)."""
+        and at least half the window must), or when it projects outside every widened box of every
+        person-sized blob (so a second, larger person in view does not count as losing the one followed).
+        Records this frame's feet-row distance for the later frames' medians."""
         if detection.triangulated:
             return bool(np.linalg.norm(pelvis[:2] - detection.position) > self.config.lost_distance_m)
         low, high = self.config.feet_row_height_ratio
