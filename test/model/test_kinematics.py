@@ -168,15 +168,19 @@ def test_contact_rolls_heel_to_toe_and_switches_feet_continuously():
 
 def test_body_follows_walker_legs_and_speed():
     walkers, states, poses = run(64, 100, seed=5)
-    # Sagittal hip angle == walker leg angle: the thigh axis projected on the sagittal plane.
-    for walker, kin, pose in zip(walkers[::7], states[::7], poses[::7]):
+    # Sagittal hip angle == walker leg angle: the thigh axis projected on the sagittal plane, exactly so
+    # while the hip is neither abducted nor rotated (Table 1's hips, which rest unabducted).
+    upright = run(64, 100, seed=5, config=KinematicConfig(step_width=None))
+    for walker, kin, pose in zip(*(frames[::7] for frames in upright)):
         thigh = pose.markers[:, M["left_knee"]] - pose.markers[:, M["left_hip"]]
         forward = np.stack([np.cos(kin.heading), np.sin(kin.heading)], axis=1)
         ahead = np.einsum("ij,ij->i", thigh[:, :2], forward)
         angle = np.arctan2(ahead, -thigh[:, 2])
         abducted = np.abs(kin.hip_abduction[:, 0]) + np.abs(kin.hip_rotation[:, 0])
         close = abducted < 0.02
+        assert close.sum() >= 10
         assert np.allclose(angle[close], leg_angles(walker)[close, 0], atol=0.01)
+        assert np.allclose(pose.joint_angles[:, J["left_hip_flexion"]], leg_angles(walker)[:, 0])
     # Segment lengths are kept.
     pose = poses[30]
     for a, b, length in [("left_hip", "left_knee", BODY.upper_leg_length),
