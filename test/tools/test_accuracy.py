@@ -16,6 +16,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from accuracy_helpers import pelvis_offsets, speed_error
@@ -129,6 +130,7 @@ def runs(tmp_path_factory):
                 result = json.loads((out / "eval.json").read_text())
                 result["speed_error_m_s"] = speed_error(out, seq / "ground_truth.csv")
                 result["sequence_dir"] = str(seq)
+                result["run_dir"] = str(out)
                 done[name] = result
             return done[name]
 
@@ -156,6 +158,18 @@ def test_stance_leg_posterior(runs, name: str):
 def test_speed_estimate(runs, name: str):
     error = runs(name)["speed_error_m_s"]
     assert error < BOUNDS[name].speed_m_s, f"{name}: mean speed error {error:.3f} m/s"
+
+
+@pytest.mark.parametrize("name", ["mono_straight", "two_camera_straight"])
+def test_heel_strikes_in_the_summary(runs, name: str):
+    """summary.csv marks the MAP walker's heel strikes with when in the frame they happened (0-1), one per
+    step: on a steady walk, a strike every ~16 frames (0.53 s at 30 Hz)."""
+    from awalker_tools import evaluation
+
+    summary = evaluation.read_summary_csv(Path(runs(name)["run_dir"]) / "summary.csv")
+    struck = np.isfinite(summary["strike_fraction"])
+    assert np.all((summary["strike_fraction"][struck] >= 0) & (summary["strike_fraction"][struck] < 1))
+    assert abs(int(struck.sum()) - FRAMES / 16) <= 1.5
 
 
 @pytest.mark.parametrize("name", list(SEQUENCES))

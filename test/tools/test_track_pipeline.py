@@ -77,8 +77,7 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     summary = evaluation.read_summary_csv(out / "summary.csv")
     assert summary["stamp_ns"].tolist() == tracked
     assert np.all((summary["stance_left_probability"] >= 0) & (summary["stance_left_probability"] <= 1))
-    struck = np.isfinite(summary["strike_fraction"])        # when in the frame the MAP walker struck
-    assert np.all((summary["strike_fraction"][struck] >= 0) & (summary["strike_fraction"][struck] < 1))
+    # (10 frames hold no heel strike: test_accuracy checks the strike times of longer tracks)
     assert len(list((out / "overlay").glob("frame_*.png"))) == FRAMES and (out / "overlay.mp4").stat().st_size > 0
     # timings: streaming is part of the whole command, the filter part of streaming
     run = yaml.safe_load((out / "run.yaml").read_text())

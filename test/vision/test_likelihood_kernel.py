@@ -189,5 +189,6 @@ def test_projected_axes_match_camera_project(distortion):
         uv, depth = camera.project(end)
         np.testing.assert_allclose(axes[..., 4 + start // 2], depth, rtol=1e-12, atol=1e-12)
         front = depth > 1e-6
+        assert front.any() and not front.all()      # both cases checked
         np.testing.assert_allclose(axes[..., start:start + 2][front], uv[front], rtol=1e-10, atol=1e-8)
         assert np.all(axes[..., start:start + 2][~front] == -1e6)
