@@ -132,6 +132,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-dead-reckoning", action="store_true", help="skip the no-image baseline")
     parser.add_argument("--hands-off", action="store_true",
                         help="no background-only frames, no start or body description: the automatic start")
+    parser.add_argument("--leg-scale-spread", type=float, default=0.0,
+                        help="awalker track --leg-scale-spread (the particles' leg lengths; runs named ..._legsS_sN)")
     parser.add_argument("--carry", choices=CARRIED, default="none",
                         help="the person carries a backpack or a shoulder bag (synth --carry): unmodelled foreground")
     args = parser.parse_args(argv)
@@ -140,7 +142,7 @@ def main(argv: list[str] | None = None) -> int:
     report: dict = {"benchmark": "realwalks", "settings": {
         "particles": args.particles, "size": list(args.size), "rate": args.rate, "seeds": args.seeds,
         "background_frames": 0 if args.hands_off else args.background_frames, "hands_off": args.hands_off,
-        "carry": args.carry,
+        "carry": args.carry, "leg_scale_spread": args.leg_scale_spread,
         "cpus": os.cpu_count()}, "runs": {}, "summary": {}}
     jobs = [(w, v, s) for w in args.walks for v in args.variants for s in args.settings]
     for k, (walk, variant, setting) in enumerate(jobs):
@@ -152,11 +154,14 @@ def main(argv: list[str] | None = None) -> int:
         if not (args.no_dead_reckoning or args.hands_off):    # dead reckoning needs a start description
             modes += [("dead_reckoning", seed, False) for seed in args.seeds]
         for mode, seed, images in modes:
-            run_dir = args.out / "runs" / f"{walk}_{variant}_{setting}_{mode}{suffix(args.hands_off, args.carry)}_s{seed}"
+            legs = f"_legs{args.leg_scale_spread:g}" if images and args.leg_scale_spread > 0 else ""
+            run_name = f"{walk}_{variant}_{setting}_{mode}{suffix(args.hands_off, args.carry)}{legs}_s{seed}"
+            run_dir = args.out / "runs" / run_name
             if not (run_dir / "eval.json").exists():
                 with contextlib.redirect_stdout(sys.stderr):
                     run_tracking(TrackOptions(bag=bag, out=run_dir, particles=args.particles, seed=seed,
                                               likelihood_scale=0.1 if images else 0.0, recovery=images,
+                                              leg_scale_spread=args.leg_scale_spread if images else 0.0,
                                               auto_start=args.hands_off, overlays=False, quiet=True))
                 evaluate_run(run_dir)
             result = json.loads((run_dir / "eval.json").read_text())

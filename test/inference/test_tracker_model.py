@@ -138,6 +138,15 @@ def test_initial_particles_spread_around_the_start():
     assert np.median(states.speed) == pytest.approx(1.4, rel=0.05)
     # phases spread within the step: the stance angle takes many values
     assert np.ptp(states.walker.stance_angle) > 0.2
+    # the body's own legs by default; with leg_scale_spread the particles' legs spread around them and wander
+    assert np.all(states.kin.leg_scale == 1.0) and model.kin_config.leg_scale_drift == 0.0
+    config = TrackerConfig(spread=InitialSpread(position_m=0.05), leg_scale_spread=0.04)
+    model = TrackerModel(body, start, marker_likelihood(), config)
+    states = model.initial(400, np.random.default_rng(0))
+    assert np.std(np.log(states.kin.leg_scale)) == pytest.approx(0.04, rel=0.2)
+    assert model.kin_config.leg_scale_drift == config.leg_scale_drift > 0
+    with pytest.raises(ValueError, match="leg_scale"):
+        TrackerConfig(leg_scale_spread=-0.1)
 
 
 def test_start_outside_the_solved_gaits_is_refused_and_the_spread_redrawn():

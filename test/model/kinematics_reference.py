@@ -14,6 +14,7 @@ from awalker_tracker.model.kinematics import (
     KinematicConfig,
     KinematicState,
     _initial_dofs,
+    _initial_leg_scale,
     _initial_state,
     _plane_origin,
     leg_angles,
@@ -86,8 +87,9 @@ class _LocalPose:
     ankles: np.ndarray  # (N, 2, 3)
     foot: np.ndarray    # (N, 2, 3, 3) columns along the foot (heel->toe), left, up
 
-def _local_pose(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray) -> _LocalPose:
-    """Forward kinematics relative to the pelvis. legs (N, 2) sagittal leg angles, dofs (N, 13)."""
+def _local_pose(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray) -> _LocalPose:
+    """Forward kinematics relative to the pelvis. legs (N, 2) sagittal leg angles, dofs (N, 13), leg
+    scales (N,) on thigh and shank lengths."""
     d = KinematicState.unpack(dofs)
     heading = _rot_z(d["heading"])                                            # (N,3,3)
     torso = _turn(_turn(heading, 1, d["torso_lean"][:, 0]), 0, d["torso_lean"][:, 1])
@@ -95,16 +97,16 @@ def _local_pose(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray) -> _L
     # Leg angle phi about the lateral axis (foot ahead for phi > 0), then abduction, rotation.
     thigh = np.repeat(heading[:, None], 2, axis=1)
     thigh = _turn(_turn(_turn(thigh, 1, -legs), 0, _SIDE * d["hip_abduction"]), 2, -_SIDE * d["hip_rotation"])
-    knees = hips - body.upper_leg_length * thigh[..., :, 2]
-    shank, ankles, foot = _lower_legs(body, thigh, knees, dofs)
+    knees = hips - (body.upper_leg_length * scale)[:, None, None] * thigh[..., :, 2]
+    shank, ankles, foot = _lower_legs(body, thigh, knees, dofs, scale)
     return _LocalPose(torso, hips, thigh, knees, shank, ankles, foot)
 
 
 def _lower_legs(body: BodyDescription, thigh: np.ndarray, knees: np.ndarray,
-                dofs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                dofs: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Shank frames, ankle positions and foot frames (N, 2, ...) below the given thighs and knees."""
     shank = _turn(thigh, 1, dofs[:, 7:9])                         # knee flexion
-    ankles = knees - body.lower_leg_length * shank[..., :, 2]
+    ankles = knees - (body.lower_leg_length * scale)[:, None, None] * shank[..., :, 2]
     foot = _turn(_turn(shank, 1, -dofs[:, 9:11]), 0, -_SIDE * dofs[:, 11:13])   # ankle flexion, inversion
     return shank, ankles, foot
 
@@ -187,7 +189,7 @@ def _contact_translation(body: BodyDescription, local: _LocalPose, leg: np.ndarr
     return np.column_stack([ground_xy - point[:, :2], -point[:, 2]])
 
 
-def _swing_foot_lowest_z(body: BodyDescription, thigh_z: np.ndarray, knee_z: np.ndarray,
+def _swing_foot_lowest_z(body: BodyDescription, shank_length: np.ndarray, thigh_z: np.ndarray, knee_z: np.ndarray,
                          knee: np.ndarray, ankle_turns: tuple[np.ndarray, ...], shift_z: np.ndarray) -> np.ndarray:
     """World height (M,) of the lowest point of the swing foot's sole for a given swing knee angle.
 
@@ -196,14 +198,14 @@ def _swing_foot_lowest_z(body: BodyDescription, thigh_z: np.ndarray, knee_z: np.
     (flexion about y, inversion about x). Only the frames' z rows are turned (the height needs no more).
     """
     shank_z = _turn(thigh_z, 1, knee)
-    ankle_z = knee_z - body.lower_leg_length * shank_z[:, 0, 2]
+    ankle_z = knee_z - shank_length * shank_z[:, 0, 2]
     c_flex, s_flex, c_inv, s_inv = ankle_turns
     foot_z = _turn_cs(_turn_cs(shank_z, 1, c_flex, s_flex), 0, c_inv, s_inv)[:, 0]
     along, up = _sole_offsets(body, _lowest_roll_from(body, foot_z[:, 0], foot_z[:, 2]))
     return ankle_z + foot_z[:, 0] * along + foot_z[:, 2] * up + shift_z
 
 
-def _keep_swing_foot_above_ground(body: BodyDescription, local: _LocalPose, dofs: np.ndarray,
+def _keep_swing_foot_above_ground(body: BodyDescription, local: _LocalPose, dofs: np.ndarray, scale: np.ndarray,
                                   stance_leg: np.ndarray, shift_z: np.ndarray, iterations: int = 14) -> None:
     """Ground clearance: where the swing foot would go below z = 0, bend the swing knee (in place
     in ``dofs``) just enough, found by bisection. The knee-less walker's trailing leg sweeps
@@ -216,19 +218,20 @@ def _keep_swing_foot_above_ground(body: BodyDescription, local: _LocalPose, dofs
                            dofs[rows, DOF_NAMES.index("left_ankle_inversion") + swing]], axis=1)
     knee = dofs[rows, knee_col]
     thigh_z = _pick(local.thigh, swing)[:, 2:3, :]
-    knee_z = _pick(local.hips, swing)[:, 2] - body.upper_leg_length * thigh_z[:, 0, 2]
+    knee_z = _pick(local.hips, swing)[:, 2] - body.upper_leg_length * scale * thigh_z[:, 0, 2]
+    shank_length = body.lower_leg_length * scale
     flex, inversion = -ankle_dofs[:, 0], -_SIDE[swing] * ankle_dofs[:, 1]
     turns = tuple(f(a)[:, None] for a in (flex, inversion) for f in (np.cos, np.sin))
-    low = np.flatnonzero(_swing_foot_lowest_z(body, thigh_z, knee_z, knee, turns, shift_z) < 0.0)
+    low = np.flatnonzero(_swing_foot_lowest_z(body, shank_length, thigh_z, knee_z, knee, turns, shift_z) < 0.0)
     if low.size == 0:
         return
     # the bisection works on the low rows only, with everything but the knee angle fixed
-    thigh_z, knee_z, shift_low = thigh_z[low], knee_z[low], shift_z[low]
+    thigh_z, knee_z, shift_low, shank_length = thigh_z[low], knee_z[low], shift_z[low], shank_length[low]
     turns = tuple(t[low] for t in turns)
     below, above = knee[low], np.full(low.size, np.pi)
     for _ in range(iterations):
         middle = 0.5 * (below + above)
-        clear = _swing_foot_lowest_z(body, thigh_z, knee_z, middle, turns, shift_low) >= 0.0
+        clear = _swing_foot_lowest_z(body, shank_length, thigh_z, knee_z, middle, turns, shift_low) >= 0.0
         above = np.where(clear, middle, above)
         below = np.where(clear, below, middle)
     dofs[low, knee_col[low]] = above
@@ -253,10 +256,13 @@ def sample_posed_kinematics_reference(
     if np.any(struck):      # a new step: a new turn rate
         turn_rate = np.where(struck, config.turning.sample(kin.turn_rate, rng), kin.turn_rate)
     new = _eq6(config, body, walker, current, kin.previous, rng, (turn_rate, kin.turn_rate))
+    scale = kin.leg_scale
+    if config.leg_scale_drift > 0:
+        scale = np.clip(scale * np.exp(config.leg_scale_drift * rng.standard_normal(len(kin))), *config.leg_scale_range)
     if heading is not None:
         new[:, DOF_NAMES.index("heading")] = heading
     legs = leg_angles(walker)
-    local = _local_pose(body, legs, new)
+    local = _local_pose(body, legs, new, scale)
     old_leg = kin.contact_leg
     old_foot = _pick(local.foot, old_leg)
     beta = _lowest_roll(body, old_foot)
@@ -275,7 +281,7 @@ def sample_posed_kinematics_reference(
     # Clearance while the swing leg trails the stance leg (early swing); later the foot must be
     # free to come down for heel strike, and is only kept out of the ground.
     margin = np.where(walker.stance_angle > walker.swing_angle, config.swing_clearance, 0.0)
-    _keep_swing_foot_above_ground(body, local, new, new_leg, shift[:, 2] - margin)
+    _keep_swing_foot_above_ground(body, local, new, scale, new_leg, shift[:, 2] - margin)
     # The clearance moves the knee without giving it velocity (a position projection): shift
     # psi_{t-1} along, so that eq. (6) next frame sees the sampled velocity.
     current = current + (new - before)
@@ -284,13 +290,14 @@ def sample_posed_kinematics_reference(
     changed = np.flatnonzero(np.any(new != before, axis=1))
     if changed.size:
         local.shank[changed], local.ankles[changed], local.foot[changed] = _lower_legs(
-            body, local.thigh[changed], local.knees[changed], new[changed])
+            body, local.thigh[changed], local.knees[changed], new[changed], scale[changed])
     named = KinematicState.unpack(new)
     state = KinematicState(
         heading=named["heading"], torso_lean=named["torso_lean"], hip_abduction=named["hip_abduction"],
         hip_rotation=named["hip_rotation"], knee=named["knee"], ankle=named["ankle"], previous=current,
         contact_point=contact, contact_roll=beta, contact_leg=new_leg,
         plane_origin=_plane_origin(params, walker, contact, named["heading"]), turn_rate=turn_rate,
+        leg_scale=scale,
     )
     return state, _posed_body(body, legs, new, local, shift)
 
@@ -305,7 +312,7 @@ def pose_body_reference(body: BodyDescription, params: WalkerParams, walker: Wal
     del params  # the sagittal leg angles come from the walker; the geometry from ``body``
     legs = leg_angles(walker)
     dofs = kin.dofs()
-    local = _local_pose(body, legs, dofs)
+    local = _local_pose(body, legs, dofs, kin.leg_scale)
     shift = _contact_translation(body, local, kin.contact_leg, kin.contact_roll, kin.contact_point)
     return _posed_body(body, legs, dofs, local, shift)
 
@@ -354,7 +361,7 @@ def sole_point_world_reference(body: BodyDescription, walker: WalkerState, kin: 
                      leg: np.ndarray, beta: np.ndarray) -> np.ndarray:
     """World position (N, 3) of the material point at angle ``beta`` on the rocker sole of foot
     ``leg`` (LEFT/RIGHT per particle) for the bodies posed by ``pose_body`` (used to check slip)."""
-    local = _local_pose(body, leg_angles(walker), kin.dofs())
+    local = _local_pose(body, leg_angles(walker), kin.dofs(), kin.leg_scale)
     shift = _contact_translation(body, local, kin.contact_leg, kin.contact_roll, kin.contact_point)
     leg = np.broadcast_to(np.asarray(leg, np.int8), (len(kin),))
     return _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), np.asarray(beta, float)) + shift
@@ -374,16 +381,18 @@ def initial_kinematics_reference(
     heading_spread: float = 0.0,
     joint_spread: float = 0.0,
     turn_rate_spread: float = 0.0,
+    leg_scale_spread: float = 0.0,
 ) -> KinematicState:
     """``kinematics.initial_kinematics`` with the sole geometry in numpy (same arguments)."""
     body = body or BodyDescription.default()
     params = params or body.walker_params()
     # the sampling and the state assembly are the package's (not compiled); the sole geometry is the reference's
     walker, dofs = _initial_dofs(config, body, walker, heading, n, rng, heading_spread, joint_spread)
-    local = _local_pose(body, leg_angles(walker), dofs)
+    scale = _initial_leg_scale(config, n, rng, leg_scale_spread)
+    local = _local_pose(body, leg_angles(walker), dofs, scale)
     leg = walker.stance_leg.astype(np.int8)
     beta = _lowest_roll(body, _pick(local.foot, leg))
     point = _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), beta)
     return _initial_state(params, walker, dofs, beta, point, start_position_xy, rng, position_spread,
-                          turn_rate_spread)
+                          turn_rate_spread, scale)
 

@@ -325,3 +325,47 @@ def test_the_feet_tread_the_step_width_apart(step_width):
     assert np.median(widths) == pytest.approx(expected, abs=0.015)
     rest = config.hip_abduction_rest(BODY)
     assert rest == 0.0 if step_width is None else rest == pytest.approx(-np.arcsin(0.04 / BODY.leg_length))
+
+
+def test_leg_scale_shortens_thigh_and_shank_and_lowers_the_body():
+    """KinematicState.leg_scale: thigh and shank x the scale, the stance foot still on the ground, so the
+    pelvis rides lower by about (1 - scale) x (thigh + shank) with the legs near vertical; feet, torso and
+    head keep their sizes."""
+    walker = hand_made_walk(9, 50)[8]                      # mid-stance: legs near vertical
+    kin = initial_kinematics(KinematicConfig(), walker, [0.0, 0.0], 0.0, 50, np.random.default_rng(11), body=BODY)
+    assert np.all(kin.leg_scale == 1.0)                    # the body's own legs unless a spread is asked for
+    short = kin.copy()
+    short.leg_scale = np.linspace(0.85, 1.1, 50)
+    full, scaled = pose_body(BODY, PARAMS, walker, kin), pose_body(BODY, PARAMS, walker, short)
+    m = scaled.markers
+    for a, b, length in (("left_hip", "left_knee", BODY.upper_leg_length),
+                         ("right_knee", "right_ankle", BODY.lower_leg_length)):
+        np.testing.assert_allclose(np.linalg.norm(m[:, M[a]] - m[:, M[b]], axis=1), short.leg_scale * length)
+    for a, b in (("pelvis", "thorax"), ("left_ankle", "left_toe"), ("right_heel", "right_toe")):
+        np.testing.assert_allclose(np.linalg.norm(m[:, M[a]] - m[:, M[b]], axis=1),
+                                   np.linalg.norm(full.markers[:, M[a]] - full.markers[:, M[b]], axis=1))
+    drop = full.markers[:, M["pelvis"], 2] - m[:, M["pelvis"], 2]
+    legs = BODY.upper_leg_length + BODY.lower_leg_length
+    np.testing.assert_allclose(drop, (1 - short.leg_scale) * legs, atol=2e-3)
+    stance = sole_point_world(BODY, walker, short, short.contact_leg, short.contact_roll)
+    np.testing.assert_allclose(stance[:, 2], 0.0, atol=1e-9)
+
+
+def test_leg_scales_spread_and_wander_only_when_asked():
+    """initial_kinematics(leg_scale_spread) draws log-normal scales within KinematicConfig.leg_scale_range;
+    each frame they wander by leg_scale_drift, and stay put without it."""
+    walkers = hand_made_walk(20, 4000)
+    rng = np.random.default_rng(12)
+    config = KinematicConfig(leg_scale_drift=0.01, leg_scale_range=(0.9, 1.08))
+    kin = initial_kinematics(config, walkers[0], [0.0, 0.0], 0.0, 4000, rng, body=BODY, leg_scale_spread=0.04)
+    assert np.std(np.log(kin.leg_scale)) == pytest.approx(0.04, rel=0.1)
+    assert kin.leg_scale.min() >= 0.9 and kin.leg_scale.max() <= 1.08
+    start = kin.leg_scale.copy()
+    still = sample_kinematics(KinematicConfig(), BODY, PARAMS, walkers[0], walkers[1], None, kin, rng)
+    assert np.array_equal(still.leg_scale, start)
+    for f in range(1, 20):
+        kin = sample_kinematics(config, BODY, PARAMS, walkers[f - 1], walkers[f], None, kin, rng)
+    step = np.log(kin.leg_scale / start)
+    inside = (kin.leg_scale > 0.9) & (kin.leg_scale < 1.08)
+    assert np.std(step[inside]) == pytest.approx(0.01 * np.sqrt(19), rel=0.15)
+    assert kin.leg_scale.min() >= 0.9 and kin.leg_scale.max() <= 1.08

@@ -58,7 +58,7 @@ def random_case(seed: int, n: int = 3000) -> tuple[WalkerState, KinematicState]:
         contact_point=rng.normal(0, 3, (n, 2)),
         contact_roll=rng.uniform(-BODY.sole_half_angle, BODY.sole_half_angle, n),
         contact_leg=rng.integers(0, 2, n).astype(np.int8), plane_origin=rng.normal(0, 3, (n, 2)),
-        turn_rate=rng.normal(0, 0.5, n))
+        turn_rate=rng.normal(0, 0.5, n), leg_scale=rng.uniform(0.85, 1.1, n))
     return walker, kin
 
 
@@ -80,7 +80,7 @@ def assert_poses_close(actual: BodyPoseBatch, expected: BodyPoseBatch) -> None:
 @pytest.mark.parametrize("seed, dt", [(0, 1 / 30), (1, 1 / 30), (2, 1 / 60)])
 def test_sample_posed_kinematics_matches_numpy_reference(seed, dt):
     walker, kin = random_case(seed)
-    config = KinematicConfig(dt=dt)
+    config = KinematicConfig(dt=dt, leg_scale_drift=0.01 if seed == 1 else 0.0)   # leg scales wandering or kept
     state, pose = sample_posed_kinematics(config, BODY, PARAMS, walker, kin, np.random.default_rng(seed))
     expected_state, expected_pose = sample_posed_kinematics_reference(config, BODY, PARAMS, walker, kin,
                                                                       np.random.default_rng(seed))
@@ -119,7 +119,8 @@ def test_pose_body_and_sole_points_match_numpy_reference():
 def test_initial_kinematics_matches_numpy_reference():
     walker, _ = random_case(5, n=400)
     config = KinematicConfig()
-    spreads = dict(position_spread=0.1, heading_spread=0.2, joint_spread=0.3, turn_rate_spread=0.1)
+    spreads = dict(position_spread=0.1, heading_spread=0.2, joint_spread=0.3, turn_rate_spread=0.1,
+                   leg_scale_spread=0.05)
     actual = initial_kinematics(config, walker, [1.0, -2.0], 0.4, 400, np.random.default_rng(5), body=BODY,
                                 **spreads)
     expected = initial_kinematics_reference(config, walker, [1.0, -2.0], 0.4, 400, np.random.default_rng(5),
@@ -130,7 +131,7 @@ def test_initial_kinematics_matches_numpy_reference():
 def test_a_walk_of_sampled_frames_matches_numpy_reference_frame_by_frame():
     """40 frames of the prior on a walker whose legs swing between +-0.4 rad with heel strikes: every
     frame, compiled and reference agree from the same previous state, which then carries on."""
-    n, config = 300, KinematicConfig()
+    n, config = 300, KinematicConfig(leg_scale_drift=0.005)
     rng = np.random.default_rng(6)
     walkers, leg, origin = [], 0, 0.0
     for f in range(40):
@@ -138,7 +139,9 @@ def test_a_walk_of_sampled_frames_matches_numpy_reference_frame_by_frame():
             leg, origin = 1 - leg, origin + PARAMS.step_length(0.4)
         phi1 = 0.4 - 0.8 * (f % 16) / 16 + 0.02 * rng.standard_normal(n)
         walkers.append(WalkerState.from_arrays(phi1, -phi1, -1.5, 1.5, origin, leg))
-    kin = initial_kinematics(config, walkers[0], [0.0, 0.0], 0.2, n, rng, body=BODY, joint_spread=0.05)
+    kin = initial_kinematics(config, walkers[0], [0.0, 0.0], 0.2, n, rng, body=BODY, joint_spread=0.05,
+                             leg_scale_spread=0.04)
+    assert 0.02 < np.std(kin.leg_scale) < 0.06
     for f in range(1, 40):
         seed = 100 + f
         state, pose = sample_posed_kinematics(config, BODY, PARAMS, walkers[f], kin, np.random.default_rng(seed))

@@ -115,3 +115,20 @@ def test_tracker_node_checks_follow_near(ros_context):
         assert node.autostart_config.follow_near == (1.0, -2.0)
     finally:
         node.destroy_node()
+
+
+def test_tracker_node_checks_leg_scale_spread(ros_context):
+    from rclpy.parameter import Parameter
+
+    from awalker_tracker.errors import InputError
+    from awalker_tracker.nodes.tracker import TrackerNode
+
+    with pytest.raises(InputError, match="parameter 'leg_scale_spread'"):
+        TrackerNode(context=ros_context, parameter_overrides=[
+            Parameter("cameras", value=["cam0"]), Parameter("leg_scale_spread", value=-0.04)])
+    node = TrackerNode(context=ros_context, parameter_overrides=[
+        Parameter("cameras", value=["cam0"]), Parameter("leg_scale_spread", value=0.04)])
+    try:
+        assert node.leg_scale_spread == 0.04
+    finally:
+        node.destroy_node()

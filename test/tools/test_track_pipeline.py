@@ -249,7 +249,9 @@ def test_track_without_start_description_looks_for_the_person(tmp_path: Path, ca
 
 def test_track_option_errors(tmp_path: Path, capsys):
     for option, value, text in (("--particles", "0", "--particles"), ("--trust", "1.5", "--trust"),
-                                ("--lookahead", "-1", "--lookahead"), ("--likelihood-scale", "-1", "--likelihood-scale")):
+                                ("--lookahead", "-1", "--lookahead"),
+                                ("--likelihood-scale", "-1", "--likelihood-scale"),
+                                ("--leg-scale-spread", "0.5", "--leg-scale-spread")):
         assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), option, value]) == 2
         assert text in capsys.readouterr().err
     assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--follow-near", "nan", "0"]) == 2

@@ -96,6 +96,7 @@ class TrackOptions:
     trust: float = 0.9
     seed: int = 0
     likelihood_scale: float = 0.1
+    leg_scale_spread: float = 0.0   # the particles' leg lengths around the body's (TrackerConfig.leg_scale_spread)
     auto_start: bool = False        # ignore any start description and find the walking person (also when none exists)
     follow_near: tuple[float, float] | None = None   # automatic start: follow the person first seen near this ground point (m)
     recovery: bool = True           # re-seed fallen walkers and re-acquire a lost track (inference/recovery.py)
@@ -316,6 +317,7 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
             Parameter("num_particles", value=int(options.particles)), Parameter("lookahead", value=int(options.lookahead)),
             Parameter("trust", value=float(options.trust)), Parameter("seed", value=int(options.seed)),
             Parameter("likelihood_scale", value=float(options.likelihood_scale)),
+            Parameter("leg_scale_spread", value=float(options.leg_scale_spread)),
             Parameter("reseed_fallen", value=bool(options.recovery)), Parameter("reacquire", value=bool(options.recovery)),
             Parameter("hold_still", value=bool(options.recovery)),
             Parameter("idle_flush_s", value=1.0e9)])
@@ -413,7 +415,8 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
     (out / RUN_FILE).write_text(yaml.safe_dump({
         "input": str(bag.resolve()), "start_source": start_src, "body_source": body_src,
         "particles": options.particles, "lookahead": options.lookahead, "trust": options.trust, "seed": options.seed,
-        "likelihood_scale": options.likelihood_scale, "recovery": options.recovery,
+        "likelihood_scale": options.likelihood_scale, "leg_scale_spread": options.leg_scale_spread,
+        "recovery": options.recovery,
         "frames": result.frames, "posteriors": result.summaries, "seconds": round(result.seconds, 3),
         "seconds_streaming": round(result.seconds_streaming, 3), "seconds_pictures": round(result.seconds_pictures, 3),
         "seconds_in_filter": round(result.seconds_in_filter, 3), "sync_issues": result.sync_issues,

@@ -15,6 +15,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--particles must be >= 1, got {args.particles}")
     if not args.likelihood_scale >= 0:
         raise InputError(f"--likelihood-scale must be >= 0, got {args.likelihood_scale}")
+    if not 0.0 <= args.leg_scale_spread <= 0.2:
+        raise InputError(f"--leg-scale-spread must lie in 0-0.2, got {args.leg_scale_spread}")
     if not 0.0 <= args.trust <= 1.0:
         raise InputError(f"--trust (gamma) must lie in [0, 1], got {args.trust}")
     if args.lookahead < 0:
@@ -28,7 +30,8 @@ def run(args: argparse.Namespace) -> int:
         bag=Path(args.bag), out=Path(args.out), start=Path(args.start) if args.start else None,
         body=Path(args.body) if args.body else None, particles=args.particles, lookahead=args.lookahead,
         trust=args.trust,
-        seed=args.seed, likelihood_scale=args.likelihood_scale, recovery=not args.no_recovery,
+        seed=args.seed, likelihood_scale=args.likelihood_scale, leg_scale_spread=args.leg_scale_spread,
+        recovery=not args.no_recovery,
         auto_start=args.auto_start or args.follow_near is not None,
         follow_near=follow_near, overlays=not args.no_overlay, fit_body=args.fit_body,
         storage=args.storage,
@@ -62,6 +65,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--likelihood-scale", type=float, default=0.1,
                         help="exponent on the image likelihood (tempering, default 0.1; 0: images unused, "
                              "dead reckoning from the start description)")
+    parser.add_argument("--leg-scale-spread", type=float, default=0.0,
+                        help="let the particles' leg lengths differ from the body description's: log-normal spread "
+                             "(e.g. 0.04), wandering 0.1 %% per frame; default 0: the body's own (README \"Leg length "
+                             "from the images, online\")")
     parser.add_argument("--no-recovery", action="store_true",
                         help="never re-seed fallen walkers, re-acquire a lost track or hold the walkers while the person "
                              "stands still (the exact filter of the paper)")

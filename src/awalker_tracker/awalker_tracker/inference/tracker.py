@@ -159,6 +159,17 @@ class TrackerConfig:
     likelihood_scale: float = 0.1
     recovery: RecoveryConfig = RecoveryConfig()
     cloud_size: int = 200
+    # Leg lengths the filter explores (kinematics module doc, *Leg length*; off by default): with
+    # leg_scale_spread > 0 each particle's thigh and shank are x its own factor, log-normal with this spread
+    # when drawn (start, re-seeds), wandering by leg_scale_drift per frame (log, std). Real walks, hand-started,
+    # tracker seeds 0-4, 0.04 and 0.001 (2026-11-26, bench_realwalks --leg-scale-spread 0.04): medians of the
+    # walk medians one camera 125 -> 95 mm (better on 9 of 12 walks), two cameras 88 -> 82 (7 of 12), but per
+    # run the change is -7 mm (mean; one camera: 10th-90th percentile -75..+53 mm) and 0 (two cameras), the
+    # worst runs are worse (226 -> 328 mm, 138 -> 161) and 54 of 60 one-camera runs end on the person
+    # (56): runs whose legs settle at 0.93-0.95 gain most (two cameras 73 against 89 mm), runs whose legs
+    # grow past 1.0 lose (131 against 95). README "Leg length from the images, online".
+    leg_scale_spread: float = 0.0
+    leg_scale_drift: float = 0.001
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -167,6 +178,9 @@ class TrackerConfig:
             raise ValueError(f"TrackerConfig.kappa_bar_variance must be > 0, got {self.kappa_bar_variance}")
         if not (np.isfinite(self.likelihood_scale) and self.likelihood_scale >= 0):
             raise ValueError(f"TrackerConfig.likelihood_scale must be >= 0, got {self.likelihood_scale}")
+        if not (0.0 <= self.leg_scale_spread <= 0.2 and 0.0 <= self.leg_scale_drift <= 0.05):
+            raise ValueError(f"TrackerConfig: leg_scale_spread must lie in 0-0.2 and leg_scale_drift in 0-0.05, got "
+                             f"{self.leg_scale_spread}, {self.leg_scale_drift}")
 
 
 # ----------------------------------------------------------------------------- particle states
@@ -225,7 +239,8 @@ class TrackerModel:
         self.gaits = (gait_table if gait_table is not None else gaits.GaitTable.load()).scaled_to(self.params)
         self.prior = prior if prior is not None else control.ControlPrior.from_gait_table(
             self.gaits, kappa_bar_variance=config.kappa_bar_variance)
-        self.kin_config = kinematics if kinematics is not None else kin_mod.KinematicConfig(dt=config.dt)
+        self.kin_config = kinematics if kinematics is not None else kin_mod.KinematicConfig(
+            dt=config.dt, leg_scale_drift=config.leg_scale_drift if config.leg_scale_spread > 0 else 0.0)
         self._control = control
         self._gaits = gaits
         self._kin = kin_mod
@@ -266,7 +281,7 @@ class TrackerModel:
         kin = self._kin.initial_kinematics(
             self.kin_config, walker, pelvis_xy, heading, n, rng, body=self.body,
             params=self.params, position_spread=spread.position_m, heading_spread=spread.heading_rad,
-            joint_spread=spread.joint_rad)
+            joint_spread=spread.joint_rad, leg_scale_spread=self.config.leg_scale_spread)
         pose = self._kin.pose_body(self.body, self.params, walker, kin)
         return TrackerStates(walker, control, kin, pose, speed.copy(), np.zeros(n, bool), np.zeros(n, np.int8))
 

@@ -78,6 +78,19 @@ asin((hip_width - step_width) / (2 L)) (-0.044 rad for the default body at 0.10 
 on (Table 1's hip spring, k = 5 1/s^2, would take seconds to get there). ``step_width=None`` keeps
 Table 1's rest (``synth`` draws its walker renders so).
 
+Leg length (our addition; ``KinematicState.leg_scale``): each particle carries a factor on the thigh and
+shank lengths of the body description (the walker's L, the feet, torso and head keep theirs), drawn
+log-normal around 1 (``initial_kinematics(leg_scale_spread=...)``) and wandering by ``leg_scale_drift``
+(log, per frame) within ``leg_scale_range``, so that the filter weighs leg lengths as it weighs poses. Both
+are 0 by default (the body's own legs, as ``synth`` draws them, bit for bit as before); the tracker sets
+them when asked (``TrackerConfig.leg_scale_spread``, off by default; measured there). Why: a tape measure's
+leg is a few per cent off, and a person walks with the hips lower than the standing leg length (the stance
+knee flexed ~20 degrees on the real walks, ours straight), so a leg too long carries pelvis, hips and
+thorax too high however well the rest is tracked (real walks: 7 cm). The image likelihood draws the parts
+at the body description's lengths from the scaled joints (the thigh from the hip, the shank from the
+knee): drawing them at the scaled lengths was measured worse (real walks, seeds 0-2: two cameras 98 mm
+against 88, one camera 110 against 103).
+
 ``plane_origin`` maps the walker's sagittal x to the world: the walker's stance contact
 x (``walker.stance_contact_x``) lands on ``contact_point``, x grows along the heading.
 
@@ -190,6 +203,9 @@ class KinematicConfig:
     # m: how far apart (centre to centre) the feet tread with the hips at rest (module doc, *Step width*);
     # None: Table 1's rest, hips unabducted, so that the feet tread the hip joints' distance apart
     step_width: float | None = 0.10
+    # per frame: each particle's leg scale wanders by this (log, standard deviation) within leg_scale_range
+    leg_scale_drift: float = 0.0
+    leg_scale_range: tuple[float, float] = (0.85, 1.10)
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -260,6 +276,7 @@ class KinematicState:
     contact_leg: np.ndarray     # (N,) int8 LEFT/RIGHT: the foot holding the contact
     plane_origin: np.ndarray    # (N, 2) world xy of the walker's sagittal x = 0
     turn_rate: np.ndarray       # (N,) omega: the heading's turn rate during this step (rad/s, left +)
+    leg_scale: np.ndarray       # (N,) thigh and shank lengths x this (the body's: 1; *Leg length* in the module doc)
 
     def __len__(self) -> int:
         return int(self.heading.shape[0])
@@ -406,6 +423,7 @@ def initial_kinematics(
     heading_spread: float = 0.0,
     joint_spread: float = 0.0,
     turn_rate_spread: float = 0.0,
+    leg_scale_spread: float = 0.0,
 ) -> KinematicState:
     """N kinematic states near a rest pose: pelvis above ``start_position_xy`` ((2,) or (N, 2), m),
     torso yaw ``heading`` (rad); Gaussian spreads (m, rad, rad; joints truncated to their limits; turn rate rad/s).
@@ -419,9 +437,18 @@ def initial_kinematics(
     leg = np.ascontiguousarray(walker.stance_leg, np.int8)
     beta = np.empty(n)
     point = np.empty((n, 3))
-    _sole_points_kernel(_geometry(body), leg_angles(walker), dofs, leg, beta, True, point)
+    scale = _initial_leg_scale(config, n, rng, leg_scale_spread)
+    _sole_points_kernel(_geometry(body), leg_angles(walker), dofs, scale, leg, beta, True, point)
     return _initial_state(params, walker, dofs, beta, point, start_position_xy, rng, position_spread,
-                          turn_rate_spread)
+                          turn_rate_spread, scale)
+
+
+def _initial_leg_scale(config: KinematicConfig, n: int, rng: np.random.Generator, spread: float) -> np.ndarray:
+    """(N,) leg scales: log-normal around 1 with ``spread``, within ``config.leg_scale_range``; ones without."""
+    if spread <= 0:
+        return np.ones(n)
+    low, high = config.leg_scale_range
+    return np.clip(np.exp(spread * rng.standard_normal(n)), low, high)
 
 
 def _initial_dofs(config: KinematicConfig, body: BodyDescription, walker: WalkerState, heading: float | np.ndarray,
@@ -452,7 +479,7 @@ def _initial_dofs(config: KinematicConfig, body: BodyDescription, walker: Walker
 
 def _initial_state(params: WalkerParams, walker: WalkerState, dofs: np.ndarray, beta: np.ndarray, point: np.ndarray,
                    start_position_xy: np.ndarray, rng: np.random.Generator, position_spread: float,
-                   turn_rate_spread: float) -> KinematicState:
+                   turn_rate_spread: float, leg_scale: np.ndarray | None = None) -> KinematicState:
     """``initial_kinematics``' states from the DOFs, the stance foot's contact roll ``beta`` (N,) and its sole
     point relative to the pelvis ``point`` (N, 3) m: the pelvis above the (spread) start position."""
     n = dofs.shape[0]
@@ -466,6 +493,7 @@ def _initial_state(params: WalkerParams, walker: WalkerState, dofs: np.ndarray, 
         contact_point=contact_point, contact_roll=beta, contact_leg=walker.stance_leg.astype(np.int8),
         plane_origin=_plane_origin(params, walker, contact_point, named["heading"]),
         turn_rate=turn_rate_spread * rng.standard_normal(n) if turn_rate_spread > 0 else np.zeros(n),
+        leg_scale=np.ones(n) if leg_scale is None else leg_scale,
     )
 
 
@@ -533,6 +561,9 @@ def _sample_kinematics(
     if np.any(struck):      # a new step: a new turn rate
         turn_rate = np.where(struck, config.turning.sample(kin.turn_rate, rng), kin.turn_rate)
     new = _eq6(config, body, walker, current, kin.previous, rng, (turn_rate, kin.turn_rate))
+    scale = np.ascontiguousarray(kin.leg_scale, float)
+    if config.leg_scale_drift > 0:
+        scale = np.clip(scale * np.exp(config.leg_scale_drift * rng.standard_normal(n)), *config.leg_scale_range)
     if heading is not None:
         new[:, DOF_NAMES.index("heading")] = heading
     legs = leg_angles(walker)
@@ -549,7 +580,8 @@ def _sample_kinematics(
                                    np.ascontiguousarray(kin.contact_roll, float))
     stance_x = np.ascontiguousarray(stance_contact_x(params, walker), float)
     over_blocks(n, lambda rows: _sample_kernel(
-        geometry, legs[rows], new[rows], previous[rows], contact_point[rows], contact_roll[rows], contact_leg[rows],
+        geometry, legs[rows], new[rows], scale[rows], previous[rows], contact_point[rows], contact_roll[rows],
+        contact_leg[rows],
         stance_leg[rows], margin[rows], stance_x[rows], contact[rows], beta[rows], plane_origin[rows],
         pose.markers[rows], pose.joint_angles[rows], pose.segments.origin[rows], pose.segments.rotation[rows]))
     named = KinematicState.unpack(new)
@@ -557,7 +589,7 @@ def _sample_kinematics(
         heading=named["heading"], torso_lean=named["torso_lean"], hip_abduction=named["hip_abduction"],
         hip_rotation=named["hip_rotation"], knee=named["knee"], ankle=named["ankle"], previous=previous,
         contact_point=contact, contact_roll=beta, contact_leg=stance_leg.copy(),
-        plane_origin=plane_origin, turn_rate=turn_rate,
+        plane_origin=plane_origin, turn_rate=turn_rate, leg_scale=scale,
     )
     return state, pose
 
@@ -575,8 +607,9 @@ def pose_body(body: BodyDescription, params: WalkerParams, walker: WalkerState, 
     contact_leg, contact_roll, contact_point = (np.ascontiguousarray(kin.contact_leg, np.int8),
                                                 np.ascontiguousarray(kin.contact_roll, float),
                                                 np.ascontiguousarray(kin.contact_point, float))
+    scale = np.ascontiguousarray(kin.leg_scale, float)
     over_blocks(len(kin), lambda rows: _pose_kernel(
-        geometry, legs[rows], dofs[rows], contact_leg[rows], contact_roll[rows], contact_point[rows],
+        geometry, legs[rows], dofs[rows], scale[rows], contact_leg[rows], contact_roll[rows], contact_point[rows],
         pose.markers[rows], pose.joint_angles[rows], pose.segments.origin[rows], pose.segments.rotation[rows]))
     return pose
 
@@ -588,10 +621,12 @@ def sole_point_world(body: BodyDescription, walker: WalkerState, kin: KinematicS
     n = len(kin)
     geometry, legs, dofs = _geometry(body), leg_angles(walker), kin.dofs()
     contact = np.empty((n, 3))      # pelvis-relative contact point: the body's translation is minus it
-    _sole_points_kernel(geometry, legs, dofs, np.ascontiguousarray(kin.contact_leg, np.int8),
+    scale = np.ascontiguousarray(kin.leg_scale, float)
+    _sole_points_kernel(geometry, legs, dofs, scale, np.ascontiguousarray(kin.contact_leg, np.int8),
                         np.array(kin.contact_roll, float), False, contact)
     point = np.empty((n, 3))
-    _sole_points_kernel(geometry, legs, dofs, np.ascontiguousarray(np.broadcast_to(np.asarray(leg, np.int8), (n,))),
+    _sole_points_kernel(geometry, legs, dofs, scale,
+                        np.ascontiguousarray(np.broadcast_to(np.asarray(leg, np.int8), (n,))),
                         np.array(np.broadcast_to(np.asarray(beta, float), (n,))), False, point)
     shift = np.column_stack([kin.contact_point - contact[:, :2], -contact[:, 2]])
     return point + shift
@@ -677,10 +712,11 @@ def _copy_frame(frames: np.ndarray, source: int, target: int) -> None:
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _local_pose(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, i: int, frames: np.ndarray,
+def _local_pose(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, frames: np.ndarray,
                 points: np.ndarray) -> None:
     """Forward kinematics of body i relative to the pelvis (world orientation) into ``frames`` and
-    ``points``: legs (N, 2) the sagittal leg angles (rad), dofs (N, 13) in ``DOF_NAMES`` order."""
+    ``points``: legs (N, 2) the sagittal leg angles (rad), dofs (N, 13) in ``DOF_NAMES`` order, scale (N,)
+    the factor on thigh and shank lengths."""
     c_head, s_head = math.cos(dofs[i, 2]), math.sin(dofs[i, 2])
     _set_heading(frames, _TORSO, c_head, s_head)
     _turn(frames, _TORSO, 1, math.cos(dofs[i, 0]), math.sin(dofs[i, 0]))    # pitch: lean forward
@@ -695,19 +731,20 @@ def _local_pose(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, i: int, frames
         _turn(frames, thigh, 0, math.cos(dofs[i, 3 + side]), sign * math.sin(dofs[i, 3 + side]))
         _turn(frames, thigh, 2, math.cos(dofs[i, 5 + side]), -sign * math.sin(dofs[i, 5 + side]))
         for k in range(3):
-            points[_KNEE + side, k] = points[_HIP + side, k] - g.upper_leg_length * frames[thigh, k, 2]
-        _lower_leg(g, dofs, i, side, frames, points)
+            points[_KNEE + side, k] = points[_HIP + side, k] - (scale[i] * g.upper_leg_length) * frames[thigh, k, 2]
+        _lower_leg(g, dofs, scale, i, side, frames, points)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _lower_leg(g: _Geometry, dofs: np.ndarray, i: int, side: int, frames: np.ndarray, points: np.ndarray) -> None:
+def _lower_leg(g: _Geometry, dofs: np.ndarray, scale: np.ndarray, i: int, side: int, frames: np.ndarray,
+               points: np.ndarray) -> None:
     """Shank frame, ankle position and foot frame of leg ``side`` of body i below its thigh and knee
-    (knee flexion, then ankle flexion and inversion from ``dofs`` (N, 13))."""
+    (knee flexion, then ankle flexion and inversion from ``dofs`` (N, 13); the shank ``scale[i]`` x its length)."""
     sign, shank, foot = 1.0 - 2.0 * side, _SHANK + side, _FOOT + side
     _copy_frame(frames, _THIGH + side, shank)
     _turn(frames, shank, 1, math.cos(dofs[i, 7 + side]), math.sin(dofs[i, 7 + side]))            # knee flexion
     for k in range(3):
-        points[_ANKLE + side, k] = points[_KNEE + side, k] - g.lower_leg_length * frames[shank, k, 2]
+        points[_ANKLE + side, k] = points[_KNEE + side, k] - (scale[i] * g.lower_leg_length) * frames[shank, k, 2]
     _copy_frame(frames, shank, foot)
     _turn(frames, foot, 1, math.cos(dofs[i, 9 + side]), -math.sin(dofs[i, 9 + side]))            # ankle flexion
     _turn(frames, foot, 0, math.cos(dofs[i, 11 + side]), -sign * math.sin(dofs[i, 11 + side]))   # inversion
@@ -749,17 +786,18 @@ def _sole_point(g: _Geometry, frames: np.ndarray, points: np.ndarray, side: int,
 
 
 @numba.njit(cache=True, nogil=True)
-def _swing_foot_lowest_z(g: _Geometry, thigh_z: tuple[float, float, float], knee_z: float, knee: float,
-                         ankle_turns: tuple[float, float, float, float], shift_z: float) -> float:
+def _swing_foot_lowest_z(g: _Geometry, shank_length: float, thigh_z: tuple[float, float, float], knee_z: float,
+                         knee: float, ankle_turns: tuple[float, float, float, float], shift_z: float) -> float:
     """World height (m) of the lowest point of the swing foot's sole for the swing knee angle ``knee``
-    (rad), given the z row of the thigh frame, the knee's pelvis-relative height knee_z (m), the cosines
-    and sines (c_flex, s_flex, c_inv, s_inv) of the foot's turns about its y (flexion) and x (inversion)
-    axes and the pelvis height shift_z (m). Only the frames' z rows are turned (the height needs no more)."""
+    (rad), given the shank's length (m), the z row of the thigh frame, the knee's pelvis-relative height
+    knee_z (m), the cosines and sines (c_flex, s_flex, c_inv, s_inv) of the foot's turns about its y
+    (flexion) and x (inversion) axes and the pelvis height shift_z (m). Only the frames' z rows are turned
+    (the height needs no more)."""
     c_flex, s_flex, c_inv, s_inv = ankle_turns
     x, y, z = thigh_z
     c, s = math.cos(knee), math.sin(knee)
     x, z = c * x - s * z, c * z + s * x                             # shank: knee flexion about y
-    ankle_z = knee_z - g.lower_leg_length * z
+    ankle_z = knee_z - shank_length * z
     x, z = c_flex * x - s_flex * z, c_flex * z + s_flex * x         # foot: ankle flexion about y
     y, z = c_inv * y + s_inv * z, c_inv * z - s_inv * y             # inversion about x
     # The sole is an arc of radius rho in the foot's sagittal plane through the sole line's heel and
@@ -775,7 +813,8 @@ def _swing_foot_lowest_z(g: _Geometry, thigh_z: tuple[float, float, float], knee
 
 
 @numba.njit(cache=True, nogil=True)
-def _clear_knee(g: _Geometry, dofs: np.ndarray, i: int, swing: int, frames: np.ndarray, points: np.ndarray,
+def _clear_knee(g: _Geometry, dofs: np.ndarray, scale: np.ndarray, i: int, swing: int, frames: np.ndarray,
+                points: np.ndarray,
                 shift_z: float) -> float:
     """Ground clearance: where body i's swing foot sole would go below z = 0 (``shift_z``: the pelvis
     height minus the wanted clearance, m), the swing knee angle (rad) that bends it just enough,
@@ -788,12 +827,13 @@ def _clear_knee(g: _Geometry, dofs: np.ndarray, i: int, swing: int, frames: np.n
     turns = (math.cos(flexion), math.sin(flexion), math.cos(inversion), math.sin(inversion))
     thigh_z = (frames[thigh, 2, 0], frames[thigh, 2, 1], frames[thigh, 2, 2])
     knee_z = points[_KNEE + swing, 2]
-    if _swing_foot_lowest_z(g, thigh_z, knee_z, knee, turns, shift_z) >= 0.0:
+    shank_length = scale[i] * g.lower_leg_length
+    if _swing_foot_lowest_z(g, shank_length, thigh_z, knee_z, knee, turns, shift_z) >= 0.0:
         return knee
     below, above = knee, math.pi
     for _ in range(14):
         middle = 0.5 * (below + above)
-        if _swing_foot_lowest_z(g, thigh_z, knee_z, middle, turns, shift_z) >= 0.0:
+        if _swing_foot_lowest_z(g, shank_length, thigh_z, knee_z, middle, turns, shift_z) >= 0.0:
             above = middle
         else:
             below = middle
@@ -850,7 +890,7 @@ def _write_posed_body(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, i: int, 
 
 
 @numba.njit(cache=True, nogil=True)
-def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, previous: np.ndarray,
+def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, previous: np.ndarray,
                    contact_point: np.ndarray, contact_roll: np.ndarray, contact_leg: np.ndarray,
                    stance_leg: np.ndarray, clearance: np.ndarray, stance_x: np.ndarray,
                    new_contact: np.ndarray, new_roll: np.ndarray, plane_origin: np.ndarray, markers: np.ndarray,
@@ -858,13 +898,13 @@ def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, previous: n
     """The deterministic part of sampling k_t for N particles, after eq. (6) drew the DOFs:
 
     legs (N, 2) rad; dofs (N, 13) the sampled DOFs, in place: swing knees bent for ground clearance;
-    previous (N, 13) psi_{t-1}, in place: moved along with those knees; contact_point (N, 2) m,
-    contact_roll (N,) rad, contact_leg (N,) of the previous frame; stance_leg (N,) the walker's;
+    scale (N,) the leg scales; previous (N, 13) psi_{t-1}, in place: moved along with those knees;
+    contact_point (N, 2) m, contact_roll (N,) rad, contact_leg (N,) of the previous frame; stance_leg (N,) the walker's;
     clearance (N,) m the wanted swing-foot clearance; stance_x (N,) m the walker's stance contact x.
     Writes the new contact (N, 2), its roll (N,), the plane origin (N, 2) and the posed bodies."""
     frames, points = _scratch()
     for i in range(dofs.shape[0]):
-        _local_pose(g, legs, dofs, i, frames, points)
+        _local_pose(g, legs, dofs, scale, i, frames, points)
         old, leg = contact_leg[i], stance_leg[i]
         # Roll without slip: the ground contact advances by the arc length rolled on the sole,
         # along the old contact foot's heel->toe direction on the ground.
@@ -884,13 +924,13 @@ def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, previous: n
         px, py, pz = _sole_point(g, frames, points, leg, beta)
         shift = (cx - px, cy - py, -pz)
         swing = 1 - leg
-        knee = _clear_knee(g, dofs, i, swing, frames, points, shift[2] - clearance[i])
+        knee = _clear_knee(g, dofs, scale, i, swing, frames, points, shift[2] - clearance[i])
         if knee != dofs[i, 7 + swing]:
             # a position projection: psi_{t-1} moves along, so that eq. (6) next frame sees the
             # sampled knee velocity; the stance foot (and so ``shift``) is unchanged
             previous[i, 7 + swing] += knee - dofs[i, 7 + swing]
             dofs[i, 7 + swing] = knee
-            _lower_leg(g, dofs, i, swing, frames, points)
+            _lower_leg(g, dofs, scale, i, swing, frames, points)
         new_contact[i, 0], new_contact[i, 1] = cx, cy
         new_roll[i] = beta
         plane_origin[i, 0] = cx - stance_x[i] * math.cos(dofs[i, 2])
@@ -899,27 +939,28 @@ def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, previous: n
 
 
 @numba.njit(cache=True, nogil=True)
-def _pose_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, contact_leg: np.ndarray,
+def _pose_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, contact_leg: np.ndarray,
                  contact_roll: np.ndarray, contact_point: np.ndarray, markers: np.ndarray, joints: np.ndarray,
                  origin: np.ndarray, rotation: np.ndarray) -> None:
-    """``pose_body`` for N particles: legs (N, 2) rad, dofs (N, 13); the contact foot's sole point at
+    """``pose_body`` for N particles: legs (N, 2) rad, dofs (N, 13), leg scales (N,); the contact foot's sole point at
     contact_roll (N,) rad is put on the ground at contact_point (N, 2) m. Writes the posed bodies."""
     frames, points = _scratch()
     for i in range(dofs.shape[0]):
-        _local_pose(g, legs, dofs, i, frames, points)
+        _local_pose(g, legs, dofs, scale, i, frames, points)
         px, py, pz = _sole_point(g, frames, points, contact_leg[i], contact_roll[i])
         shift = (contact_point[i, 0] - px, contact_point[i, 1] - py, -pz)
         _write_posed_body(g, legs, dofs, i, shift, frames, points, markers, joints, origin, rotation)
 
 
 @numba.njit(cache=True, nogil=True)
-def _sole_points_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, leg: np.ndarray, beta: np.ndarray,
+def _sole_points_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, leg: np.ndarray,
+                        beta: np.ndarray,
                         lowest: bool, out: np.ndarray) -> None:
     """Pelvis-relative points (N, 3) m at angle beta (N,) rad on the rocker soles of feet ``leg`` (N,);
     with ``lowest``, beta is first set to each sole's lowest point (in place)."""
     frames, points = _scratch()
     for i in range(dofs.shape[0]):
-        _local_pose(g, legs, dofs, i, frames, points)
+        _local_pose(g, legs, dofs, scale, i, frames, points)
         if lowest:
             beta[i] = _foot_lowest_roll(g, frames, leg[i])
         out[i, 0], out[i, 1], out[i, 2] = _sole_point(g, frames, points, leg[i], beta[i])

@@ -88,6 +88,9 @@ class TrackerNode(Node):
         self.likelihood_scale = float(declare("likelihood_scale", TrackerConfig.likelihood_scale,
                                               "exponent (tempering) of the image likelihood; 0: images unused "
                                               "(dead reckoning)"))
+        self.leg_scale_spread = float(declare("leg_scale_spread", TrackerConfig.leg_scale_spread,
+                                              "spread (log, std) of the particles' leg lengths around the body's "
+                                              "(0: the body's own; TrackerConfig.leg_scale_spread)"))
         self.auto_start = bool(declare("auto_start", False, "no start description: find the walking person in the "
                                        "images (inference/autostart.py)"))
         follow = declare("follow_near", Parameter.Type.DOUBLE_ARRAY, "automatic start with several people in view: "
@@ -121,6 +124,10 @@ class TrackerNode(Node):
                                         resample_fraction=float(fraction), resampling=str(scheme), seed=int(seed))
         except ValueError as exc:
             raise InputError(f"awalker_tracker: {exc}") from None
+        try:
+            TrackerConfig(leg_scale_spread=self.leg_scale_spread)
+        except ValueError as exc:
+            raise InputError(f"awalker_tracker: parameter 'leg_scale_spread': {exc}") from None
         self.sync = StampSynchronizer(self.camera_names, max_pending=int(queue))
         self.stats = TrackerNodeStats()
         self.tracker: Tracker | None = None
@@ -321,7 +328,7 @@ class TrackerNode(Node):
         body = self.body or BodyDescription.default()
         cameras = [self.cameras[c] for c in self.camera_names]
         config = TrackerConfig(smc=self.smc_config, dt=dt, likelihood_scale=self.likelihood_scale,
-                               recovery=self.recovery,
+                               recovery=self.recovery, leg_scale_spread=self.leg_scale_spread,
                                spread=AUTO_SPREAD if self.start_found_automatically else TrackerConfig.spread)
         model = TrackerModel(body, self.start, image_likelihood(body, cameras),
                              config, cameras=cameras)
