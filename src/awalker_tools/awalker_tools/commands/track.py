@@ -10,13 +10,16 @@ from awalker_tracker.errors import InputError
 def run(args: argparse.Namespace) -> int:
     from awalker_tools.pipeline import TrackOptions, run_tracking
     from awalker_tracker.inference.autostart import AutoStartConfig
+    from awalker_tracker.inference.tracker import TrackerConfig
 
     if args.particles < 1:
         raise InputError(f"--particles must be >= 1, got {args.particles}")
     if not args.likelihood_scale >= 0:
         raise InputError(f"--likelihood-scale must be >= 0, got {args.likelihood_scale}")
-    if not 0.0 <= args.leg_scale_spread <= 0.2:
-        raise InputError(f"--leg-scale-spread must lie in 0-0.2, got {args.leg_scale_spread}")
+    try:
+        TrackerConfig(leg_scale_spread=args.leg_scale_spread)      # the tracker node's check, before anything starts
+    except ValueError as exc:
+        raise InputError(f"--leg-scale-spread: {exc}") from None
     if not 0.0 <= args.trust <= 1.0:
         raise InputError(f"--trust (gamma) must lie in [0, 1], got {args.trust}")
     if args.lookahead < 0:

@@ -166,8 +166,9 @@ class TrackerConfig:
     # walk medians one camera 125 -> 95 mm (better on 9 of 12 walks), two cameras 88 -> 82 (7 of 12), but per
     # run the change is -7 mm (mean; one camera: 10th-90th percentile -75..+53 mm) and 0 (two cameras), the
     # worst runs are worse (226 -> 328 mm, 138 -> 161) and 54 of 60 one-camera runs end on the person
-    # (56): runs whose legs settle at 0.93-0.95 gain most (two cameras 73 against 89 mm), runs whose legs
-    # grow past 1.0 lose (131 against 95). README "Leg length from the images, online".
+    # (56): runs whose legs settle below 0.95 gain most (two cameras, seeds 0-2: 74 against 85 mm), runs whose
+    # legs grow past 0.99 lose (119 against 95); capped at 1.02, one camera gave 119 mm and two cameras 83.5.
+    # README "Leg length from the images, online".
     leg_scale_spread: float = 0.0
     leg_scale_drift: float = 0.001
 

@@ -479,9 +479,10 @@ def _initial_dofs(config: KinematicConfig, body: BodyDescription, walker: Walker
 
 def _initial_state(params: WalkerParams, walker: WalkerState, dofs: np.ndarray, beta: np.ndarray, point: np.ndarray,
                    start_position_xy: np.ndarray, rng: np.random.Generator, position_spread: float,
-                   turn_rate_spread: float, leg_scale: np.ndarray | None = None) -> KinematicState:
+                   turn_rate_spread: float, leg_scale: np.ndarray) -> KinematicState:
     """``initial_kinematics``' states from the DOFs, the stance foot's contact roll ``beta`` (N,) and its sole
-    point relative to the pelvis ``point`` (N, 3) m: the pelvis above the (spread) start position."""
+    point relative to the pelvis ``point`` (N, 3) m, and the leg scales (N,): the pelvis above the (spread)
+    start position."""
     n = dofs.shape[0]
     pelvis_xy = np.broadcast_to(np.asarray(start_position_xy, float).reshape(-1, 2), (n, 2)) \
         + position_spread * rng.standard_normal((n, 2))
@@ -493,7 +494,7 @@ def _initial_state(params: WalkerParams, walker: WalkerState, dofs: np.ndarray, 
         contact_point=contact_point, contact_roll=beta, contact_leg=walker.stance_leg.astype(np.int8),
         plane_origin=_plane_origin(params, walker, contact_point, named["heading"]),
         turn_rate=turn_rate_spread * rng.standard_normal(n) if turn_rate_spread > 0 else np.zeros(n),
-        leg_scale=np.ones(n) if leg_scale is None else leg_scale,
+        leg_scale=leg_scale,
     )
 
 
@@ -814,8 +815,7 @@ def _swing_foot_lowest_z(g: _Geometry, shank_length: float, thigh_z: tuple[float
 
 @numba.njit(cache=True, nogil=True)
 def _clear_knee(g: _Geometry, dofs: np.ndarray, scale: np.ndarray, i: int, swing: int, frames: np.ndarray,
-                points: np.ndarray,
-                shift_z: float) -> float:
+                points: np.ndarray, shift_z: float) -> float:
     """Ground clearance: where body i's swing foot sole would go below z = 0 (``shift_z``: the pelvis
     height minus the wanted clearance, m), the swing knee angle (rad) that bends it just enough,
     found by bisection (14 halvings of [knee, pi]); else the sampled knee angle. The knee-less
