@@ -136,6 +136,46 @@ def test_node_publishes_joint_states_and_markers_with_image_stamp(ros_context):
         probe.destroy_node()
 
 
+def test_a_burst_of_posteriors_is_published_whole(ros_context):
+    """The automatic start publishes its window's posteriors at once (41 at 30 Hz, 80 at 60 Hz): the pose
+    publisher answers every one. (With the queue depth of 10 it had, a hands-off track lost its first 15
+    frames' joint states.)"""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+
+    from awalker_msgs.msg import PosteriorSummary as SummaryMsg
+    from awalker_tracker.nodes.convert import POSTERIOR_DEPTH, stamp_to_ns, summary_to_msg
+    from awalker_tracker.nodes.pose_publisher import PosePublisherNode
+
+    node = PosePublisherNode(context=ros_context)
+    probe = Node("probe", context=ros_context)
+    joints: list = []
+    probe.create_subscription(JointState, "/awalker/joint_states", joints.append, QoSProfile(depth=200))
+    # the tracker's publisher (nodes.tracker): reliable, POSTERIOR_DEPTH
+    pub = probe.create_publisher(SummaryMsg, "/awalker/posterior",
+                                 QoSProfile(depth=POSTERIOR_DEPTH, reliability=ReliabilityPolicy.RELIABLE))
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(probe)
+    try:
+        deadline = time.monotonic() + 5
+        while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        rng = np.random.default_rng(3)
+        stamps = [1_000_000_000 + k * 16_666_667 for k in range(80)]
+        for k, stamp in enumerate(stamps):              # all published before the pose publisher runs
+            pub.publish(summary_to_msg(make_summary(stamp, k, rng)))
+        while len(joints) < len(stamps) and time.monotonic() < deadline + 10:
+            executor.spin_once(timeout_sec=0.05)
+        assert [stamp_to_ns(m.header.stamp) for m in joints] == stamps
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        probe.destroy_node()
+
+
 def test_bad_body_description_is_reported(ros_context, tmp_path):
     from rclpy.parameter import Parameter
 

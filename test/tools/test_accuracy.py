@@ -269,6 +269,9 @@ def test_automatic_start_without_empty_frames(tmp_path):
     run = yaml.safe_load((out / "run.yaml").read_text())
     assert "robust fit" in run["features"]["cam0"]["background"]
     assert run["start_source"].startswith("found automatically")
+    # the automatic start's backlog of posteriors reaches the pose publisher whole, in both passes
+    for info in (run, yaml.safe_load((out / "first_pass" / "run.yaml").read_text())):
+        assert info["recorded"]["/awalker/joint_states"] == info["recorded"]["/awalker/posterior"] == info["posteriors"]
     # issue 12 §3: with no body description, a first pass with the body scaled to the silhouette's height,
     # then its leg length fitted to that pass's images, and the run again with it (`awalker track`'s default)
     first = yaml.safe_load((out / "first_pass" / "run.yaml").read_text())

@@ -29,7 +29,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from awalker_tracker.inference.gait import WALKER_STRIKE_DELAY, Step, StepCounter
 from awalker_tracker.model.body import BodyDescription
-from awalker_tracker.nodes.convert import particles_to_pointcloud2, points_from_msg, stamp_to_ns
+from awalker_tracker.nodes.convert import POSTERIOR_DEPTH, particles_to_pointcloud2, points_from_msg, stamp_to_ns
 from awalker_tracker.nodes.spin import run_node
 
 BONES = (("pelvis", "thorax"), ("thorax", "head"), ("pelvis", "left_hip"), ("pelvis", "right_hip"),
@@ -156,7 +156,8 @@ class PosePublisherNode(Node):
         self._first_stamp_ns: int | None = None
         self.tf_broadcaster = _tf_broadcaster(self)
         self.count = 0
-        self.create_subscription(PosteriorSummary, self.get_parameter("posterior_topic").value, self.on_summary, qos)
+        self.create_subscription(PosteriorSummary, self.get_parameter("posterior_topic").value, self.on_summary,
+                                 QoSProfile(depth=POSTERIOR_DEPTH, reliability=ReliabilityPolicy.RELIABLE))
 
     def set_body(self, body: BodyDescription) -> None:
         self.cylinders = body_cylinders(body)

@@ -41,7 +41,7 @@ from awalker_tracker.inference.sync import StampSynchronizer
 from awalker_tracker.inference.tracker import (
     ImageObservation, StartDescription, Tracker, TrackerConfig, TrackerModel, image_likelihood)
 from awalker_tracker.model.body import BodyDescription
-from awalker_tracker.nodes.convert import camera_from_msgs, header, stamp_to_ns, summary_to_msg
+from awalker_tracker.nodes.convert import POSTERIOR_DEPTH, camera_from_msgs, header, stamp_to_ns, summary_to_msg
 from awalker_tracker.nodes.features import features_from_msg
 from awalker_tracker.nodes.spin import run_node
 
@@ -172,7 +172,8 @@ class TrackerNode(Node):
             self.create_subscription(String, START_TOPIC, self._on_start, latched)
         if self.body is None:
             self.create_subscription(String, BODY_TOPIC, self._on_body, latched)
-        self.posterior_pub = self.create_publisher(PosteriorSummary, "/awalker/posterior", reliable)
+        self.posterior_pub = self.create_publisher(PosteriorSummary, "/awalker/posterior", QoSProfile(
+            depth=POSTERIOR_DEPTH, reliability=ReliabilityPolicy.RELIABLE))
         self.ack_pub = self.create_publisher(Header, ack_topic, QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
         for cam in self.camera_names:
             self.create_subscription(ImageFeatures, f"/{cam}/features",
