@@ -166,6 +166,28 @@ def test_a_failure_in_the_feature_thread_stops_track_with_its_error(synth_bag: P
     assert sys.getswitchinterval() == switch_interval     # the pipeline's shorter GIL slice is undone
 
 
+def test_outputs_missing_from_the_result_bag_are_reported(synth_bag: Path, tmp_path: Path, monkeypatch, capsys):
+    """A pose publisher that answers only some posteriors: the run completes (poses.csv comes from the tracker)
+    but says which topics result.bag lacks and how many it got, instead of waiting on in silence."""
+    from awalker_tools import pipeline
+    from awalker_tracker.nodes.pose_publisher import PosePublisherNode
+
+    original = PosePublisherNode.on_summary
+
+    def every_other(self, msg):
+        if msg.frame_index % 2 == 0:
+            original(self, msg)
+
+    monkeypatch.setattr(PosePublisherNode, "on_summary", every_other)
+    monkeypatch.setattr(pipeline, "RECORD_WAIT_S", 0.5)
+    out = tmp_path / "run"
+    assert main(["track", str(synth_bag), "--out", str(out), "--particles", "50", "--no-overlay"]) == 0
+    err = capsys.readouterr().err
+    assert (f"warning: {FRAMES} posteriors, but {out / 'result.bag'} recorded only /awalker/joint_states "
+            f"{FRAMES // 2}, /awalker/markers {FRAMES // 2}, /awalker/particles {FRAMES // 2} within 0.5 s") in err
+    assert len(evaluation.read_poses_csv(out / "poses.csv").stamps_ns) == FRAMES
+
+
 def test_track_with_nodes_in_two_processes(synth_bag: Path, localhost_context, tmp_path: Path):
     """Replay in a subprocess; features, tracker and pose publisher here (as users would split them)."""
     from rclpy.executors import SingleThreadedExecutor

@@ -55,6 +55,9 @@ GIL_SWITCH_INTERVAL_S = 0.001
 #: run beside three other jobs took over the replay's default 60 s and stopped, 2026-11-26); a failure in
 #: a node's thread stops the run at once, whatever this says.
 ACK_TIMEOUT_S = 600.0
+#: Seconds the pipeline waits, after the last frame, for the pose publisher's outputs of every posterior to
+#: reach the recorder; if some never do, it says which and how many (they are then missing from result.bag).
+RECORD_WAIT_S = 10.0
 
 
 class _SpinThread:
@@ -371,10 +374,14 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
             raise InputError(f"{bag}: replay stopped: {replayer.summary.stopped}")
         tracker.flush()
         # let the pose publisher and the recorder receive everything published so far
-        deadline = time.monotonic() + 10.0
+        deadline = time.monotonic() + RECORD_WAIT_S
         per_posterior = ("/awalker/posterior", "/awalker/joint_states", "/awalker/markers", "/awalker/particles")
         while time.monotonic() < deadline and any(recorder.counts[t] < tracker.stats.summaries for t in per_posterior):
             executor.spin_once(timeout_sec=0.05)
+        if short := [f"{t} {recorder.counts[t]}" for t in per_posterior if recorder.counts[t] < tracker.stats.summaries]:
+            # poses.csv and summary.csv still hold every frame (from the tracker); the result bag does not
+            print(f"awalker track: warning: {tracker.stats.summaries} posteriors, but {result_bag} recorded only "
+                  f"{', '.join(short)} within {RECORD_WAIT_S:g} s of the last frame", file=sys.stderr, flush=True)
         result.seconds_streaming = time.monotonic() - streaming
         executor.shutdown()
         result.frames = tracker.stats.frames_received
