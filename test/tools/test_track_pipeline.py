@@ -128,6 +128,27 @@ def test_track_fit_body_tracks_again_with_the_fitted_legs(synth_bag: Path, tmp_p
     assert evaluation.read_poses_csv(out / "poses.csv").markers.shape == (FRAMES, 13, 3)
 
 
+def test_the_first_pass_stops_after_the_frames_the_fit_uses(synth_bag: Path, tmp_path: Path, monkeypatch, capsys):
+    """The fit reads only its first frames from the start, so the first pass stops once it has filtered them;
+    the fit is the one a whole first pass gives (the features do not depend on where the replay stops)."""
+    from awalker_tools import pipeline
+
+    monkeypatch.setattr(pipeline, "FIT_FRAMES", 5)
+    out = tmp_path / "run"
+    assert main(["track", str(synth_bag), "--out", str(out), "--particles", "100", "--no-overlay", "--fit-body"]) == 0
+    first = yaml.safe_load((out / "first_pass" / "run.yaml").read_text())
+    assert first["stopped_after_frames"] == 5 and 5 <= first["posteriors"] < FRAMES
+    assert "stopped_after_frames" not in yaml.safe_load((out / "run.yaml").read_text())
+    assert len(evaluation.read_poses_csv(out / "poses.csv").stamps_ns) == FRAMES      # the run itself: all
+    # a whole first pass, then the same fit over 5 frames: the same evidence for every candidate
+    whole = tmp_path / "whole"
+    assert main(["track", str(synth_bag), "--out", str(whole), "--particles", "100", "--no-overlay"]) == 0
+    capsys.readouterr()
+    assert main(["fitbody", str(whole), "--frames", "5"]) == 0
+    expected = yaml.safe_load(capsys.readouterr().out)["fitbody"]["log_evidence"]
+    assert yaml.safe_load((out / "run.yaml").read_text())["body_fit"]["log_evidence"] == expected
+
+
 def test_fit_body_input_errors(synth_bag: Path, tmp_path: Path, capsys):
     assert main(["fitbody", str(tmp_path / "nowhere")]) == 2
     assert "not a directory" in capsys.readouterr().err

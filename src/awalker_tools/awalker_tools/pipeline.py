@@ -17,6 +17,8 @@ With no body description (the tracker scales one to the person's height seen in 
 ``TrackOptions.fit_body``, it tracks twice: a first pass into ``first_pass/``, the leg length fitted to
 the image features that pass recorded (``awalker_tools.fit_body``, issue 12 §3), and the run again
 with the fitted body, whose outputs are the ones above (run.yaml's ``body_fit`` says what the fit chose).
+The first pass stops once it has filtered the frames the fit uses (``BodyFitConfig.frames`` from the
+start), so a long bag is tracked about once, not twice.
 """
 from __future__ import annotations
 
@@ -113,6 +115,8 @@ class TrackOptions:
     # /<cam>/image_raw on the host cannot disturb the lockstep replay). True: visible on this host
     # (ROS_DOMAIN_ID) so that RViz or `ros2 topic echo` can watch.
     share_topics: bool = False
+    # stop once this many frames have been filtered (from the start frame on); None: the whole bag
+    stop_after_frames: int | None = None
 
 
 @dataclass
@@ -204,6 +208,8 @@ def _progress(options: TrackOptions, text: str) -> None:
 
 
 FIRST_PASS_DIR = "first_pass"
+#: Frames the leg fit uses from the start (and the first pass tracks); None: BodyFitConfig's.
+FIT_FRAMES: int | None = None
 
 
 def _new_result_bag(out: Path) -> Path:
@@ -219,6 +225,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     to fit (``TrackOptions.fit_body``), a first pass into ``out/first_pass``, the fit, and the run."""
     from awalker_tools.bagio import SequenceReader
     from awalker_tools.fit_body import fit_run_dir
+    from awalker_tracker.inference.bodyfit import BodyFitConfig
 
     bag, out = Path(options.bag), Path(options.out)
     if not bag.exists():
@@ -235,11 +242,13 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     _new_result_bag(out)         # before the first pass, not after it
     started = time.monotonic()
     first_dir = out / FIRST_PASS_DIR
-    _progress(options, f"awalker track: first pass into {first_dir}, to fit the body's leg length")
-    _track_once(replace(options, out=first_dir, overlays=False))
+    fit_frames = FIT_FRAMES or BodyFitConfig().frames
+    _progress(options, f"awalker track: first pass into {first_dir} (its first {fit_frames} tracked frames), to fit "
+                       "the body's leg length")
+    _track_once(replace(options, out=first_dir, overlays=False, stop_after_frames=fit_frames))
     _progress(options, f"awalker track: fitting the leg length to the images of {first_dir}")
     # the fit's own particle count (BodyFitConfig: 5000; fewer pick less reliably), whatever the run's
-    fitted = fit_run_dir(first_dir, seed=options.seed)
+    fitted = fit_run_dir(first_dir, seed=options.seed, frames=fit_frames)
     _progress(options, f"awalker track: legs x {fitted['leg_factor']:.2f} (leg length {fitted['leg_length_m']} m); "
                        "tracking again with them")
     fitted["seconds_first_pass_and_fit"] = round(time.monotonic() - started, 3)
@@ -357,10 +366,14 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
                                                         ack_timeout=ACK_TIMEOUT_S, frames_ahead=FRAMES_AHEAD),
                             local_nodes=nodes)
         last = streaming = time.monotonic()
+        enough = False          # options.stop_after_frames filtered: the replay is stopped on purpose
         try:
             while replayer.step():
                 executor.spin_once(timeout_sec=replayer.next_wait())
                 feature_thread.check()
+                if options.stop_after_frames and tracker.stats.frames_tracked >= options.stop_after_frames:
+                    enough = True
+                    break
                 if time.monotonic() - last > PROGRESS_PERIOD_S:
                     last = time.monotonic()
                     done = tracker.stats.frames_received
@@ -370,13 +383,16 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
         finally:
             replayer.close()
         feature_thread.check()
-        if replayer.summary.stopped:
+        if replayer.summary.stopped and not enough:
             raise InputError(f"{bag}: replay stopped: {replayer.summary.stopped}")
         tracker.flush()
         # let the pose publisher and the recorder receive everything published so far
         deadline = time.monotonic() + RECORD_WAIT_S
         per_posterior = ("/awalker/posterior", "/awalker/joint_states", "/awalker/markers", "/awalker/particles")
-        while time.monotonic() < deadline and any(recorder.counts[t] < tracker.stats.summaries for t in per_posterior):
+        # (and every camera's features of the frames the tracker took: the leg fit reads them from result.bag)
+        while time.monotonic() < deadline and (
+                any(recorder.counts[t] < tracker.stats.summaries for t in per_posterior)
+                or any(recorder.counts[f"/{c}/features"] < tracker.stats.frames_received for c in names)):
             executor.spin_once(timeout_sec=0.05)
         if short := [f"{t} {recorder.counts[t]}" for t in per_posterior if recorder.counts[t] < tracker.stats.summaries]:
             # poses.csv and summary.csv still hold every frame (from the tracker); the result bag does not
@@ -424,6 +440,7 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
         "particles": options.particles, "lookahead": options.lookahead, "trust": options.trust, "seed": options.seed,
         "likelihood_scale": options.likelihood_scale, "leg_scale_spread": options.leg_scale_spread,
         "recovery": options.recovery,
+        **({"stopped_after_frames": options.stop_after_frames} if enough else {}),
         "frames": result.frames, "posteriors": result.summaries, "seconds": round(result.seconds, 3),
         "seconds_streaming": round(result.seconds_streaming, 3), "seconds_pictures": round(result.seconds_pictures, 3),
         "seconds_in_filter": round(result.seconds_in_filter, 3), "sync_issues": result.sync_issues,
