@@ -90,7 +90,8 @@ def test_particle_clouds_pack_into_a_pointcloud2_heaviest_first():
     assert particles_to_pointcloud2(msg.header, [], 8).width == 0
 
 
-def test_node_publishes_joint_states_and_markers_with_image_stamp(ros_context):
+def _pose_publisher_outputs(ros_context, stamps: list[int], publisher_qos, seed: int) -> dict[str, list]:
+    """One posterior per stamp, all published before a PosePublisherNode runs; its outputs by kind."""
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
@@ -98,18 +99,18 @@ def test_node_publishes_joint_states_and_markers_with_image_stamp(ros_context):
     from visualization_msgs.msg import MarkerArray
 
     from awalker_msgs.msg import PosteriorSummary as SummaryMsg
-    from awalker_tracker.nodes.convert import stamp_to_ns, summary_to_msg
+    from awalker_tracker.nodes.convert import summary_to_msg
     from awalker_tracker.nodes.pose_publisher import PosePublisherNode
 
     node = PosePublisherNode(context=ros_context)
     probe = Node("probe", context=ros_context)
     got: dict[str, list] = {"joints": [], "rep155": [], "markers": [], "particles": []}
-    qos = QoSProfile(depth=50)
+    qos = QoSProfile(depth=200)
     probe.create_subscription(JointState, "/awalker/joint_states", got["joints"].append, qos)
     probe.create_subscription(JointState, "/humans/bodies/walker/joint_states", got["rep155"].append, qos)
     probe.create_subscription(MarkerArray, "/awalker/markers", got["markers"].append, qos)
     probe.create_subscription(PointCloud2, "/awalker/particles", got["particles"].append, qos)
-    pub = probe.create_publisher(SummaryMsg, "/awalker/posterior", qos)
+    pub = probe.create_publisher(SummaryMsg, "/awalker/posterior", publisher_qos)
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(node)
     executor.add_node(probe)
@@ -117,63 +118,48 @@ def test_node_publishes_joint_states_and_markers_with_image_stamp(ros_context):
         deadline = time.monotonic() + 5
         while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
-        rng = np.random.default_rng(2)
-        stamps = [1_000_000_000 + k * 33_333_333 for k in range(5)]
+        rng = np.random.default_rng(seed)
         for k, stamp in enumerate(stamps):
             pub.publish(summary_to_msg(make_summary(stamp, k, rng)))
-        while min(len(v) for v in got.values()) < len(stamps) and time.monotonic() < deadline + 5:
+        while min(len(v) for v in got.values()) < len(stamps) and time.monotonic() < deadline + 10:
             executor.spin_once(timeout_sec=0.05)
-        assert [stamp_to_ns(m.header.stamp) for m in got["joints"]] == stamps
-        assert [stamp_to_ns(m.header.stamp) for m in got["rep155"]] == stamps
-        assert [stamp_to_ns(m.markers[0].header.stamp) for m in got["markers"]] == stamps
-        assert [stamp_to_ns(m.header.stamp) for m in got["particles"]] == stamps
-        assert got["particles"][0].width == 20 and got["particles"][0].header.frame_id == "world"
-        assert list(got["joints"][0].name) == list(JOINT_NAMES)
-        assert all(m.header.frame_id == "world" for m in got["markers"][0].markers)
     finally:
         executor.shutdown()
         node.destroy_node()
         probe.destroy_node()
+    return got
+
+
+def test_node_publishes_joint_states_and_markers_with_image_stamp(ros_context):
+    from rclpy.qos import QoSProfile
+
+    from awalker_tracker.nodes.convert import stamp_to_ns
+
+    stamps = [1_000_000_000 + k * 33_333_333 for k in range(5)]
+    got = _pose_publisher_outputs(ros_context, stamps, QoSProfile(depth=50), seed=2)
+    assert [stamp_to_ns(m.header.stamp) for m in got["joints"]] == stamps
+    assert [stamp_to_ns(m.header.stamp) for m in got["rep155"]] == stamps
+    assert [stamp_to_ns(m.markers[0].header.stamp) for m in got["markers"]] == stamps
+    assert [stamp_to_ns(m.header.stamp) for m in got["particles"]] == stamps
+    assert got["particles"][0].width == 20 and got["particles"][0].header.frame_id == "world"
+    assert list(got["joints"][0].name) == list(JOINT_NAMES)
+    assert all(m.header.frame_id == "world" for m in got["markers"][0].markers)
 
 
 def test_a_burst_of_posteriors_is_published_whole(ros_context):
     """The automatic start publishes its window's posteriors at once (41 at 30 Hz, 80 at 60 Hz): the pose
     publisher answers every one. (With the queue depth of 10 it had, a hands-off track lost its first 15
     frames' joint states.)"""
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy
-    from sensor_msgs.msg import JointState
 
-    from awalker_msgs.msg import PosteriorSummary as SummaryMsg
-    from awalker_tracker.nodes.convert import POSTERIOR_DEPTH, stamp_to_ns, summary_to_msg
-    from awalker_tracker.nodes.pose_publisher import PosePublisherNode
+    from awalker_tracker.nodes.convert import POSTERIOR_DEPTH, stamp_to_ns
 
-    node = PosePublisherNode(context=ros_context)
-    probe = Node("probe", context=ros_context)
-    joints: list = []
-    probe.create_subscription(JointState, "/awalker/joint_states", joints.append, QoSProfile(depth=200))
+    stamps = [1_000_000_000 + k * 16_666_667 for k in range(80)]
     # the tracker's publisher (nodes.tracker): reliable, POSTERIOR_DEPTH
-    pub = probe.create_publisher(SummaryMsg, "/awalker/posterior",
-                                 QoSProfile(depth=POSTERIOR_DEPTH, reliability=ReliabilityPolicy.RELIABLE))
-    executor = SingleThreadedExecutor(context=ros_context)
-    executor.add_node(node)
-    executor.add_node(probe)
-    try:
-        deadline = time.monotonic() + 5
-        while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.05)
-        rng = np.random.default_rng(3)
-        stamps = [1_000_000_000 + k * 16_666_667 for k in range(80)]
-        for k, stamp in enumerate(stamps):              # all published before the pose publisher runs
-            pub.publish(summary_to_msg(make_summary(stamp, k, rng)))
-        while len(joints) < len(stamps) and time.monotonic() < deadline + 10:
-            executor.spin_once(timeout_sec=0.05)
-        assert [stamp_to_ns(m.header.stamp) for m in joints] == stamps
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        probe.destroy_node()
+    got = _pose_publisher_outputs(ros_context, stamps, QoSProfile(depth=POSTERIOR_DEPTH,
+                                  reliability=ReliabilityPolicy.RELIABLE), seed=3)
+    assert [stamp_to_ns(m.header.stamp) for m in got["joints"]] == stamps
+    assert [stamp_to_ns(m.markers[0].header.stamp) for m in got["markers"]] == stamps
 
 
 def test_bad_body_description_is_reported(ros_context, tmp_path):
