@@ -129,15 +129,18 @@ def test_track_fit_body_tracks_again_with_the_fitted_legs(synth_bag: Path, tmp_p
 
 
 def test_the_first_pass_stops_after_the_frames_the_fit_uses(synth_bag: Path, tmp_path: Path, monkeypatch, capsys):
-    """The fit reads only its first frames from the start, so the first pass stops once it has filtered them;
-    the fit is the one a whole first pass gives (the features do not depend on where the replay stops)."""
+    """The fit reads only its first frames from the start, so the first pass stops once it has filtered them,
+    with few particles; the fit is the one a whole first pass of the run's particles gives (the features, the
+    start and the body do not depend on the first pass's filter or where the replay stops)."""
     from awalker_tools import pipeline
 
     monkeypatch.setattr(pipeline, "FIT_FRAMES", 5)
+    monkeypatch.setattr(pipeline, "FIRST_PASS_PARTICLES", 20)
     out = tmp_path / "run"
     assert main(["track", str(synth_bag), "--out", str(out), "--particles", "100", "--no-overlay", "--fit-body"]) == 0
     first = yaml.safe_load((out / "first_pass" / "run.yaml").read_text())
     assert first["stopped_after_frames"] == 5 and 5 <= first["posteriors"] < FRAMES
+    assert first["particles"] == pipeline.FIRST_PASS_PARTICLES       # its own track is not used
     assert "stopped_after_frames" not in yaml.safe_load((out / "run.yaml").read_text())
     assert len(evaluation.read_poses_csv(out / "poses.csv").stamps_ns) == FRAMES      # the run itself: all
     # a whole first pass, then the same fit over 5 frames: the same evidence for every candidate

@@ -18,7 +18,8 @@ With no body description (the tracker scales one to the person's height seen in 
 the image features that pass recorded (``awalker_tools.fit_body``, issue 12 §3), and the run again
 with the fitted body, whose outputs are the ones above (run.yaml's ``body_fit`` says what the fit chose).
 The first pass stops once it has filtered the frames the fit uses (``BodyFitConfig.frames`` from the
-start), so a long bag is tracked about once, not twice.
+start), with few particles (``FIRST_PASS_PARTICLES``: its own track is not used), so a long bag is tracked
+about once, not twice.
 """
 from __future__ import annotations
 
@@ -210,6 +211,10 @@ def _progress(options: TrackOptions, text: str) -> None:
 FIRST_PASS_DIR = "first_pass"
 #: Frames the leg fit uses from the start (and the first pass tracks); None: BodyFitConfig's.
 FIT_FRAMES: int | None = None
+#: Particles of the first pass. The fit reads only what that pass recorded and found without its filter
+#: (the image features, the automatic start and the body scaled to the seen height: the start finder's) and
+#: runs its own filters (BodyFitConfig.particles), so the first pass's own track needs no more.
+FIRST_PASS_PARTICLES = 100
 
 
 def _new_result_bag(out: Path) -> Path:
@@ -245,7 +250,8 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     fit_frames = FIT_FRAMES or BodyFitConfig().frames
     _progress(options, f"awalker track: first pass into {first_dir} (its first {fit_frames} tracked frames), to fit "
                        "the body's leg length")
-    _track_once(replace(options, out=first_dir, overlays=False, stop_after_frames=fit_frames))
+    _track_once(replace(options, out=first_dir, overlays=False, stop_after_frames=fit_frames,
+                        particles=FIRST_PASS_PARTICLES))
     _progress(options, f"awalker track: fitting the leg length to the images of {first_dir}")
     # the fit's own particle count (BodyFitConfig: 5000; fewer pick less reliably), whatever the run's
     fitted = fit_run_dir(first_dir, seed=options.seed, frames=fit_frames)
