@@ -38,6 +38,26 @@ def test_the_evidence_finds_the_walkers_leg_length():
     assert evidence[0.94] > evidence[1.0] + 20 > evidence[1.06] + 40
 
 
+def test_candidates_on_several_threads_give_what_one_thread_gives(monkeypatch):
+    """The candidates run at once on the cores' threads; each is the same filter, bit for bit, as alone."""
+    true_body, markers, _, _ = simulate_walk(20, 1.3, 0.7, 0.0, seed=12)
+    start = StartDescription(0, tuple(markers[0, 0, :2]), 0.0, 1.3, 0.7, LEFT)
+    config = BodyFitConfig(leg_factors=(0.94, 0.97, 1.0, 1.03), frames=15, particles=300, seed=2)
+
+    def fit(threads: str):
+        monkeypatch.setenv("AWALKER_THREADS", threads)
+        messages: list[str] = []
+        result = fit_leg_length(true_body, start, lambda body: marker_likelihood(0.03), list(markers),
+                                TrackerConfig(dt=1 / 30), config, progress=messages.append)
+        return result, messages
+
+    alone, messages_alone = fit("1")
+    together, messages_together = fit("3")
+    assert together.log_evidence == alone.log_evidence and together.factor == alone.factor
+    assert list(together.log_evidence) == list(config.leg_factors)          # in the candidates' order
+    assert sorted(messages_together) == sorted(messages_alone) and len(messages_alone) == 4
+
+
 def test_bad_fit_settings_and_inputs():
     with pytest.raises(ValueError, match="leg factors"):
         BodyFitConfig(leg_factors=(0.4, 1.0))

@@ -24,10 +24,12 @@ drawn length kept in 11 of 12 runs.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from awalker_tracker.blocks import thread_count
 from awalker_tracker.inference.smc import ParticleFilter
 from awalker_tracker.inference.tracker import StartDescription, TrackerConfig, TrackerModel
 from awalker_tracker.model.body import BodyDescription
@@ -77,19 +79,32 @@ def fit_leg_length(body: BodyDescription, start: StartDescription, likelihood_fo
     used = list(observations[: config.frames])
     smc = replace(tracker_config.smc, num_particles=config.particles, seed=config.seed)
     run_config = replace(tracker_config, smc=smc)
-    evidence: dict[float, float] = {}
-    for factor in config.leg_factors:
+
+    def candidate_evidence(factor: float) -> tuple[float, int]:
+        """log p(z_1:T) (nats) and the frames it sums, for the legs x ``factor``."""
         candidate = legs_scaled(body, factor)
         model = TrackerModel(candidate, start, likelihood_for(candidate), run_config,
                              cameras=list(cameras) if cameras is not None else None)
         pf = ParticleFilter(model, smc)
         log_evidence = [step.log_evidence for obs in used for step in pf.push(obs)]   # (the steps are not kept)
         log_evidence += [step.log_evidence for step in pf.finish()]
-        count = len(log_evidence)
-        evidence[factor] = float(np.sum(log_evidence))
-        if progress is not None:
-            progress(f"legs x{factor:.2f} (leg length {candidate.leg_length:.3f} m): log evidence "
-                     f"{evidence[factor]:.1f} over {count} frames")
+        return float(np.sum(log_evidence)), len(log_evidence)
+
+    # The candidates are independent filters with their own random streams: run them on as many threads as
+    # there are cores (the kernels release the GIL; one candidate's numpy and Python overlap another's
+    # kernels), each the same bit for bit as alone. Measured (2026-11-26, 6 candidates x 60 frames x 5000
+    # particles, a real walk's first pass): two cameras 19.0 -> 13.6 s, one camera 14.7 -> 12.7 s.
+    evidence: dict[float, float] = {}
+    with ThreadPoolExecutor(max_workers=max(1, min(thread_count(), len(config.leg_factors))),
+                            thread_name_prefix="awalker-bodyfit") as pool:
+        futures = {pool.submit(candidate_evidence, factor): factor for factor in config.leg_factors}
+        for future in as_completed(futures):
+            factor = futures[future]
+            evidence[factor], count = future.result()
+            if progress is not None:
+                progress(f"legs x{factor:.2f} (leg length {legs_scaled(body, factor).leg_length:.3f} m): log "
+                         f"evidence {evidence[factor]:.1f} over {count} frames")
+    evidence = {factor: evidence[factor] for factor in config.leg_factors}
     finite = {f: e for f, e in evidence.items() if np.isfinite(e)}
     if not finite:
         raise ValueError("fit_leg_length: every candidate lost the person (evidence -inf)")
