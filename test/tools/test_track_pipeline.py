@@ -212,6 +212,29 @@ def test_outputs_missing_from_the_result_bag_are_reported(synth_bag: Path, tmp_p
     assert len(evaluation.read_poses_csv(out / "poses.csv").stamps_ns) == FRAMES
 
 
+def test_features_missing_from_the_result_bag_are_reported(synth_bag: Path, tmp_path: Path, monkeypatch, capsys):
+    """A recorder that misses some frames' features (which the leg fit reads from result.bag): the run says so."""
+    from awalker_tools import pipeline
+
+    original = pipeline.Recorder._on
+    seen = {"features": 0}
+
+    def drop_every_other_feature(self, topic, raw):
+        if topic == "/cam0/features":
+            seen["features"] += 1
+            if seen["features"] % 2 == 0:
+                return
+        original(self, topic, raw)
+
+    monkeypatch.setattr(pipeline.Recorder, "_on", drop_every_other_feature)
+    monkeypatch.setattr(pipeline, "RECORD_WAIT_S", 0.5)
+    out = tmp_path / "run"
+    assert main(["track", str(synth_bag), "--out", str(out), "--particles", "50", "--no-overlay"]) == 0
+    frames = FRAMES + BACKGROUND
+    assert (f"warning: the tracker took {frames} frames, but {out / 'result.bag'} recorded only /cam0/features "
+            f"{(frames + 1) // 2} within 0.5 s") in capsys.readouterr().err
+
+
 def test_track_with_nodes_in_two_processes(synth_bag: Path, localhost_context, tmp_path: Path):
     """Replay in a subprocess; features, tracker and pose publisher here (as users would split them)."""
     from rclpy.executors import SingleThreadedExecutor

@@ -27,6 +27,7 @@ import os
 import sys
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -394,16 +395,25 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
         tracker.flush()
         # let the pose publisher and the recorder receive everything published so far
         deadline = time.monotonic() + RECORD_WAIT_S
-        per_posterior = ("/awalker/posterior", "/awalker/joint_states", "/awalker/markers", "/awalker/particles")
         # (and every camera's features of the frames the tracker took: the leg fit reads them from result.bag)
-        while time.monotonic() < deadline and (
-                any(recorder.counts[t] < tracker.stats.summaries for t in per_posterior)
-                or any(recorder.counts[f"/{c}/features"] < tracker.stats.frames_received for c in names)):
+        per_posterior = ("/awalker/posterior", "/awalker/joint_states", "/awalker/markers", "/awalker/particles")
+        features_topics = [f"/{c}/features" for c in names]
+
+        def short(topics: Sequence[str], expected: int) -> list[str]:
+            """'topic count' for each of ``topics`` recorded fewer than ``expected`` times."""
+            return [f"{t} {recorder.counts[t]}" for t in topics if recorder.counts[t] < expected]
+
+        while time.monotonic() < deadline and (short(per_posterior, tracker.stats.summaries)
+                                               or short(features_topics, tracker.stats.frames_received)):
             executor.spin_once(timeout_sec=0.05)
-        if short := [f"{t} {recorder.counts[t]}" for t in per_posterior if recorder.counts[t] < tracker.stats.summaries]:
-            # poses.csv and summary.csv still hold every frame (from the tracker); the result bag does not
+        # poses.csv and summary.csv still hold every frame (from the tracker); the result bag does not
+        if missing := short(per_posterior, tracker.stats.summaries):
             print(f"awalker track: warning: {tracker.stats.summaries} posteriors, but {result_bag} recorded only "
-                  f"{', '.join(short)} within {RECORD_WAIT_S:g} s of the last frame", file=sys.stderr, flush=True)
+                  f"{', '.join(missing)} within {RECORD_WAIT_S:g} s of the last frame", file=sys.stderr, flush=True)
+        if missing := short(features_topics, tracker.stats.frames_received):
+            print(f"awalker track: warning: the tracker took {tracker.stats.frames_received} frames, but {result_bag} "
+                  f"recorded only {', '.join(missing)} within {RECORD_WAIT_S:g} s of the last frame",
+                  file=sys.stderr, flush=True)
         result.seconds_streaming = time.monotonic() - streaming
         executor.shutdown()
         result.frames = tracker.stats.frames_received
