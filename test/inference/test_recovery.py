@@ -238,3 +238,63 @@ def test_the_walkers_are_held_while_the_person_stands_still(walk_stop_walk):
         else:
             assert states is moved
     assert 15 <= len(held) <= 30
+
+
+def test_one_camera_places_the_person_by_the_feet_row_only_where_the_blob_is_as_tall_as_the_body(seen):
+    """``feet_row_position``: one camera, a blob as tall as the body: the person's ground position (within
+    the feet row's ~0.2 m); a body 1.5 times as tall (the blob lost the legs or the head): none; two cameras
+    triangulate instead: none."""
+    from test_detection import features_of as features_in
+    from vision_scene import front_camera
+
+    camera, features, markers = seen
+    pelvis = markers[PELVIS]
+    mono = LostTrackMonitor([camera], RecoveryConfig(), dt=1 / 30, body_height_m=BODY.height)
+    mono.update(0, [features], pelvis)
+    assert np.linalg.norm(mono.feet_row_position(0) - pelvis[:2]) < 0.25
+    assert mono.feet_row_position(1) is None                      # a frame not seen yet
+    tall = LostTrackMonitor([camera], RecoveryConfig(), dt=1 / 30, body_height_m=1.5 * BODY.height)
+    tall.update(0, [features], pelvis)
+    assert tall.feet_row_position(0) is None
+    front = front_camera()
+    front_features = features_in(front, walking_poses(3, x0=0.4), 1)[0][-1]
+    both = LostTrackMonitor([camera, front], RecoveryConfig(), dt=1 / 30, body_height_m=BODY.height)
+    both.update(0, [features, front_features], pelvis)
+    assert both.feet_row_position(0) is None
+
+
+@pytest.mark.parametrize("band", [0.3, 0.0])
+def test_walkers_straying_in_depth_beyond_the_band_lose_weight(seen, band: float):
+    """One camera: walkers whose pelvis lies within ``depth_band_m`` of the feet-row position over the ground
+    keep the image's log-likelihood; beyond it they lose 0.5 (excess / sigma)^2 nats. Band 0: no term."""
+    from awalker_tracker.inference.tracker import ImageObservation
+
+    camera, features, markers = seen
+    pelvis = markers[PELVIS]
+    body = BodyDescription.default()
+    recovery = RecoveryConfig(depth_band_m=band, depth_band_sigma_m=0.1)
+    config = TrackerConfig(dt=1 / 30, recovery=recovery)
+    start = StartDescription(0, (float(pelvis[0]), float(pelvis[1])), 0.0, 1.3, 0.7, LEFT)
+    flat = lambda prev, states, obs: np.full(len(states), -7.0)    # noqa: E731  the images rate all alike
+    model = TrackerModel(body, start, flat, config, cameras=[camera])
+    model.monitor.body_height_m = BODY.height
+    rng = np.random.default_rng(0)
+    states = model.initial(5, rng)
+    offsets = np.array([0.0, 0.2, 0.5, 0.8, -0.8])                 # along the camera's view (+y), m
+    moved_markers = states.pose.markers.copy()
+    moved_markers[:, :, :2] += pelvis[:2] - states.pose.markers[:, PELVIS, None, :2]
+    moved_markers[:, :, 1] += offsets[:, None]
+    states = replace(states, pose=replace(states.pose, markers=moved_markers))
+    states = model.rejuvenate(0, np.array([0.0, -50, -50, -50, -50]), None, states,
+                              ImageObservation(features=(features,)), rng)
+    loglik = model.log_likelihood(None, states, ImageObservation(features=(features,)))
+    gap = np.linalg.norm(moved_markers[:, PELVIS, :2] - model.monitor.feet_row_position(0), axis=1)
+    base = config.likelihood_scale * -7.0                          # the images' tempered log-likelihood
+    expected = base - (0.5 * (np.maximum(gap - band, 0.0) / 0.1) ** 2 if band > 0 else 0.0)
+    np.testing.assert_allclose(loglik, expected)
+    if band > 0:
+        inside = gap <= band
+        assert inside[0] and np.all(loglik[inside] == base)
+        assert loglik[3] < loglik[2] < base and loglik[4] < base    # 0.5 and 0.8 m off: beyond the band
+    with pytest.raises(ValueError, match="depth_band_sigma_m"):
+        RecoveryConfig(depth_band_sigma_m=0.0)

@@ -248,6 +248,7 @@ class TrackerModel:
         self.monitor = (LostTrackMonitor(cameras, config.recovery, config.dt, body_height_m=self.body.height)
                         if cameras and (config.recovery.reacquire or config.recovery.hold_still) else None)
         self.reseeded_fallen = 0     # particles re-seeded after a fall, over the run
+        self._feet_row: np.ndarray | None = None   # the frame's one-camera feet-row position (rejuvenate)
 
     # -- SMC protocol ---------------------------------------------------------------------
     def initial(self, n: int, rng: np.random.Generator) -> TrackerStates:
@@ -372,12 +373,14 @@ class TrackerModel:
         (``inference.recovery``): called by the filter with the particles' current log weights, the
         states before the transition (``parent``, None at the first frame) and after it, before the
         likelihood of ``obs`` is computed."""
+        self._feet_row = None
         if self.monitor is None or not isinstance(obs, ImageObservation):
             return states
         w = np.exp(log_weights - np.max(log_weights))
         w /= w.sum()
         pelvis = w @ states.pose.markers[:, MARKER_NAMES.index("pelvis")]
         order = self.monitor.update(frame, obs.features, pelvis)
+        self._feet_row = self.monitor.feet_row_position(frame)
         if parent is not None and self.monitor.still(frame):
             # the person stands still: the frame's walkers are the previous frame's, not moving
             states = replace(parent, speed=np.zeros(len(parent)), reseeded=np.full(len(parent), HELD, np.int8))
@@ -416,7 +419,18 @@ class TrackerModel:
         penalty = self.config.fallen_log_penalty * states.fallen
         if self.config.likelihood_scale == 0.0:     # dead reckoning: the observations are not looked at
             return -penalty
-        return self.config.likelihood_scale * np.asarray(self.likelihood(prev, states, obs), float) - penalty
+        return (self.config.likelihood_scale * np.asarray(self.likelihood(prev, states, obs), float)
+                - penalty - self.depth_band_penalty(states))
+
+    def depth_band_penalty(self, states: TrackerStates) -> np.ndarray:
+        """(N,) nats taken from walkers whose pelvis strays over the ground beyond ``depth_band_m`` from the
+        frame's one-camera feet-row position (``inference.recovery``, *One camera's depth*); zeros where
+        the frame has none (several cameras, a blob not as tall as the body, recovery off)."""
+        r = self.config.recovery
+        if self._feet_row is None or r.depth_band_m <= 0:
+            return np.zeros(len(states))
+        gap = np.linalg.norm(states.pose.markers[:, MARKER_NAMES.index("pelvis"), :2] - self._feet_row, axis=1)
+        return 0.5 * (np.maximum(gap - r.depth_band_m, 0.0) / r.depth_band_sigma_m) ** 2
 
     # -- outputs --------------------------------------------------------------------------
     def outputs(self, states: TrackerStates, events: Any | None) -> ParticleOutputs:
