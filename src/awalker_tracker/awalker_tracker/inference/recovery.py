@@ -50,7 +50,7 @@ import numpy as np
 
 from awalker_tracker.vision.camera import Camera
 from awalker_tracker.vision.detection import (
-    GroundTrack, PersonDetection, detect_person, person_blobs, wholly_in_view)
+    GroundTrack, PersonBlob, PersonDetection, locate_person, person_blobs, wholly_in_view)
 
 NOT_RESEEDED, RESEEDED_FALLEN, REACQUIRED, HELD = 0, 1, 2, 3
 
@@ -135,7 +135,8 @@ class LostTrackMonitor:
         self._quiet_until = -1
         self.reacquisitions = 0
 
-    def _off_person(self, frame: int, detection: PersonDetection, pelvis: np.ndarray, features: list[Any]) -> bool:
+    def _off_person(self, frame: int, detection: PersonDetection, pelvis: np.ndarray,
+                    seen: list[list[PersonBlob]]) -> bool:
         """True when the pelvis is off the triangulated ground position. Without one: when over
         ``track_window_s`` its median ground distance from the feet-row positions exceeds
         ``lost_distance_one_camera_m`` (a drift along the line of sight, which leaves the body on the
@@ -155,8 +156,7 @@ class LostTrackMonitor:
             return True
         by_name = {c.name: c for c in self.cameras}
         margin = self.config.box_margin
-        blobs = [b for f, c in zip(features, self.cameras) for b in person_blobs(f, c.name)]
-        for blob in blobs:
+        for blob in (b for blobs in seen for b in blobs):
             uv, depth = by_name[blob.camera].project(pelvis[None])
             u0, v0, u1, v1 = blob.box
             du, dv = margin * (u1 - u0), margin * (v1 - v0)
@@ -179,7 +179,8 @@ class LostTrackMonitor:
         if frame in self._orders:
             return self._orders[frame]
         cfg = self.config
-        detection = detect_person(list(features), self.cameras, near=pelvis)
+        seen = [person_blobs(f, c.name) for f, c in zip(features, self.cameras)]     # once: used twice below
+        detection = locate_person(seen, self.cameras, near=pelvis)
         reliable = detection is not None and wholly_in_view(detection, self.cameras)
         self.track.add(frame, detection.position if reliable else None)
         velocity = self.track.velocity(frame, cfg.track_window_s)
@@ -190,7 +191,7 @@ class LostTrackMonitor:
         # hysteresis: a stop starts below still_m_s and lasts until the track moves at moving_m_s
         self._still[frame] = cfg.hold_still and recent_speed is not None and (
             recent_speed < (cfg.moving_m_s if was_still else cfg.still_m_s))
-        off = cfg.reacquire and reliable and self._off_person(frame, detection, pelvis, list(features))
+        off = cfg.reacquire and reliable and self._off_person(frame, detection, pelvis, seen)
         self._run[frame] = self._run.get(frame - 1, 0) + 1 if off else 0
         order = None
         if off and self._run[frame] * self.dt >= cfg.lost_after_s and frame >= self._quiet_until:

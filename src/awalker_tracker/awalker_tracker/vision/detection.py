@@ -138,6 +138,12 @@ def detect_person(features: list[FrameFeatures], cameras: list[Camera], threshol
     point (3,) on the person followed) the blob nearest to it (module docstring); when no camera has a
     blob near it, as without ``near``."""
     seen = [person_blobs(feats, camera.name, threshold, min_area_fraction) for feats, camera in zip(features, cameras)]
+    return locate_person(seen, cameras, min_plane_angle_deg, near_edge_m, near)
+
+
+def locate_person(seen: list[list[PersonBlob]], cameras: list[Camera], min_plane_angle_deg: float = 20.0,
+                  near_edge_m: float = 0.12, near: np.ndarray | None = None) -> PersonDetection | None:
+    """``detect_person`` from every camera's blobs already found (``person_blobs``, in camera order)."""
     if near is not None and all(blob_near(c, camera, near) is None for c, camera in zip(seen, cameras)):
         near = None
     if near is None and len(cameras) > 1:
@@ -252,14 +258,21 @@ class GroundTrack:
         with something else misplaces one frame's person by metres."""
         t = np.array([f for f, _ in points], float) - at
         xy = np.array([p for _, p in points])
+
+        def fit(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            """Least squares over ``rows``: (slope, value at ``at``), each (2,)."""
+            t_mean, xy_mean = t[rows].mean(), xy[rows].mean(axis=0)
+            centred = t[rows] - t_mean
+            slope = centred @ (xy[rows] - xy_mean) / (centred @ centred)
+            return slope, xy_mean - slope * t_mean
+
         keep = np.ones(len(t), bool)
         for _ in range(iterations):
-            fit = np.polyfit(t[keep], xy[keep], 1)          # rows: slope, value at ``at``
-            distance = np.linalg.norm(xy - (fit[0] * t[:, None] + fit[1]), axis=1)
+            slope, value = fit(keep)
+            distance = np.linalg.norm(xy - (slope * t[:, None] + value), axis=1)
             bound = max(3.0 * 1.4826 * float(np.median(distance[keep])), outlier_floor_m)
             inside = distance <= bound
             if inside.sum() < 2 or np.array_equal(inside, keep):
                 break
             keep = inside
-        fit = np.polyfit(t[keep], xy[keep], 1)
-        return fit[0], fit[1]
+        return fit(keep)
