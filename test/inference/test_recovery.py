@@ -266,13 +266,15 @@ def test_one_camera_places_the_person_by_the_feet_row_only_where_the_blob_is_as_
 @pytest.mark.parametrize("band", [0.3, 0.0])
 def test_walkers_straying_in_depth_beyond_the_band_lose_weight(seen, band: float):
     """One camera: walkers whose pelvis lies within ``depth_band_m`` of the feet-row position over the ground
-    keep the image's log-likelihood; beyond it they lose 0.5 (excess / sigma)^2 nats. Band 0: no term."""
+    keep the image's log-likelihood; beyond it they lose 0.5 (excess / sigma)^2 nats, levelling off at
+    ~-log(depth_band_outlier) (a feet row metres from every walker changes no weights). Band 0 (the
+    default): no term."""
     from awalker_tracker.inference.tracker import ImageObservation
 
     camera, features, markers = seen
     pelvis = markers[PELVIS]
     body = BodyDescription.default()
-    recovery = RecoveryConfig(depth_band_m=band, depth_band_sigma_m=0.1)
+    recovery = RecoveryConfig(depth_band_m=band, depth_band_sigma_m=0.1, depth_band_outlier=0.05)
     config = TrackerConfig(dt=1 / 30, recovery=recovery)
     start = StartDescription(0, (float(pelvis[0]), float(pelvis[1])), 0.0, 1.3, 0.7, LEFT)
     flat = lambda prev, states, obs: np.full(len(states), -7.0)    # noqa: E731  the images rate all alike
@@ -290,9 +292,11 @@ def test_walkers_straying_in_depth_beyond_the_band_lose_weight(seen, band: float
     loglik = model.log_likelihood(None, states, ImageObservation(features=(features,)))
     gap = np.linalg.norm(moved_markers[:, PELVIS, :2] - model.monitor.feet_row_position(0), axis=1)
     base = config.likelihood_scale * -7.0                          # the images' tempered log-likelihood
-    expected = base - (0.5 * (np.maximum(gap - band, 0.0) / 0.1) ** 2 if band > 0 else 0.0)
-    np.testing.assert_allclose(loglik, expected)
+    squared = 0.5 * (np.maximum(gap - band, 0.0) / 0.1) ** 2
+    levelled = np.log1p(0.05) - np.logaddexp(-squared, np.log(0.05))
+    np.testing.assert_allclose(loglik, base - (levelled if band > 0 else 0.0))
     if band > 0:
+        assert np.all(levelled <= squared + 1e-12) and base - loglik.min() < -np.log(0.05) + 0.06
         inside = gap <= band
         assert inside[0] and np.all(loglik[inside] == base)
         assert loglik[3] < loglik[2] < base and loglik[4] < base    # 0.5 and 0.8 m off: beyond the band

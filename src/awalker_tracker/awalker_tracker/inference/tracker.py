@@ -425,12 +425,16 @@ class TrackerModel:
     def depth_band_penalty(self, states: TrackerStates) -> np.ndarray:
         """(N,) nats taken from walkers whose pelvis strays over the ground beyond ``depth_band_m`` from the
         frame's one-camera feet-row position (``inference.recovery``, *One camera's depth*); zeros where
-        the frame has none (several cameras, a blob not as tall as the body, recovery off)."""
+        the frame has none (several cameras, a blob not as tall as the body, recovery off). The feet row
+        is an outlier with probability ``depth_band_outlier``: the penalty levels off at about
+        -log(outlier) nats, so a feet row far from every walker (hidden feet) changes no weights."""
         r = self.config.recovery
         if self._feet_row is None or r.depth_band_m <= 0:
             return np.zeros(len(states))
         gap = np.linalg.norm(states.pose.markers[:, MARKER_NAMES.index("pelvis"), :2] - self._feet_row, axis=1)
-        return 0.5 * (np.maximum(gap - r.depth_band_m, 0.0) / r.depth_band_sigma_m) ** 2
+        inlier = -0.5 * (np.maximum(gap - r.depth_band_m, 0.0) / r.depth_band_sigma_m) ** 2
+        outlier = np.log(r.depth_band_outlier)
+        return np.logaddexp(0.0, outlier) - np.logaddexp(inlier, outlier)
 
     # -- outputs --------------------------------------------------------------------------
     def outputs(self, states: TrackerStates, events: Any | None) -> ParticleOutputs:
