@@ -273,13 +273,11 @@ def test_walkers_straying_in_depth_beyond_the_band_lose_weight(seen, band: float
 
     camera, features, markers = seen
     pelvis = markers[PELVIS]
-    body = BodyDescription.default()
     recovery = RecoveryConfig(depth_band_m=band, depth_band_sigma_m=0.1, depth_band_outlier=0.05)
     config = TrackerConfig(dt=1 / 30, recovery=recovery)
     start = StartDescription(0, (float(pelvis[0]), float(pelvis[1])), 0.0, 1.3, 0.7, LEFT)
     flat = lambda prev, states, obs: np.full(len(states), -7.0)    # noqa: E731  the images rate all alike
-    model = TrackerModel(body, start, flat, config, cameras=[camera])
-    model.monitor.body_height_m = BODY.height
+    model = TrackerModel(BODY, start, flat, config, cameras=[camera])    # the drawn body: its blob counts
     rng = np.random.default_rng(0)
     states = model.initial(5, rng)
     offsets = np.array([0.0, 0.2, 0.5, 0.8, -0.8])                 # along the camera's view (+y), m
