@@ -15,7 +15,9 @@ evidence: that was this baseline before 2026-11-25, 130-1014 mm.)
 
 Per sequence x setting x seed: absolute and relative median errors (mm, pelvis, thorax, hips, knees,
 ankles), the facing-direction error one second after a turn ends (degrees), left/right swaps, frames
-fallen or off the person, whether the run ended on the person, and recovery counts. Summary: median
+fallen or off the person, whether the run ended on the person, recovery counts, and the gait against the
+truth's heel strikes (median timing error and signed timing, s, later > 0; step length error, m; speed
+error, m/s). Summary: median
 and worst over seeds. Prints ONE JSON document; progress and tables on stderr.
 
     .venv/bin/python benchmarks/bench_realwalks.py --out bench_rw/                 # everything (~25 min on 2 cores)
@@ -94,6 +96,11 @@ def score(result: dict, variant: str, rate: float) -> dict:
              "off_person_frames": walk["off_person_frames"],
              "ended_on_person": not (walk["end"]["fallen"] or walk["end"]["off_person"]),
              "recovery": result.get("recovery", {})}
+    gait = result.get("gait", {}).get("comparison", {})    # heel strikes against the truth's (inference/gait.py)
+    entry.update({"heel_strike_error_s": gait.get("timing_error_s_median"),
+                  "heel_strike_bias_s": gait.get("timing_bias_s_median"),
+                  "step_length_error_m": gait.get("step_length_error_m_median"),
+                  "speed_error_m_s": gait.get("speed_error_m_s")})
     turn = VARIANTS[variant][1]
     if turn is not None:
         after = int(round((turn[1] + turn[2] + 1.0) * rate))       # frames after the person appears
@@ -180,6 +187,9 @@ def main(argv: list[str] | None = None) -> int:
         summary["runs_ended_on_person"] = f"{sum(r['ended_on_person'] for r in tracked)}/{len(tracked)}"
         summary["reacquisitions"] = [r["recovery"].get("reacquisitions", 0) for r in tracked]
         summary["swap_fraction_median"] = float(np.median([r["swap_fraction"] for r in tracked]))
+        for key in ("heel_strike_error_s", "heel_strike_bias_s", "step_length_error_m", "speed_error_m_s"):
+            values = [r[key] for r in tracked if r.get(key) is not None]
+            summary[f"{key}_median"] = float(np.median(values)) if values else None
         if args.hands_off:
             delays = [r["start_delay_s"] for r in tracked if r["start_delay_s"] is not None]
             summary["started"] = f"{len(delays)}/{len(tracked)}"

@@ -249,3 +249,4 @@ def test_gait_is_compared_over_the_frames_the_estimate_covers():
     assert result["matched_strikes"] == result["true_strikes"]
     # the walker's strikes are taken as the end of a double support: 0.2 x the 0.5 s steps earlier
     assert result["timing_error_s_median"] == pytest.approx(0.1, abs=1e-9)
+    assert result["timing_bias_s_median"] == pytest.approx(-0.1, abs=1e-9)      # reported early

@@ -456,7 +456,8 @@ def format_table(result: dict[str, object], label: str = "") -> str:
         lines.append(f"gait: step length {fmt(e['step_length_m'], '.2f')} m (true {fmt(t['step_length_m'], '.2f')}), "
                      f"cadence {fmt(e['cadence_steps_min'], '.0f')} steps/min (true {fmt(t['cadence_steps_min'], '.0f')}); "
                      f"heel strikes matched {c['matched_strikes']}/{c['true_strikes']}, timing error "
-                     f"{fmt(c['timing_error_s_median'], '.3f')} s, step length error "
+                     f"{fmt(c['timing_error_s_median'], '.3f')} s (signed {fmt(c['timing_bias_s_median'], '+.3f')}), "
+                     f"step length error "
                      f"{fmt(c['step_length_error_m_median'], '.3f')} m median")
     if "stance_correct_fraction" in result:
         lines.append(f"stance leg right on {100 * result['stance_correct_fraction']:.1f}% of "

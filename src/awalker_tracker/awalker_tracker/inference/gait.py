@@ -168,7 +168,8 @@ def as_rows(walk: list[Step]) -> list[dict[str, object]]:
 
 def compare(estimate: list[Step], truth: list[Step], max_offset_s: float = 0.2) -> dict[str, object]:
     """Each true heel strike matched to the nearest estimated strike of the same foot within ``max_offset_s``:
-    timing error (s), step length error (m) of matched steps, and the median speeds' difference (m/s)."""
+    timing error (s; its median size, and the median signed, later than the truth > 0), step length error (m)
+    of matched steps, and the median speeds' difference (m/s)."""
     timing, length = [], []
     for s in truth:
         same = [e for e in estimate if e.foot == s.foot]
@@ -183,6 +184,7 @@ def compare(estimate: list[Step], truth: list[Step], max_offset_s: float = 0.2) 
     return {
         "true_strikes": len(truth), "matched_strikes": len(timing),
         "timing_error_s_median": float(np.median(np.abs(timing))) if timing else None,
+        "timing_bias_s_median": float(np.median(timing)) if timing else None,     # > 0: reported late
         "step_length_error_m_median": float(np.median(np.abs(length))) if length else None,
         "speed_error_m_s": (abs(est_speed - true_speed) if est_speed is not None and true_speed is not None
                             else None),
