@@ -263,6 +263,53 @@ def test_one_camera_places_the_person_by_the_feet_row_only_where_the_blob_is_as_
     assert both.feet_row_position(0) is None
 
 
+def _legs_hidden(camera, features, behind_m: float, ground_point_xy: np.ndarray, masked: bool = False):
+    """``features`` with every map row below the one where the ground ``behind_m`` beyond ``ground_point_xy``
+    (along the camera's view, +y) projects set to background (``masked``: to the occlusion mask's 0): the
+    blob's lowest row is then that row, as when a box hides the legs and its top edge cuts the blob there."""
+    uv, _ = camera.project(np.array([[ground_point_xy[0], ground_point_xy[1] + behind_m, 0.0]]))
+    cut = int(np.ceil(uv[0, 1] / features.downsample))
+    llr = features.llr.copy()
+    llr[:, cut:, :] = 0.0 if masked else -20.0
+    return replace(features, llr=llr)
+
+
+@pytest.mark.parametrize("reach", [True, False])
+def test_one_camera_does_not_count_a_feet_row_that_jumps_away(seen, reach: bool):
+    """Legs hidden for frames 15-29 put the blob's lowest row 0.9 m behind the person, where the head's row
+    still makes the blob 1.08 times as tall as the body (the camera stands 1.1 m high, near the
+    head), so only the reach test keeps those rows out: with it, none counts and the track on the person
+    is not lost; with the reach unlimited, they count and the monitor re-acquires the track 1 m off the
+    person (0.9 m off). The legs back in view, the feet row counts again; a monitor that has counted nothing within
+    ``reach_reset_s`` counts the hidden-legs row (it cannot know better), unless what hides them lies under
+    the camera's occlusion mask."""
+    camera, features, markers = seen
+    pelvis = markers[PELVIS]
+    hidden = _legs_hidden(camera, features, 0.8, pelvis[:2])
+    config = RecoveryConfig(lost_after_s=0.0) if reach else RecoveryConfig(lost_after_s=0.0, reach_m=1e3)
+    monitor = LostTrackMonitor([camera], config, dt=1 / 30, body_height_m=BODY.height)
+    orders = [monitor.update(f, [hidden if 15 <= f < 30 else features], pelvis) for f in range(40)]
+    fired = [f for f, order in enumerate(orders) if order is not None]
+    hidden_rows = [monitor.feet_row_position(f) for f in range(15, 30)]
+    assert all(np.linalg.norm(monitor.feet_row_position(f) - pelvis[:2]) < 0.25 for f in (*range(15), *range(30, 40)))
+    if reach:
+        assert fired == [] and all(row is None for row in hidden_rows)
+    else:
+        assert all(row is not None and 0.7 < row[1] - pelvis[1] < 1.3 for row in hidden_rows)
+        assert fired and 15 < fired[0] < 30 and orders[fired[0]].position[1] - pelvis[1] > 0.7
+    fresh = LostTrackMonitor([camera], config, dt=1 / 30, body_height_m=BODY.height)
+    fresh.update(0, [hidden], pelvis)
+    assert fresh.feet_row_position(0) is not None
+    # the same legs hidden by something under the camera's occlusion mask: that row does not count, ever
+    behind_mask = _legs_hidden(camera, features, 0.8, pelvis[:2], masked=True)
+    assert behind_mask.occluded().mean() > 0.1 and features.occluded().mean() < 0.001
+    fresh = LostTrackMonitor([camera], config, dt=1 / 30, body_height_m=BODY.height)
+    fresh.update(0, [behind_mask], pelvis)
+    assert fresh.feet_row_position(0) is None
+    with pytest.raises(ValueError, match="must be >= 0"):
+        RecoveryConfig(reach_m=-0.1)
+
+
 @pytest.mark.parametrize("band", [0.3, 0.0])
 def test_walkers_straying_in_depth_beyond_the_band_lose_weight(seen, band: float):
     """One camera: walkers whose pelvis lies within ``depth_band_m`` of the feet-row position over the ground

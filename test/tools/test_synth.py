@@ -1,6 +1,8 @@
 """awalker synth: complete, deterministic bags whose ground truth lines up with the pixels."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import yaml
@@ -178,6 +180,42 @@ def test_dressed_person_is_not_the_model_body(tmp_path):
     assert np.abs(left - right).max() < 40
     _, model_frames, *_ = read(tmp_path / "model")
     assert not np.array_equal(model_frames[3 + k][1]["cam0"], frames[3 + k][1]["cam0"])
+
+
+def test_dressed_shoes_stand_on_the_floor_while_the_foot_lies_flat(tmp_path):
+    """The dressed person's shoe soles reach the floor while their foot lies flat (the skeleton's heel-toe
+    line runs ~3 cm over the sole: drawn along it, the person floated), and nothing is drawn under the
+    floor while the foot rolls. Checked on the pixels: a side camera's rendered shoe pixels, put back in
+    3D through their depth, reach down to the floor within 8 mm in flat-foot frames (2 cm before) (a pixel is 6 mm
+    there) and never below it, though the shoes' capsules reach 2-3 cm under it while a foot rolls."""
+    from awalker_tools.person_render import Outfit, PersonRenderer, capsules
+    from awalker_tools.synth import SynthConfig, make_cameras, mocap_motion
+    from awalker_tracker.model.mocap import flat_foot_frames
+
+    config = SynthConfig(tmp_path, frames=40, mocap=(MOCAP_DIR / "07.asf", MOCAP_DIR / "07_01.amc"),
+                         person="dressed", width=960, height=720)
+    motion = mocap_motion(config, np.zeros(2), 0.0)
+    camera = make_cameras(1, 960, 720, motion.markers[20, M["pelvis"], :2])[0]
+    green_shoes = replace(Outfit.random(np.random.default_rng(0)), shoes=(0.0, 220.0, 0.0))   # nothing else is green
+    renderer = PersonRenderer(camera, green_shoes, blur_sigma_px=0.0)
+    flat = {side: flat_foot_frames(motion.markers, side) for side in ("left", "right")}
+    lowest, flat_lowest, under = [], [], []
+    for k in range(0, 40, 2):
+        image, depth = renderer.render(motion.points[k], np.zeros((720, 960, 3), np.float32))
+        under += [min(a[2], b[2]) - r for a, b, r, material in capsules(motion.points[k], renderer.outfit)
+                  if material == "shoes"]
+        person = np.isfinite(depth)
+        points = camera.position + renderer.rays[person] * (depth[person] / renderer.depth_per_t[person])[:, None]
+        lowest.append(float(points[:, 2].min()))
+        shoe = image[person][:, 1] > 2.0 * (image[person][:, 0] + image[person][:, 2]) + 10.0
+        for side in ("left", "right"):            # a flat foot's shoe: green pixels near its heel-toe midpoint
+            middle = 0.5 * (motion.markers[k, M[f"{side}_heel"]] + motion.markers[k, M[f"{side}_toe"]])
+            near = shoe & (np.linalg.norm(points[:, :2] - middle[:2], axis=1) < 0.15)
+            if flat[side][k] and near.any():
+                flat_lowest.append(float(points[near, 2].min()))
+    assert min(lowest) >= -0.001
+    assert len(flat_lowest) >= 3 and np.median(flat_lowest) < 0.008
+    assert min(under) < -0.015
 
 
 @pytest.mark.parametrize("carry", ["shoulder-bag", "backpack"])

@@ -4,7 +4,11 @@ All functions work on points (F, P, 3) in the world frame (z up, m) at ``rate`` 
 markers (``MARKER_NAMES``) first, so that any other skeleton points (arms, head) move with them.
 
 - ``level_floor``: CMU walks drift in height (07_01: the pelvis rises 8 cm over 3.6 m); the lowest
-  foot point per frame, fitted by a straight line in time over its lower envelope, is moved to z = 0.
+  foot point per frame, fitted by a straight line in time over its lower envelope, is made level, and
+  then the floor is put ``FOOT_LINE_HEIGHT`` under the heel-toe line of a foot lying flat
+  (``model.mocap.flat_foot_frames``): the skeleton's heel and toe points lie inside the foot, ~3 cm over
+  the sole, and dip that much lower only while the foot rolls (heel strike, toe-off: the lowest point is
+  reached there), so a floor at the lowest point floated every flat foot ~3 cm over it.
 - ``loop_to_duration``: repeats the walk from a frame that matches a later one (pose relative to the
   pelvis, and velocity), continuing the ground translation, until it lasts long enough.
 - ``time_warp``: plays the walk faster or slower (a factor of 1.2 is 20 % faster: the same steps,
@@ -21,8 +25,13 @@ import numpy as np
 
 from awalker_tracker.inference.gait import stance_from_heels
 from awalker_tracker.model.body import MARKER_NAMES
+from awalker_tracker.model.mocap import flat_foot_frames
 
 _M = {n: i for i, n in enumerate(MARKER_NAMES)}
+#: Height (m) of the heel-toe line over the floor while the foot lies flat: where ``level_floor`` puts the
+#: floor, and how far under that line ``person_render`` draws the shoe's sole (CMU subject 7's walks: the
+#: line stands 3.1-3.4 cm over the lowest foot point of the stride).
+FOOT_LINE_HEIGHT = 0.033
 FOOT_POINTS = {"left": [_M["left_heel"], _M["left_toe"]], "right": [_M["right_heel"], _M["right_toe"]]}
 
 
@@ -34,8 +43,9 @@ def _rotation_z(angle: np.ndarray) -> np.ndarray:
 
 
 def level_floor(points: np.ndarray, rate: float) -> np.ndarray:
-    """Points with the floor under the feet moved to z = 0 (a straight-line fit in time to the lowest
-    foot point, using the frames in the lower quarter of its residuals)."""
+    """Points with the floor under the feet moved to z = 0: level (a straight-line fit in time to the lowest
+    foot point, using the frames in the lower quarter of its residuals), ``FOOT_LINE_HEIGHT`` under the
+    heel-toe line of a foot lying flat (module docstring)."""
     feet = points[:, FOOT_POINTS["left"] + FOOT_POINTS["right"], 2].min(axis=1)
     t = np.arange(len(points)) / rate
     fit = np.polyfit(t, feet, 1)
@@ -45,6 +55,11 @@ def level_floor(points: np.ndarray, rate: float) -> np.ndarray:
         fit = np.polyfit(t[low], feet[low], 1)
     out = points.copy()
     out[..., 2] -= np.polyval(fit, t)[:, None]
+    markers = out[:, : len(MARKER_NAMES)]
+    lines = [0.5 * (markers[flat, _M[f"{side}_heel"], 2] + markers[flat, _M[f"{side}_toe"], 2])
+             for side in ("left", "right") if (flat := flat_foot_frames(markers, side)).any()]
+    if lines:
+        out[..., 2] += FOOT_LINE_HEIGHT - float(np.median(np.concatenate(lines)))
     return out
 
 

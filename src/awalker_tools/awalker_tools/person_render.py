@@ -3,7 +3,8 @@
 The tracker's likelihood expects its own body (``vision/render.py``: tapered elliptical cylinders,
 one colour per part class, no arms). This renderer draws something else, as a camera would see a
 real person: the whole CMU skeleton including swinging arms and a head with hair, every limb a
-capsule (a sphere swept along the bone, per-person radii), a shirt with horizontal stripes over the
+capsule (a sphere swept along the bone, per-person radii; the shoe's sole ``FOOT_LINE_HEIGHT`` under the
+heel-toe line, on the floor while the foot lies flat, and what would lie under the floor hidden by it), a shirt with horizontal stripes over the
 torso and upper arms, jeans of one colour on both legs and the hips, dark shoes, skin on the neck,
 face, forearms and hands; Lambert shading under a light from above, a soft contact shadow on the
 floor under the feet and the body, and a slight lens blur (sensor noise is added by ``synth``).
@@ -23,6 +24,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from awalker_tools.mocap_motion import FOOT_LINE_HEIGHT
 from awalker_tracker.model.body import MARKER_NAMES
 from awalker_tracker.model.mocap import EXTRA_POINTS
 from awalker_tracker.vision.camera import Camera
@@ -74,6 +76,7 @@ def capsules(points: np.ndarray, outfit: Outfit) -> list[tuple[np.ndarray, np.nd
     p = {n: points[i] for n, i in _P.items()}
     r = outfit.radii
     lift = lambda v, dz: v + np.array([0.0, 0.0, dz])  # noqa: E731
+    sole = r["foot"] - FOOT_LINE_HEIGHT      # the shoe's sole FOOT_LINE_HEIGHT under the heel-toe line
     neck_up = p["neck"] + 0.07 * UP
     head_centre = p["neck"] + 0.6 * (p["head_top"] - p["neck"]) + 0.04 * UP
     out = [
@@ -91,7 +94,7 @@ def capsules(points: np.ndarray, outfit: Outfit) -> list[tuple[np.ndarray, np.nd
             (p[f"{side}_wrist"], p[f"{side}_hand"], r["hand"], "skin"),
             (p[f"{side}_hip"], p[f"{side}_knee"], r["thigh"], "jeans"),
             (p[f"{side}_knee"], p[f"{side}_ankle"], r["shin"], "jeans"),
-            (lift(p[f"{side}_heel"], r["foot"]), lift(p[f"{side}_toe"], 0.7 * r["foot"]), r["foot"], "shoes"),
+            (lift(p[f"{side}_heel"], sole), lift(p[f"{side}_toe"], sole), r["foot"], "shoes"),
         ]
     return out + carried(p, outfit)
 
@@ -191,8 +194,9 @@ class PersonRenderer:
             closest = start + s[:, None] * u                       # on the bone
             t = np.einsum("ij,ij->i", closest - origin, d)
             gap = np.linalg.norm(origin + t[:, None] * d - closest, axis=1)
-            hit = (gap < radius) & (t > 0)
             t_hit = t - np.sqrt(np.maximum(radius * radius - gap * gap, 0.0))
+            # a hit under the floor is hidden by it (a shoe rolling on its heel or toe presses into it)
+            hit = (gap < radius) & (t > 0) & (origin[2] + t_hit * d[:, 2] >= 0.0)
             block = distance[v0:v1, u0:u1].reshape(-1)
             nearer = hit & (t_hit < block)
             if not nearer.any():

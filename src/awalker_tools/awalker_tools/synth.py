@@ -360,7 +360,6 @@ def mocap_motion(config: SynthConfig, start_xy: np.ndarray, heading: float) -> M
     if turn is not None:
         points = variants.bend(points, rate, np.radians(turn[0]), turn[1], turn[2])
     points = points[: config.frames]
-    points[..., 2] -= min(0.0, float(np.percentile(points[:, 9:13, 2].min(axis=1), 5)))  # feet not below floor
     markers = np.ascontiguousarray(points[:, : len(MARKER_NAMES)])
     body = body_from_markers(markers)
     first_second = min(len(markers) - 1, int(rate))

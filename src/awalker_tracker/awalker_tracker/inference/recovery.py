@@ -19,7 +19,17 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   on the person's image and the blob test alone never fired (8 of 60 one-camera runs ended 0.5-1.6 m
   off). A feet row counts only where the blob stands as tall as the body (``feet_row_height_ratio``,
   0.85-1.10 of its height; a walking person's blob is 0.91-0.96 on the real walks): legs hidden behind
-  something, or a blob that lost the head or merged with a shadow, misplace it by metres. When lost, a
+  something, or a blob that lost the head or merged with a shadow, misplace it by metres. Nor where it
+  jumps: a feet row counts only within ``reach_m`` + ``reach_m_s`` x (time since the last one counted)
+  of where the counted ones put the person now (the last of them, moved on at their velocity over
+  ``track_window_s``), unless none has counted for ``reach_reset_s``. Legs hidden behind a box put the
+  blob's lowest row on the box's top edge, metres behind the person, and with the camera near head
+  height the blob still looks as tall as the body (our lower-body occluder render: 3.4 m behind, ratio
+  under 1.10); people do not jump, so those rows are not counted (for up to ``reach_reset_s``: legs
+  hidden longer, or a track that started on hidden legs, count again). Where the camera has an occlusion
+  mask (something known to stand in front of the person), a blob whose lowest row lies on it does not
+  count either (``detection.ends_on_occlusion``): our lower-body occluder render hides the legs for the whole
+  run, so its feet rows are wrong from the first frame and the reach test cannot tell. When lost, a
   fraction of the particles (the lowest weights) are re-seeded around the detected ground position,
   with the heading and speed of the detections' recent ground track (when it moves), then the image
   likelihood decides. At most once per ``cooldown_s``.
@@ -51,7 +61,7 @@ import numpy as np
 
 from awalker_tracker.vision.camera import Camera
 from awalker_tracker.vision.detection import (
-    GroundTrack, PersonBlob, PersonDetection, locate_person, person_blobs, wholly_in_view)
+    GroundTrack, PersonBlob, PersonDetection, ends_on_occlusion, locate_person, person_blobs, wholly_in_view)
 
 NOT_RESEEDED, RESEEDED_FALLEN, REACQUIRED, HELD = 0, 1, 2, 3
 
@@ -71,6 +81,9 @@ class RecoveryConfig:
     lost_distance_m: float = 0.4       # triangulated detections: the pelvis this far off over the ground is lost
     lost_distance_one_camera_m: float = 0.6  # feet-row detections (one camera): the median over track_window_s
     feet_row_height_ratio: tuple[float, float] = (0.85, 1.10)  # ... of frames whose blob is this tall (x body height)
+    reach_m: float = 0.5               # ... and whose feet row lies within this of where the counted ones put the
+    reach_m_s: float = 0.5             # ... person now, plus this per second since the last counted one,
+    reach_reset_s: float = 2.0         # ... unless none counted for this long (module docstring)
     track_window_s: float = 0.5        # detections over this time give the person's ground velocity
     moving_m_s: float = 0.3            # slower ground tracks give no heading (and do not end a stop)
     hold_still: bool = True            # hold the walkers while the person stands still
@@ -90,7 +103,7 @@ class RecoveryConfig:
         if min(self.lost_after_s, self.cooldown_s, self.position_spread_m, self.heading_spread_rad,
                self.box_margin, self.track_window_s, self.moving_m_s, self.lost_distance_m,
                self.lost_distance_one_camera_m, self.still_m_s,
-               self.still_window_s, self.depth_band_m) < 0:
+               self.still_window_s, self.depth_band_m, self.reach_m, self.reach_m_s, self.reach_reset_s) < 0:
             raise ValueError("RecoveryConfig: times, spreads and margins must be >= 0")
         if not (self.depth_band_sigma_m > 0 and 0 < self.depth_band_outlier < 1):
             raise ValueError(f"RecoveryConfig: depth_band_sigma_m must be > 0 and depth_band_outlier in (0, 1), got "
@@ -135,11 +148,12 @@ class LostTrackMonitor:
         self._still: dict[int, bool] = {}
         self._gaps: dict[int, float] = {}   # one camera: the pelvis's ground distance from the feet-row position
         self._feet_rows: dict[int, np.ndarray] = {}   # one camera: the feet-row ground position, where it counts
+        self._counted = GroundTrack(dt)               # ... the same as a track (None where it does not count)
         self._quiet_until = -1
         self.reacquisitions = 0
 
     def _off_person(self, frame: int, detection: PersonDetection, pelvis: np.ndarray,
-                    seen: list[list[PersonBlob]]) -> bool:
+                    seen: list[list[PersonBlob]], features: dict[str, Any]) -> bool:
         """True when the pelvis is off the triangulated ground position. Without one: when over
         ``track_window_s`` its median ground distance from the feet-row positions exceeds
         ``lost_distance_one_camera_m`` (a drift along the line of sight, which leaves the body on the
@@ -150,7 +164,11 @@ class LostTrackMonitor:
         if detection.triangulated:
             return bool(np.linalg.norm(pelvis[:2] - detection.position) > self.config.lost_distance_m)
         low, high = self.config.feet_row_height_ratio
-        if self.body_height_m is None or low <= detection.height / self.body_height_m <= high:
+        as_tall = self.body_height_m is None or low <= detection.height / self.body_height_m <= high
+        on_mask = any(ends_on_occlusion(blob, features[blob.camera]) for blob in detection.blobs)
+        counts = as_tall and not on_mask and self._reachable(frame, detection.position)
+        self._counted.add(frame, detection.position if counts else None)
+        if counts:
             self._gaps[frame] = float(np.linalg.norm(pelvis[:2] - detection.position))
             self._feet_rows[frame] = detection.position.copy()
         span = self.track.span(self.config.track_window_s)
@@ -166,6 +184,21 @@ class LostTrackMonitor:
             if depth[0] > 0 and u0 - du <= uv[0, 0] <= u1 + du and v0 - dv <= uv[0, 1] <= v1 + dv:
                 return False
         return True
+
+    def _reachable(self, frame: int, position: np.ndarray) -> bool:
+        """Whether a feet-row ground position (m) at ``frame`` is within reach of the counted ones (module
+        docstring: ``reach_m``, ``reach_m_s``, ``reach_reset_s``)."""
+        cfg = self.config
+        reset = int(round(cfg.reach_reset_s / self.dt))
+        recent = [f for f in self._feet_rows if 0 < frame - f <= reset]
+        if not recent:
+            return True
+        last = max(recent)
+        where = self._counted.fitted_position(last, cfg.track_window_s)
+        velocity = self._counted.velocity(last, cfg.track_window_s)
+        elapsed = (frame - last) * self.dt
+        predicted = (self._feet_rows[last] if where is None else where) + (0.0 if velocity is None else velocity * elapsed)
+        return bool(np.linalg.norm(position - predicted) <= cfg.reach_m + cfg.reach_m_s * elapsed)
 
     def feet_row_position(self, frame: int) -> np.ndarray | None:
         """One camera: the person's ground position (m, world xy) from ``frame``'s feet row where it counts
@@ -194,7 +227,8 @@ class LostTrackMonitor:
         # hysteresis: a stop starts below still_m_s and lasts until the track moves at moving_m_s
         self._still[frame] = cfg.hold_still and recent_speed is not None and (
             recent_speed < (cfg.moving_m_s if was_still else cfg.still_m_s))
-        off = cfg.reacquire and reliable and self._off_person(frame, detection, pelvis, seen)
+        by_camera = {c.name: f for c, f in zip(self.cameras, features)}
+        off = cfg.reacquire and reliable and self._off_person(frame, detection, pelvis, seen, by_camera)
         self._run[frame] = self._run.get(frame - 1, 0) + 1 if off else 0
         order = None
         if off and self._run[frame] * self.dt >= cfg.lost_after_s and frame >= self._quiet_until:

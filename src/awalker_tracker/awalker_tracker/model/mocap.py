@@ -274,6 +274,18 @@ def load_mocap(asf: str | Path, amc: str | Path, heel_offset: float = 0.05) -> M
     return MocapTrial(markers, MOCAP_RATE, f"{Path(asf).name}+{Path(amc).name}", extra)
 
 
+def flat_foot_frames(markers: np.ndarray, side: str) -> np.ndarray:
+    """(F,) bool: the frames of marker trajectories (F, 13, 3) in which the ``side`` foot lies flat on the
+    floor: heel and toe within 1 cm of each other in height, and of those the lower half (a foot held
+    level in the swing is higher)."""
+    heel, toe = (markers[:, MARKER_NAMES.index(f"{side}_{name}"), 2] for name in ("heel", "toe"))
+    level = np.abs(heel - toe) < 0.01
+    if not level.any():
+        return level
+    line = 0.5 * (heel + toe)
+    return level & (line <= np.median(line[level]))
+
+
 def body_from_markers(markers: np.ndarray, template: BodyDescription | None = None) -> BodyDescription:
     """A body description with segment lengths measured from marker trajectories (F, 13, 3)
     (median over frames); widths and the other sizes from ``template``."""

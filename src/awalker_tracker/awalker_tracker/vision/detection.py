@@ -106,6 +106,18 @@ def blob_near(blobs: list[PersonBlob], camera: Camera, point: np.ndarray) -> Per
     return best if gap(best) <= best.box[3] - best.box[1] else None
 
 
+def ends_on_occlusion(blob: PersonBlob, features: FrameFeatures, rows: int = 2, fraction: float = 0.5) -> bool:
+    """Whether most (``fraction``) of the map pixels just under ``blob`` (``rows`` rows, within its columns)
+    lie under the camera's occlusion mask (``FrameFeatures.occluded``): the blob's lowest row is then the top
+    edge of something known to stand in front of the person, not their feet."""
+    d = features.downsample
+    u0, _, u1, v1 = blob.box
+    bottom = int(round((v1 + 0.5) / d)) - 1
+    first, last = int(round((u0 + 0.5) / d)), int(round((u1 + 0.5) / d))
+    below = features.occluded()[bottom + 1: bottom + 1 + rows, first:last]
+    return bool(below.size and below.mean() >= fraction)
+
+
 def _ray(camera: Camera, uv: tuple[float, float]) -> np.ndarray:
     """World direction (3,) of the ray through pixel ``uv``."""
     xy = camera.pixels_to_normalised(np.asarray([uv], float))[0]

@@ -88,6 +88,12 @@ class FrameFeatures:
     def map_shape(self) -> tuple[int, int]:
         return int(self.llr.shape[1]), int(self.llr.shape[2])
 
+    def occluded(self) -> np.ndarray:
+        """(h, w) bool: map pixels whose ratios are exactly 0 in every class: those under the occlusion mask,
+        all of them while the background is learned, and now and then a pixel unlike both models (both
+        likelihoods at the outlier floor: scattered single pixels, where a mask covers regions)."""
+        return np.all(self.llr == 0.0, axis=0)
+
 
 def occlusion_map_mask(mask: np.ndarray | None, downsample: int, shape: tuple[int, int]) -> np.ndarray | None:
     """A full-resolution occlusion mask -> (h, w) bool: any occluded pixel in a block occludes it."""
