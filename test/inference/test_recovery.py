@@ -314,8 +314,8 @@ def test_one_camera_does_not_count_a_feet_row_that_jumps_away(seen, reach: bool)
 def test_walkers_straying_in_depth_beyond_the_band_lose_weight(seen, band: float):
     """One camera: walkers whose pelvis lies within ``depth_band_m`` of the feet-row position over the ground
     keep the image's log-likelihood; beyond it they lose 0.5 (excess / sigma)^2 nats, levelling off at
-    ~-log(depth_band_outlier) (a feet row metres from every walker changes no weights). Band 0 (the
-    default): no term."""
+    ~-log(depth_band_outlier) (a feet row metres from every walker changes no weights). Band 0 (off):
+    no term."""
     from awalker_tracker.inference.tracker import ImageObservation
 
     camera, features, markers = seen

@@ -397,7 +397,10 @@ def test_a_person_who_stops_is_held_where_they_stand(dressed_stop, tmp_path, rec
     assert still[(seconds >= 1.9) & (seconds < 3.0)].all()           # held through the stop
     assert not still[(seconds < 1.5) | (seconds >= 3.3)].any()       # and only then
     assert result["recovery"]["still_frames"] == int(still.sum())
-    assert np.median(late_stop) < 350.0, np.median(late_stop)
+    # the stop's second half, tracker seeds 0-9 (2026-11-27): 286/207/238/370/219/199/246/278/217/280 mm with
+    # the soles drawn on the floor (before: 210/291/246/269/245/193/198/236/238/269; the same median, 241-242,
+    # one seed further out); the bound 15 % above the worst, as for the others (README, the seed spread)
+    assert np.median(late_stop) < 425.0, np.median(late_stop)
     end = result["walk"]["end"]
     assert end["pelvis_ground_error_m"] < 0.5 and not end["fallen"], end
 
@@ -598,4 +601,5 @@ def test_one_camera_reacquires_a_track_started_too_far_along_its_view(dressed_si
         assert abs(one_second_in) < 0.4 and abs(last_half) < 0.4, (one_second_in, last_half)
     else:
         assert (summary["reacquired"] == 0).all()
+        assert yaml.safe_load((out / "run.yaml").read_text())["depth_band_m"] == 0.0   # no depth band either
         assert one_second_in > 0.5, one_second_in

@@ -15,6 +15,7 @@ import yaml
 
 from awalker_tools import evaluation
 from awalker_tools.cli import main
+from awalker_tracker.inference.recovery import RecoveryConfig
 from awalker_tracker.model.body import BodyDescription
 
 FRAMES, BACKGROUND = 10, 4
@@ -58,7 +59,7 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     from awalker_tools.bagio import SequenceReader
 
     out = tmp_path / "run"
-    assert main(["track", str(synth_bag), "--out", str(out), "--particles", "100", "--seed", "1"]) == 0
+    assert main(["track", str(synth_bag), "--out", str(out), "--particles", "100", "--seed", "1", "--depth-band", "0.25"]) == 0
     with SequenceReader(synth_bag) as reader:
         stamps = reader.frame_stamps.tolist()
     tracked = stamps[BACKGROUND:]
@@ -82,6 +83,7 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     # timings: streaming is part of the whole command, the filter part of streaming
     run = yaml.safe_load((out / "run.yaml").read_text())
     assert 0 < run["seconds_in_filter"] < run["seconds_streaming"] < run["seconds"]
+    assert run["depth_band_m"] == 0.25 != RecoveryConfig().depth_band_m     # --depth-band reached the tracker node
     # a body description came with the bag: one pass, no leg length fitted (fit_body's default)
     assert not (out / "first_pass").exists() and "body_fit" not in run
     # the pictures are drawn after tracking and timed apart
@@ -320,7 +322,8 @@ def test_track_option_errors(tmp_path: Path, capsys):
     for option, value, text in (("--particles", "0", "--particles"), ("--trust", "1.5", "--trust"),
                                 ("--lookahead", "-1", "--lookahead"),
                                 ("--likelihood-scale", "-1", "--likelihood-scale"),
-                                ("--leg-scale-spread", "0.5", "--leg-scale-spread")):
+                                ("--leg-scale-spread", "0.5", "--leg-scale-spread"),
+                                ("--depth-band", "-0.1", "--depth-band")):
         assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), option, value]) == 2
         assert text in capsys.readouterr().err
     assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--follow-near", "nan", "0"]) == 2
@@ -334,10 +337,14 @@ def test_track_fit_body_option_reaches_the_pipeline(tmp_path: Path, monkeypatch)
     from awalker_tools import pipeline
 
     seen = []
-    monkeypatch.setattr(pipeline, "run_tracking", lambda options: seen.append(options.fit_body))
+    monkeypatch.setattr(pipeline, "run_tracking", lambda options: seen.append(options))
     for extra, expected in (([], None), (["--fit-body"], True), (["--no-fit-body"], False)):
         assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), *extra]) == 0
-        assert seen[-1] is expected
+        assert seen[-1].fit_body is expected
+    # --depth-band reaches the pipeline too (None: the tracker node's default, RecoveryConfig's)
+    assert seen[-1].depth_band_m is None
+    assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--depth-band", "0"]) == 0
+    assert seen[-1].depth_band_m == 0.0
 
 
 JUNK_PUBLISHER = """

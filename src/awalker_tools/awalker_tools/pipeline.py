@@ -107,6 +107,7 @@ class TrackOptions:
     auto_start: bool = False        # ignore any start description and find the walking person (also when none exists)
     follow_near: tuple[float, float] | None = None   # automatic start: follow the person first seen near this ground point (m)
     recovery: bool = True           # re-seed fallen walkers and re-acquire a lost track (inference/recovery.py)
+    depth_band_m: float | None = None   # one camera: the feet row's depth band (None: RecoveryConfig's, off); off without recovery
     overlays: bool = True
     # two passes, the second with the leg length fitted to the first one's images (module docstring);
     # None: when no body description is found, so that the body would only be scaled to the seen height
@@ -130,6 +131,7 @@ class TrackResult:
     seconds_streaming: float = 0.0  # from the first replayed message to the last posterior received
     seconds_in_filter: float = 0.0
     sync_issues: list[str] = field(default_factory=list)
+    depth_band_m: float = 0.0       # the tracker's one-camera depth band (RecoveryConfig.depth_band_m)
     recorded: dict[str, int] = field(default_factory=dict)
     features: dict[str, dict[str, str]] = field(default_factory=dict)   # per camera: how its models were learned
 
@@ -339,6 +341,8 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
             Parameter("leg_scale_spread", value=float(options.leg_scale_spread)),
             Parameter("reseed_fallen", value=bool(options.recovery)), Parameter("reacquire", value=bool(options.recovery)),
             Parameter("hold_still", value=bool(options.recovery)),
+            *([Parameter("depth_band_m", value=float(options.depth_band_m) if options.recovery else 0.0)]
+              if options.depth_band_m is not None or not options.recovery else []),
             Parameter("idle_flush_s", value=1.0e9)])
         tracker.keep_summaries = True
         nodes.append(tracker)
@@ -419,6 +423,7 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
         result.frames = tracker.stats.frames_received
         result.summaries = tracker.stats.summaries
         result.seconds_in_filter = tracker.stats.seconds_in_filter
+        result.depth_band_m = tracker.recovery.depth_band_m
         result.sync_issues = list(tracker.stats.sync_issues)
         result.recorded = dict(recorder.counts)
         result.features = {node.camera_name: {"background": node.stats.background_from,
@@ -455,7 +460,7 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
         "input": str(bag.resolve()), "start_source": start_src, "body_source": body_src,
         "particles": options.particles, "lookahead": options.lookahead, "trust": options.trust, "seed": options.seed,
         "likelihood_scale": options.likelihood_scale, "leg_scale_spread": options.leg_scale_spread,
-        "recovery": options.recovery,
+        "recovery": options.recovery, "depth_band_m": result.depth_band_m,
         **({"stopped_after_frames": options.stop_after_frames} if enough else {}),
         "frames": result.frames, "posteriors": result.summaries, "seconds": round(result.seconds, 3),
         "seconds_streaming": round(result.seconds_streaming, 3), "seconds_pictures": round(result.seconds_pictures, 3),

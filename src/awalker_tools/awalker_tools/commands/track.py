@@ -20,6 +20,8 @@ def run(args: argparse.Namespace) -> int:
         TrackerConfig(leg_scale_spread=args.leg_scale_spread)      # the tracker node's check, before anything starts
     except ValueError as exc:
         raise InputError(f"--leg-scale-spread: {exc}") from None
+    if args.depth_band is not None and not args.depth_band >= 0:
+        raise InputError(f"--depth-band must be >= 0 m (0: off), got {args.depth_band}")
     if not 0.0 <= args.trust <= 1.0:
         raise InputError(f"--trust (gamma) must lie in [0, 1], got {args.trust}")
     if args.lookahead < 0:
@@ -34,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
         body=Path(args.body) if args.body else None, particles=args.particles, lookahead=args.lookahead,
         trust=args.trust,
         seed=args.seed, likelihood_scale=args.likelihood_scale, leg_scale_spread=args.leg_scale_spread,
-        recovery=not args.no_recovery,
+        recovery=not args.no_recovery, depth_band_m=args.depth_band,
         auto_start=args.auto_start or args.follow_near is not None,
         follow_near=follow_near, overlays=not args.no_overlay, fit_body=args.fit_body,
         storage=args.storage,
@@ -72,9 +74,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="let the particles' leg lengths differ from the body description's: log-normal spread "
                              "(e.g. 0.04), wandering 0.1 %% per frame; default 0: the body's own (README \"Leg length "
                              "from the images, online\")")
+    parser.add_argument("--depth-band", type=float, default=None, metavar="M",
+                        help="one camera: walkers whose pelvis lies more than M metres from where the person's feet row "
+                             "puts them lose weight (e.g. 0.3; default: off, RecoveryConfig.depth_band_m; README \"One "
+                             "camera's depth held by the feet row\")")
     parser.add_argument("--no-recovery", action="store_true",
-                        help="never re-seed fallen walkers, re-acquire a lost track or hold the walkers while the person "
-                             "stands still (the exact filter of the paper)")
+                        help="never re-seed fallen walkers, re-acquire a lost track, hold the walkers while the person "
+                             "stands still or hold one camera's depth by the feet row (the exact filter of the paper)")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="result bag storage")
     parser.add_argument("--no-overlay", action="store_true", help="skip overlay images and video")
     parser.add_argument("--fit-body", action=argparse.BooleanOptionalAction, default=None,

@@ -100,11 +100,18 @@ class TrackerNode(Node):
         self.estimate_body = bool(declare("estimate_body", False, "no body description: with the automatic start, "
                                           "scale the default body to the person's height seen in the images"))
         self.body_output = str(declare("body_output", "", "write an estimated body description to this YAML file"))
-        self.recovery = RecoveryConfig(
-            reseed_fallen=bool(declare("reseed_fallen", True, "re-seed walkers that fall (inference/recovery.py)")),
-            reacquire=bool(declare("reacquire", True, "re-acquire a lost track at the person seen in the images")),
-            hold_still=bool(declare("hold_still", True, "hold the walkers while the person seen in the images stands "
-                                                        "still")))
+        depth_band = float(declare("depth_band_m", RecoveryConfig.depth_band_m, "one camera: walkers whose pelvis "
+                                   "lies farther than this (m) from where the blob's feet row puts the person lose "
+                                   "weight; 0: off (inference/recovery.py)"))
+        try:
+            self.recovery = RecoveryConfig(
+                reseed_fallen=bool(declare("reseed_fallen", True, "re-seed walkers that fall (inference/recovery.py)")),
+                reacquire=bool(declare("reacquire", True, "re-acquire a lost track at the person seen in the images")),
+                hold_still=bool(declare("hold_still", True, "hold the walkers while the person seen in the images "
+                                                            "stands still")),
+                depth_band_m=depth_band)
+        except ValueError as exc:
+            raise InputError(f"awalker_tracker: parameter 'depth_band_m': {exc}") from None
         self.frame_rate = float(declare("frame_rate", 0.0, "frames/s; 0: from the first two frame stamps"))
         self.world_frame = declare("world_frame", "world", "world frame id of the outputs")
         ack_topic = declare("ack_topic", "/awalker/ack", "std_msgs/Header acks of processed frames")
