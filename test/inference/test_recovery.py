@@ -279,8 +279,8 @@ def test_one_camera_does_not_count_a_feet_row_that_jumps_away(seen, reach: bool)
     """Legs hidden for frames 15-29 put the blob's lowest row 0.9 m behind the person, where the head's row
     still makes the blob 1.08 times as tall as the body (the camera stands 1.1 m high, near the
     head), so only the reach test keeps those rows out: with it, none counts and the track on the person
-    is not lost; with the reach unlimited, they count and the monitor re-acquires the track 1 m off the
-    person (0.9 m off). The legs back in view, the feet row counts again; a monitor that has counted nothing within
+    is not lost; with the reach unlimited, they count and the monitor re-acquires the track 0.9 m off the
+    person. The legs back in view, the feet row counts again; a monitor that has counted nothing within
     ``reach_reset_s`` counts the hidden-legs row (it cannot know better), unless what hides them lies under
     the camera's occlusion mask."""
     camera, features, markers = seen

@@ -186,7 +186,7 @@ def test_dressed_shoes_stand_on_the_floor_while_the_foot_lies_flat(tmp_path):
     """The dressed person's shoe soles reach the floor while their foot lies flat (the skeleton's heel-toe
     line runs ~3 cm over the sole: drawn along it, the person floated), and nothing is drawn under the
     floor while the foot rolls. Checked on the pixels: a side camera's rendered shoe pixels, put back in
-    3D through their depth, reach down to the floor within 8 mm in flat-foot frames (2 cm before) (a pixel is 6 mm
+    3D through their depth, reach down to the floor within 8 mm in flat-foot frames (3-4 cm before; a pixel is 6 mm
     there) and never below it, though the shoes' capsules reach 2-3 cm under it while a foot rolls."""
     from awalker_tools.person_render import Outfit, PersonRenderer, capsules
     from awalker_tools.synth import SynthConfig, make_cameras, mocap_motion

@@ -4,8 +4,8 @@ The tracker's likelihood expects its own body (``vision/render.py``: tapered ell
 one colour per part class, no arms). This renderer draws something else, as a camera would see a
 real person: the whole CMU skeleton including swinging arms and a head with hair, every limb a
 capsule (a sphere swept along the bone, per-person radii; the shoe's sole ``FOOT_LINE_HEIGHT`` under the
-heel-toe line, on the floor while the foot lies flat, and what would lie under the floor hidden by it), a shirt with horizontal stripes over the
-torso and upper arms, jeans of one colour on both legs and the hips, dark shoes, skin on the neck,
+heel-toe line, on the floor while the foot lies flat, and what would lie under the floor hidden by it),
+a shirt with horizontal stripes over the torso and upper arms, jeans of one colour on both legs and the hips, dark shoes, skin on the neck,
 face, forearms and hands; Lambert shading under a light from above, a soft contact shadow on the
 floor under the feet and the body, and a slight lens blur (sensor noise is added by ``synth``).
 Optionally the person carries something the tracker's body has even less of (``Outfit.carry``): a

@@ -328,6 +328,7 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
             Parameter("use_start_description", value=start is not None),
             Parameter("body_description", value=str(out / BODY_FILE) if body is not None else "")]) for c in names]
         nodes += features
+        band = options.depth_band_m if options.recovery else 0.0      # None: the tracker node's default
         tracker = TrackerNode(context=context, parameter_overrides=[
             Parameter("cameras", value=names), Parameter("calibration", value=str(out / CALIBRATION_FILE)),
             Parameter("start_description", value=str(out / START_FILE) if start is not None else ""),
@@ -341,8 +342,7 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
             Parameter("leg_scale_spread", value=float(options.leg_scale_spread)),
             Parameter("reseed_fallen", value=bool(options.recovery)), Parameter("reacquire", value=bool(options.recovery)),
             Parameter("hold_still", value=bool(options.recovery)),
-            *([Parameter("depth_band_m", value=float(options.depth_band_m) if options.recovery else 0.0)]
-              if options.depth_band_m is not None or not options.recovery else []),
+            *([Parameter("depth_band_m", value=float(band))] if band is not None else []),
             Parameter("idle_flush_s", value=1.0e9)])
         tracker.keep_summaries = True
         nodes.append(tracker)

@@ -151,8 +151,7 @@ class LostTrackMonitor:
         self._orders: dict[int, Reacquisition | None] = {}
         self._still: dict[int, bool] = {}
         self._gaps: dict[int, float] = {}   # one camera: the pelvis's ground distance from the feet-row position
-        self._feet_rows: dict[int, np.ndarray] = {}   # one camera: the feet-row ground position, where it counts
-        self._counted = GroundTrack(dt)               # ... the same as a track (None where it does not count)
+        self._feet_rows = GroundTrack(dt)   # one camera: the feet-row ground position per frame (None: it does not count)
         self._quiet_until = -1
         self.reacquisitions = 0
 
@@ -169,12 +168,11 @@ class LostTrackMonitor:
             return bool(np.linalg.norm(pelvis[:2] - detection.position) > self.config.lost_distance_m)
         low, high = self.config.feet_row_height_ratio
         as_tall = self.body_height_m is None or low <= detection.height / self.body_height_m <= high
-        on_mask = any(ends_on_occlusion(blob, features[blob.camera]) for blob in detection.blobs)
-        counts = as_tall and not on_mask and self._reachable(frame, detection.position)
-        self._counted.add(frame, detection.position if counts else None)
+        counts = (as_tall and not any(ends_on_occlusion(blob, features[blob.camera]) for blob in detection.blobs)
+                  and self._reachable(frame, detection.position))
+        self._feet_rows.add(frame, detection.position.copy() if counts else None)
         if counts:
             self._gaps[frame] = float(np.linalg.norm(pelvis[:2] - detection.position))
-            self._feet_rows[frame] = detection.position.copy()
         span = self.track.span(self.config.track_window_s)
         gaps = [g for f in range(frame - span + 1, frame + 1) if (g := self._gaps.get(f)) is not None]
         if 2 * len(gaps) >= span and float(np.median(gaps)) > self.config.lost_distance_one_camera_m:
@@ -194,20 +192,21 @@ class LostTrackMonitor:
         docstring: ``reach_m``, ``reach_m_s``, ``reach_reset_s``)."""
         cfg = self.config
         reset = int(round(cfg.reach_reset_s / self.dt))
-        recent = [f for f in self._feet_rows if 0 < frame - f <= reset]
+        counted = self._feet_rows.positions
+        recent = [f for f, p in counted.items() if p is not None and 0 < frame - f <= reset]
         if not recent:
             return True
         last = max(recent)
-        where = self._counted.fitted_position(last, cfg.track_window_s)
-        velocity = self._counted.velocity(last, cfg.track_window_s)
+        where = self._feet_rows.fitted_position(last, cfg.track_window_s)
+        velocity = self._feet_rows.velocity(last, cfg.track_window_s)
         elapsed = (frame - last) * self.dt
-        predicted = (self._feet_rows[last] if where is None else where) + (0.0 if velocity is None else velocity * elapsed)
+        predicted = (counted[last] if where is None else where) + (0.0 if velocity is None else velocity * elapsed)
         return bool(np.linalg.norm(position - predicted) <= cfg.reach_m + cfg.reach_m_s * elapsed)
 
     def feet_row_position(self, frame: int) -> np.ndarray | None:
         """One camera: the person's ground position (m, world xy) from ``frame``'s feet row where it counts
         (a reliable blob as tall as the body; decided by ``update``), else None."""
-        return self._feet_rows.get(frame)
+        return self._feet_rows.positions.get(frame)
 
     def still(self, frame: int) -> bool:
         """Whether the person stood still at ``frame`` (decided by ``update``; False if not yet)."""
@@ -243,7 +242,7 @@ class LostTrackMonitor:
             self._quiet_until = frame + max(1, int(round(self.config.cooldown_s / self.dt)))
             self.reacquisitions += 1
         self._orders[frame] = order
-        for store in (self._run, self._orders, self._still, self._gaps, self._feet_rows):     # keep a few seconds of history
+        for store in (self._run, self._orders, self._still, self._gaps):     # keep a few seconds of history (the tracks keep their own)
             for old in [f for f in store if f < frame - 300]:
                 del store[old]
         return order
