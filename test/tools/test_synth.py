@@ -113,6 +113,26 @@ def test_turn_and_occluder(tmp_path):
     assert hidden_lower and not hidden_head
 
 
+def test_occluder_hides_the_legs_for_a_stretch_only(tmp_path):
+    """The box stands in front of half of the walk (synth.OCCLUDED_SHARE): both feet are hidden for a
+    stretch and seen before and after it, so a tracker has the legs' phase going in (the box was once as
+    wide as a 40-frame walk, which hid the legs throughout)."""
+    assert synth(tmp_path, "--occluder", "--frames", "40", "--seed", "1") == 0
+    cameras, frames, stamps, markers, _, masks = read(tmp_path)
+    hidden = []
+    for k, msg in enumerate(masks[-len(markers):]):
+        mask = np.frombuffer(bytes(msg.data), np.uint8).reshape(msg.height, msg.width)
+        count = 0
+        for name in ("left_ankle", "right_ankle"):
+            (u, v), _ = cameras[0].project(markers[k, M[name]])
+            u, v = int(round(u)), int(round(v))
+            count += 0 <= u < mask.shape[1] and 0 <= v < mask.shape[0] and mask[v, u] == 255
+        hidden.append(count == 2)
+    hidden = np.array(hidden)
+    assert not hidden[:5].any() and not hidden[-5:].any()
+    assert 0.15 < hidden.mean() < 0.45
+
+
 def test_from_mocap(tmp_path):
     assert synth(tmp_path, "--from-mocap", str(MOCAP_DIR / "07.asf"), str(MOCAP_DIR / "07_01.amc"),
                  "--rate", "60") == 0
@@ -137,6 +157,7 @@ def test_from_mocap(tmp_path):
 @pytest.mark.parametrize(
     ("args", "message"),
     [(["--cameras", "5"], "--cameras must be 1..4"), (["--turn", "120"], "--turn must be within"),
+     (["--occluder", "-0.5"], "--occluder SHARE must lie in 0-2"),
      (["--from-mocap", "missing.asf", "missing.amc"], "missing.asf"),
      (["--from-mocap", "a.asf", "b.amc", "--turn", "30"], "takes --variant"),
      (["--person", "dressed"], "need a motion capture walk"), (["--variant", "u-turn"], "need a motion capture walk"),

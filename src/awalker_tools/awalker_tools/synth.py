@@ -39,6 +39,7 @@ ROOM_HALF_SIZE = 8.0   # m: the room spans [-8, 8] x [-8, 8]
 ROOM_HEIGHT = 4.0      # m
 TEXEL = 0.01           # m per texture pixel
 FIRST_STAMP_NS = 1_700_000_000_000_000_000
+OCCLUDED_SHARE = 0.5   # --occluder's default: the share of the pelvis's path behind the box (``make_occluder``)
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,7 @@ class SynthConfig:
     step_length: float = 0.7
     speed_change: bool = False       # slow down to 65 % of the speed over the middle third
     turn_deg: float = 0.0            # turn left (+) or right (-) by this much over the middle third
-    occluder: bool = False
+    occluder: float = 0.0            # > 0: a box hides the lower body over this share of the walk (make_occluder)
     mocap: tuple[Path, Path] | None = None
     width: int = 640
     height: int = 480
@@ -80,6 +81,8 @@ class SynthConfig:
             raise InputError(f"synth: --rate must be 30 or 60 Hz, got {self.rate:g}")
         if self.frames < 2 or self.background_frames < 0:
             raise InputError(f"synth: need --frames >= 2 (got {self.frames}) and background frames >= 0")
+        if not (np.isfinite(self.occluder) and 0.0 <= self.occluder <= 2.0):
+            raise InputError(f"synth: --occluder SHARE must lie in 0-2 (of the walk's path), got {self.occluder:g}")
         if abs(self.turn_deg) > 90:
             raise InputError(f"synth: --turn must be within [-90, 90] degrees, got {self.turn_deg:g}")
         if self.mocap is not None and (self.speed_change or self.turn_deg):
@@ -260,15 +263,21 @@ class Occluder:
         return np.where(hit, np.maximum(t_near, 0.0), np.inf)
 
 
-def make_occluder(motion: Motion, camera: Camera) -> Occluder:
-    """A 0.65 m high, 1.6 m wide box between ``camera`` and the middle of the walk, hiding the
-    lower body for about a third of the sequence."""
-    mid = motion.markers[len(motion.markers) // 2, _M["pelvis"]]
+def make_occluder(motion: Motion, camera: Camera, hidden_share: float) -> Occluder:
+    """A 0.65 m high box 1 m in front of the middle of the walk (towards ``camera``), as wide as
+    ``hidden_share`` of the pelvis's path seen from the camera: some of the legs are behind it over about that
+    share of the sequence, both feet on about a fifth of a 40-frame walk's frames (a third of a 90-frame
+    one), and they are seen before and after it, as in the paper's occlusion experiment (Experiment 2)."""
+    pelvis = motion.markers[:, _M["pelvis"]]
+    mid = pelvis[len(pelvis) // 2]
     towards = camera.position[:2] - mid[:2]
-    towards /= np.linalg.norm(towards)
+    reach = float(np.linalg.norm(towards))
+    towards /= reach
     centre = mid[:2] + 1.0 * towards
     side = np.array([-towards[1], towards[0]])
-    corners = np.array([centre + 0.8 * side + 0.15 * towards, centre - 0.8 * side - 0.15 * towards])
+    path = abs(float((pelvis[-1, :2] - pelvis[0, :2]) @ side))       # m across the view, at the walk's depth
+    half_width = 0.5 * hidden_share * path * (reach - 1.0) / reach     # the same share, at the box's depth
+    corners = np.array([centre + half_width * side + 0.15 * towards, centre - half_width * side - 0.15 * towards])
     lower = np.append(corners.min(axis=0), 0.0)
     upper = np.append(corners.max(axis=0), 0.65)
     return Occluder(lower, upper)
@@ -464,7 +473,7 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
     rooms = [render_room(cam, textures) for cam in cameras]
     occluders = {}
     if config.occluder:
-        box = make_occluder(motion, cameras[0])
+        box = make_occluder(motion, cameras[0], config.occluder)
         for cam, room in zip(cameras, rooms):
             depth = box.depth(cam)
             seen = np.isfinite(depth)

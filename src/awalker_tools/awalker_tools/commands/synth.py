@@ -5,7 +5,7 @@ import argparse
 from pathlib import Path
 
 from awalker_tools.person_render import CARRIED
-from awalker_tools.synth import VARIANTS, SynthConfig, synthesise
+from awalker_tools.synth import OCCLUDED_SHARE, VARIANTS, SynthConfig, synthesise
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -29,7 +29,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--speed-change", action="store_true", help="slow down over the middle third")
     parser.add_argument("--turn", type=float, default=0.0, metavar="DEG",
                         help="turn by DEG degrees (left +, at most 90) over the middle third")
-    parser.add_argument("--occluder", action="store_true", help="a box hiding the lower body for a stretch")
+    parser.add_argument("--occluder", nargs="?", type=float, const=OCCLUDED_SHARE, default=0.0, metavar="SHARE",
+                        help="a box hiding the lower body for a stretch: in front of SHARE of the walk's path "
+                             f"(default {OCCLUDED_SHARE:g}: both feet hidden on about a fifth of a 40-frame walk; "
+                             "over 1: hidden throughout)")
     parser.add_argument("--from-mocap", nargs=2, type=Path, metavar=("ASF", "AMC"),
                         help="drive the body with a CMU motion capture walk instead of the walker")
     parser.add_argument("--person", choices=("model", "dressed"), default="model",

@@ -24,12 +24,12 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   of where the counted ones put the person now (the last of them, moved on at their velocity over
   ``track_window_s``), unless none has counted for ``reach_reset_s``. Legs hidden behind a box put the
   blob's lowest row on the box's top edge, metres behind the person, and with the camera near head
-  height the blob still looks as tall as the body (our lower-body occluder render: 3.4 m behind, ratio
-  under 1.10); people do not jump, so those rows are not counted (for up to ``reach_reset_s``: legs
+  height the blob still looks as tall as the body (a box in front of a whole 40-frame walk, ``synth
+  --occluder 1.2``: 3.4 m behind, ratio under 1.10); people do not jump, so those rows are not counted (for up to ``reach_reset_s``: legs
   hidden longer, or a track that started on hidden legs, count again). Where the camera has an occlusion
   mask (something known to stand in front of the person), a blob whose lowest row lies on it does not
-  count either (``detection.ends_on_occlusion``): our lower-body occluder render hides the legs for the whole
-  run, so its feet rows are wrong from the first frame and the reach test cannot tell. When lost, a
+  count either (``detection.ends_on_occlusion``): where the legs are hidden from the first frame (that
+  render), the feet rows are wrong from the start and the reach test cannot tell. When lost, a
   fraction of the particles (the lowest weights) are re-seeded around the detected ground position,
   with the heading and speed of the detections' recent ground track (when it moves), then the image
   likelihood decides. At most once per ``cooldown_s``.
