@@ -91,11 +91,26 @@ def test_features_message_roundtrip():
     out = [extractor.process(f) for f in frames][-1]
     msg = features_to_msg(out, header(5, "cam_optical_frame"), "cam")
     back = features_from_msg(msg)
+    assert out.occlusion is None and back.occlusion is None and len(msg.occlusion_map) == 0   # no mask, none sent
     assert back.classes == out.classes and back.downsample == 2 and back.map_shape == out.map_shape
     assert np.array_equal(back.llr, out.llr)
+    # an occlusion mask: its map pixels travel with the ratios (which are 0 there)
+    mask = np.zeros(frames[-1].shape[:2], np.uint8)
+    mask[-9:, :20] = 255
+    masked = FeatureExtractor(FeatureConfig(background_frames=3, downsample=2, flow=FlowConfig(cell_size=8)))
+    out_masked = [masked.process(f, occlusion_mask=mask) for f in frames][-1]
+    back_masked = features_from_msg(features_to_msg(out_masked, header(5, "cam_optical_frame"), "cam"))
+    h, w = out_masked.map_shape
+    assert back_masked.occlusion.shape == (h, w) and np.array_equal(back_masked.occlusion, out_masked.occlusion)
+    assert back_masked.occlusion[-5:, :10].all() and not back_masked.occlusion[: h - 5].any()
+    assert not back_masked.llr[:, back_masked.occlusion].any()
     assert np.array_equal(back.flow.flow, out.flow.flow) and np.array_equal(back.flow.valid, out.flow.valid)
     assert np.array_equal(back.flow.covariance, out.flow.covariance)
     assert np.array_equal(back.flow.centers, out.flow.centers) and back.flow.cell_size == 8
+    msg.occlusion_map = [0, 1, 0]
+    with pytest.raises(InputError, match="occlusion map of 3 pixels"):
+        features_from_msg(msg)
+    msg.occlusion_map = []
     msg.log_likelihood_ratio = msg.log_likelihood_ratio[:-1]
     with pytest.raises(InputError, match="ratios"):
         features_from_msg(msg)

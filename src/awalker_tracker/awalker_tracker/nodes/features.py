@@ -124,6 +124,8 @@ def features_to_msg(features: FrameFeatures, hdr: Header, camera_name: str) -> I
                         image_height=int(features.image_height), part_classes=list(features.classes),
                         map_width=w, map_height=h, downsample=int(features.downsample), flow=grid)
     msg.log_likelihood_ratio = _floats(features.llr)
+    if features.occlusion is not None:
+        msg.occlusion_map = array.array("B", np.ascontiguousarray(features.occlusion, np.uint8).tobytes())
     return msg
 
 
@@ -146,7 +148,12 @@ def features_from_msg(msg: ImageFeatures) -> FrameFeatures:
         raise InputError(f"{where}: NaN or infinity in the maps or the flow grid")
     flow = FlowGrid(np.stack(arrays[:2], -1).reshape(rows, cols, 2), np.stack(arrays[2:], -1).reshape(rows, cols, 2),
                     cov.reshape(rows, cols, 2, 2), valid.reshape(rows, cols) > 0, int(g.cell_size))
-    return FrameFeatures(classes, llr.reshape(len(classes), h, w), d, int(msg.image_width), int(msg.image_height), flow)
+    occluded = np.asarray(msg.occlusion_map, np.uint8)
+    if occluded.size not in (0, h * w):
+        raise InputError(f"{where}: occlusion map of {occluded.size} pixels for a {h} x {w} map (expected {h * w} or none)")
+    occlusion = occluded.reshape(h, w) > 0 if occluded.size else None
+    return FrameFeatures(classes, llr.reshape(len(classes), h, w), d, int(msg.image_width), int(msg.image_height), flow,
+                         occlusion)
 
 
 # ---- node -----------------------------------------------------------------------------------

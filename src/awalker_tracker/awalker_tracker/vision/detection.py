@@ -108,13 +108,15 @@ def blob_near(blobs: list[PersonBlob], camera: Camera, point: np.ndarray) -> Per
 
 def ends_on_occlusion(blob: PersonBlob, features: FrameFeatures, rows: int = 2, fraction: float = 0.5) -> bool:
     """Whether most (``fraction``) of the map pixels just under ``blob`` (``rows`` rows, within its columns)
-    lie under the camera's occlusion mask (``FrameFeatures.occluded``): the blob's lowest row is then the top
-    edge of something known to stand in front of the person, not their feet."""
+    lie under the camera's occlusion mask (``FrameFeatures.occlusion``; none: False): the blob's lowest row is
+    then the top edge of something known to stand in front of the person, not their feet."""
+    if features.occlusion is None:
+        return False
     d = features.downsample
     u0, _, u1, v1 = blob.box
     bottom = int(round((v1 + 0.5) / d)) - 1
     first, last = int(round((u0 + 0.5) / d)), int(round((u1 + 0.5) / d))
-    below = features.occluded()[bottom + 1: bottom + 1 + rows, first:last]
+    below = features.occlusion[bottom + 1: bottom + 1 + rows, first:last]
     return bool(below.size and below.mean() >= fraction)
 
 

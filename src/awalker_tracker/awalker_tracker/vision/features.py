@@ -75,7 +75,8 @@ class FeatureConfig:
 
 @dataclass(frozen=True, eq=False)
 class FrameFeatures:
-    """Features of one camera frame: llr (C, h, w) float32 per ``classes``; flow grid; sizes in px."""
+    """Features of one camera frame: llr (C, h, w) float32 per ``classes``; flow grid; sizes in px;
+    ``occlusion`` (h, w) bool, the map pixels under the camera's occlusion mask (None: no mask)."""
 
     classes: tuple[str, ...]
     llr: np.ndarray
@@ -83,16 +84,11 @@ class FrameFeatures:
     image_width: int
     image_height: int
     flow: FlowGrid
+    occlusion: np.ndarray | None = None
 
     @property
     def map_shape(self) -> tuple[int, int]:
         return int(self.llr.shape[1]), int(self.llr.shape[2])
-
-    def occluded(self) -> np.ndarray:
-        """(h, w) bool: map pixels whose ratios are exactly 0 in every class: those under the occlusion mask,
-        all of them while the background is learned, and now and then a pixel unlike both models (both
-        likelihoods at the outlier floor: scattered single pixels, where a mask covers regions)."""
-        return np.all(self.llr == 0.0, axis=0)
 
 
 def occlusion_map_mask(mask: np.ndarray | None, downsample: int, shape: tuple[int, int]) -> np.ndarray | None:
@@ -234,4 +230,4 @@ class FeatureExtractor:
             flow = FlowGrid(flow.centers, flow.flow, flow.covariance, flow.valid & ~cell_mask, flow.cell_size)
         self._prev_grey = grey
         self.frame_index += 1
-        return FrameFeatures(self.classes, llr, cfg.downsample, width, height, flow)
+        return FrameFeatures(self.classes, llr, cfg.downsample, width, height, flow, map_mask)
