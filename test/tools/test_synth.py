@@ -32,6 +32,13 @@ def read(out):
     return cameras, frames, stamps, markers, start, masks
 
 
+def on_mask(camera, mask: np.ndarray, point: np.ndarray) -> bool:
+    """Whether world ``point`` (3,) projects onto an occluded pixel (255) of ``mask`` (H, W)."""
+    (u, v), _ = camera.project(point)
+    u, v = int(round(u)), int(round(v))
+    return bool(0 <= u < mask.shape[1] and 0 <= v < mask.shape[0] and mask[v, u] == 255)
+
+
 def test_synth_is_complete_deterministic_and_lines_up(tmp_path):
     assert synth(tmp_path / "a", "--seed", "3", "--cameras", "2") == 0
     assert synth(tmp_path / "b", "--seed", "3", "--cameras", "2") == 0
@@ -102,14 +109,9 @@ def test_turn_and_occluder(tmp_path):
     mask = np.frombuffer(bytes(masks[0].data), np.uint8).reshape(masks[0].height, masks[0].width)
     assert set(np.unique(mask)) == {0, 255}
     # Some frame has a knee or ankle behind the occluder, none has the head behind it.
-    hidden_lower, hidden_head = False, False
-    for k in range(markers.shape[0]):
-        for name in ("left_ankle", "right_ankle", "left_knee", "right_knee", "head"):
-            (u, v), _ = cameras[0].project(markers[k, M[name]])
-            u, v = int(round(u)), int(round(v))
-            inside = 0 <= u < mask.shape[1] and 0 <= v < mask.shape[0] and mask[v, u] == 255
-            hidden_head |= inside and name == "head"
-            hidden_lower |= inside and name != "head"
+    lower = ("left_ankle", "right_ankle", "left_knee", "right_knee")
+    hidden_lower = any(on_mask(cameras[0], mask, markers[k, M[n]]) for k in range(len(markers)) for n in lower)
+    hidden_head = any(on_mask(cameras[0], mask, markers[k, M["head"]]) for k in range(len(markers)))
     assert hidden_lower and not hidden_head
 
 
@@ -122,12 +124,7 @@ def test_occluder_hides_the_legs_for_a_stretch_only(tmp_path):
     hidden = []
     for k, msg in enumerate(masks[-len(markers):]):
         mask = np.frombuffer(bytes(msg.data), np.uint8).reshape(msg.height, msg.width)
-        count = 0
-        for name in ("left_ankle", "right_ankle"):
-            (u, v), _ = cameras[0].project(markers[k, M[name]])
-            u, v = int(round(u)), int(round(v))
-            count += 0 <= u < mask.shape[1] and 0 <= v < mask.shape[0] and mask[v, u] == 255
-        hidden.append(count == 2)
+        hidden.append(all(on_mask(cameras[0], mask, markers[k, M[n]]) for n in ("left_ankle", "right_ankle")))
     hidden = np.array(hidden)
     assert not hidden[:5].any() and not hidden[-5:].any()
     assert 0.15 < hidden.mean() < 0.45
