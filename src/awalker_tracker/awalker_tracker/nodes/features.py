@@ -108,6 +108,11 @@ def _floats(values: np.ndarray) -> array.array:
     return out
 
 
+def _flags(values: np.ndarray) -> array.array:
+    """uint8 array.array (0/1) of a bool array, row-major."""
+    return array.array("B", np.ascontiguousarray(values, np.uint8).tobytes())
+
+
 def features_to_msg(features: FrameFeatures, hdr: Header, camera_name: str) -> ImageFeatures:
     """awalker_msgs/ImageFeatures of one frame (``hdr``: image stamp, optical frame id)."""
     flow = features.flow
@@ -118,14 +123,14 @@ def features_to_msg(features: FrameFeatures, hdr: Header, camera_name: str) -> I
     grid.flow_x = _floats(flow.flow[..., 0])
     grid.flow_y = _floats(flow.flow[..., 1])
     grid.covariance = _floats(flow.covariance)
-    grid.valid = array.array("B", flow.valid.astype(np.uint8).tobytes())
+    grid.valid = _flags(flow.valid)
     h, w = features.map_shape
     msg = ImageFeatures(header=hdr, camera_name=camera_name, image_width=int(features.image_width),
                         image_height=int(features.image_height), part_classes=list(features.classes),
                         map_width=w, map_height=h, downsample=int(features.downsample), flow=grid)
     msg.log_likelihood_ratio = _floats(features.llr)
     if features.occlusion is not None:
-        msg.occlusion_map = array.array("B", np.ascontiguousarray(features.occlusion, np.uint8).tobytes())
+        msg.occlusion_map = _flags(features.occlusion)
     return msg
 
 
