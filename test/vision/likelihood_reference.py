@@ -99,8 +99,8 @@ def _silhouettes(parts: tuple[PartShape, ...], segments: BodySegments, camera: C
 
 
 def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, prev_segments: BodySegments,
-                          camera: Camera, features: FrameFeatures, occlusion_mask: np.ndarray | None = None,
-                          config: LikelihoodConfig = LikelihoodConfig(), silhouettes: _Silhouettes | None = None,
+                          camera: Camera, features: FrameFeatures, config: LikelihoodConfig = LikelihoodConfig(),
+                          silhouettes: _Silhouettes | None = None,
                           prev_silhouettes: _Silhouettes | None = None) -> np.ndarray:
     """Log-likelihood (N,) of one camera's features (see the module docstring).
 
@@ -111,8 +111,8 @@ def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, 
     _check_inputs(parts, segments, camera, features)
     n = segments.origin.shape[0]
     sil = _silhouettes(parts, segments, camera) if silhouettes is None else silhouettes
-    appearance = _AppearanceTable(parts, features, occlusion_mask)
-    flow = _FlowTable(features.flow, occlusion_mask) if config.flow_weight > 0 else None
+    appearance = _AppearanceTable(parts, features)
+    flow = _FlowTable(features.flow) if config.flow_weight > 0 else None
     if flow is not None and not flow.any:
         flow = None
     prev = None
@@ -268,14 +268,12 @@ def _hidden_rows(parts: tuple[PartShape, ...], sil: _Silhouettes, cx: np.ndarray
 
 def reference_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments,
                              prev_segments: BodySegments | None, cameras: list[Camera],
-                             features: list[FrameFeatures], occlusion_masks: list[np.ndarray | None] | None = None,
-                             config: LikelihoodConfig = LikelihoodConfig()) -> np.ndarray:
+                             features: list[FrameFeatures], config: LikelihoodConfig = LikelihoodConfig()) -> np.ndarray:
     """log p(z_t | s_t) (N,) summed over cameras (eq. 12), computed with numpy."""
-    masks = list(occlusion_masks) if occlusion_masks else [None] * len(cameras)
     prev = segments if prev_segments is None else prev_segments
     total = np.zeros(len(segments))
-    for camera, feats, mask in zip(cameras, features, masks):
+    for camera, feats in zip(cameras, features):
         sil = _silhouettes(parts, segments, camera)
         prev_sil = sil if prev is segments else None
-        total += camera_log_likelihood(parts, segments, prev, camera, feats, mask, config, sil, prev_sil)
+        total += camera_log_likelihood(parts, segments, prev, camera, feats, config, sil, prev_sil)
     return total

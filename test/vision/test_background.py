@@ -151,6 +151,34 @@ def test_extractor_learns_robustly_when_no_background_frames_are_known():
     assert not out.flow.valid[:, : out.flow.shape[1] // 2].any() and out.flow.valid[:, out.flow.shape[1] // 2 + 1 :].any()
 
 
+
+def test_occluded_masks_exactly_the_touched_map_pixels_and_flow_cells():
+    """One occluded pixel occludes its whole map pixel (downsample x downsample) and its flow cell; the
+    rest of the features pass unchanged, and no mask leaves the features as they are."""
+    from awalker_tracker.vision.features import FrameFeatures, occluded
+    from awalker_tracker.vision.flow import FlowGrid, grid_centers
+
+    rng = np.random.default_rng(9)
+    height, width, downsample, cell = 48, 64, 4, 8
+    llr = rng.normal(0.0, 2.0, (4, height // downsample, width // downsample)).astype(np.float32)
+    rows, cols = height // cell, width // cell
+    flow = FlowGrid(grid_centers(rows, cols, cell), rng.normal(size=(rows, cols, 2)).astype(np.float32),
+                    np.tile(np.eye(2, dtype=np.float32), (rows, cols, 1, 1)), np.ones((rows, cols), bool), cell)
+    features = FrameFeatures(("head", "torso", "legs", "feet"), llr, downsample, width, height, flow)
+    assert occluded(features, None) is features
+    mask = np.zeros((height, width), np.uint8)
+    mask[21, 45] = 255                       # map pixel (5, 11), flow cell (2, 5)
+    out = occluded(features, mask)
+    hidden = np.zeros(llr.shape[1:], bool)
+    hidden[5, 11] = True
+    assert np.array_equal(out.occlusion, hidden)
+    assert not out.llr[:, 5, 11].any()
+    assert np.array_equal(out.llr[:, ~hidden], llr[:, ~hidden])
+    invalid = np.zeros((rows, cols), bool)
+    invalid[2, 5] = True
+    assert np.array_equal(out.flow.valid, ~invalid)
+    assert np.array_equal(out.flow.flow, flow.flow)
+
 def test_lighting_changes_are_divided_out():
     """The room brightens by 15-35 % with a tint after the background frames: with gain compensation the
     background stays background and the walker stands out; without it the background does not (a

@@ -8,7 +8,7 @@ import pytest
 
 from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import BodySegments, PartShape
-from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor, FrameFeatures
+from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor, FrameFeatures, occluded
 from awalker_tracker.vision.flow import FlowConfig, FlowGrid
 from awalker_tracker.vision.likelihood import LikelihoodConfig, log_likelihood, occluder_table
 from vision_scene import (
@@ -112,7 +112,7 @@ def test_occlusion_mask_removes_its_pixels_and_cells(scene):
     mask = np.zeros((cam.height, cam.width), np.uint8)
     mask[int(knee_v) - 12:, :] = 255
     free = log_likelihood(BODY.parts, batch, prev, cameras[:1], features[:1])
-    masked = log_likelihood(BODY.parts, batch, prev, cameras[:1], features[:1], [mask])
+    masked = log_likelihood(BODY.parts, batch, prev, cameras[:1], [occluded(features[0], mask)])
     assert free[0] - free[1] > 1.0                   # visible: bending the knee is detected
     assert masked[0] == pytest.approx(masked[1], abs=1e-9)   # under the mask: contributes nothing
 
@@ -149,8 +149,6 @@ def test_bad_inputs(scene):
     seg = poses[FRAME].segments()
     with pytest.raises(ValueError, match="cameras"):
         log_likelihood(BODY.parts, seg, seg, cameras, features[:1])
-    with pytest.raises(ValueError, match="occlusion masks"):
-        log_likelihood(BODY.parts, seg, seg, cameras, features, [None])
     with pytest.raises(ValueError, match="parts"):
         log_likelihood(BODY.parts[:3], seg, seg, cameras, features)
     small = dataclasses.replace(cameras[0], width=cameras[0].width // 2, height=cameras[0].height // 2)

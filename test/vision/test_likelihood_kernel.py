@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from awalker_tracker.model.body import BodySegments
 from awalker_tracker.vision.camera import Camera
-from awalker_tracker.vision.features import PART_CLASSES, FrameFeatures
+from awalker_tracker.vision.features import PART_CLASSES, FrameFeatures, occluded
 from awalker_tracker.vision.flow import FlowGrid, grid_centers
 from awalker_tracker.vision.likelihood import (
     LikelihoodConfig,
@@ -127,22 +127,23 @@ def test_compiled_likelihood_matches_numpy_reference(case):
     rng = np.random.default_rng(100 + case)
     camera = make_camera(distortion, skew)
     features = random_features(rng, with_flow)
-    mask = occlusion_mask(rng) if with_mask else None
+    if with_mask:
+        features = occluded(features, occlusion_mask(rng))
     batch = concat(random_bodies(camera, 1500, rng), walking_bodies(300, rng))
     prev = moved(batch, rng)
-    compiled = log_likelihood(BODY.parts, batch, prev, [camera], [features], [mask], config=config)
-    reference = reference_log_likelihood(BODY.parts, batch, prev, [camera], [features], [mask], config=config)
+    compiled = log_likelihood(BODY.parts, batch, prev, [camera], [features], config=config)
+    reference = reference_log_likelihood(BODY.parts, batch, prev, [camera], [features], config=config)
     assert_agrees(compiled, reference)
     # the test bodies do exercise the cases: the head-top term, behind the camera, outside the image, hidden rows
     if config.head_top_weight > 0 and config.appearance_weight > 0:
-        without = log_likelihood(BODY.parts, batch, prev, [camera], [features], [mask],
+        without = log_likelihood(BODY.parts, batch, prev, [camera], [features],
                                  config=dataclasses.replace(config, head_top_weight=0.0))
         assert np.mean(compiled < without - 1e-6) > 0.05 and np.all(compiled <= without + 1e-6)
     axes = _project_segments(BODY.parts, batch, _CameraArrays(camera))
     assert (axes[..., 4:] <= 0).any(axis=(1, 2)).mean() > 0.03
     assert ((axes[..., 0] > WIDTH) & (axes[..., 4] > 0)).any(axis=1).mean() > 0.03
     if config.self_occlusion:
-        no_occlusion = log_likelihood(BODY.parts, batch, prev, [camera], [features], [mask],
+        no_occlusion = log_likelihood(BODY.parts, batch, prev, [camera], [features],
                                       config=dataclasses.replace(config, self_occlusion=False))
         assert (no_occlusion != compiled).mean() > 0.2
 
@@ -152,15 +153,14 @@ def test_no_previous_poses_and_several_cameras():
     rng = np.random.default_rng(7)
     cameras = [make_camera("none"), make_camera("five"), make_camera("eight", 0.5)]
     features = [random_features(rng) for _ in cameras]
-    masks = [None, occlusion_mask(rng), None]
+    features[1] = occluded(features[1], occlusion_mask(rng))
     batch = concat(random_bodies(cameras[0], 600, rng), walking_bodies(200, rng))
-    compiled = log_likelihood(BODY.parts, batch, None, cameras, features, masks)
-    reference = reference_log_likelihood(BODY.parts, batch, None, cameras, features, masks)
+    compiled = log_likelihood(BODY.parts, batch, None, cameras, features)
+    reference = reference_log_likelihood(BODY.parts, batch, None, cameras, features)
     assert_agrees(compiled, reference)
     prev = moved(batch, rng)
-    per_camera = sum(camera_log_likelihood(BODY.parts, batch, prev, c, f, m)
-                     for c, f, m in zip(cameras, features, masks))
-    np.testing.assert_allclose(log_likelihood(BODY.parts, batch, prev, cameras, features, masks), per_camera,
+    per_camera = sum(camera_log_likelihood(BODY.parts, batch, prev, c, f) for c, f in zip(cameras, features))
+    np.testing.assert_allclose(log_likelihood(BODY.parts, batch, prev, cameras, features), per_camera,
                                rtol=1e-12, atol=1e-12)
 
 

@@ -542,8 +542,7 @@ def marker_likelihood(sigma_m: float = 0.03, names: tuple[str, ...] = MARKER_NAM
 class ImageObservation:
     """Image features of one frame from every camera (camera order of the likelihood's cameras)."""
 
-    features: tuple[Any, ...]                    # vision.features.FrameFeatures per camera
-    occlusion_masks: tuple[np.ndarray | None, ...] = ()
+    features: tuple[Any, ...]     # vision.features.FrameFeatures per camera (occlusion masks applied)
 
 
 def image_likelihood(body: BodyDescription, cameras: list[Any],
@@ -561,8 +560,7 @@ def image_likelihood(body: BodyDescription, cameras: list[Any],
 
     def loglik(prev: TrackerStates | None, states: TrackerStates, obs: ImageObservation) -> np.ndarray:
         prev_segments = states.pose.segments if prev is None else prev.pose.segments
-        masks = list(obs.occlusion_masks) or [None] * len(cameras)
-        return log_likelihood(parts, states.pose.segments, prev_segments, cameras, list(obs.features), masks,
+        return log_likelihood(parts, states.pose.segments, prev_segments, cameras, list(obs.features),
                               config=config, memo=memo) / len(cameras)
 
     return loglik

@@ -110,6 +110,21 @@ def occlusion_cell_mask(mask: np.ndarray | None, rows: int, cols: int, size: int
     return m[: rows * size, : cols * size].reshape(rows, size, cols, size).any(axis=(1, 3))
 
 
+def occluded(features: FrameFeatures, mask: np.ndarray | None) -> FrameFeatures:
+    """``features`` with a full-resolution occlusion mask (H, W; nonzero = occluded) applied: the map
+    pixels it touches get ratio 0 and are marked in ``occlusion``, the flow cells it touches are invalid.
+    The one place the mask is applied (the likelihood reads the features as they come)."""
+    map_mask = occlusion_map_mask(mask, features.downsample, features.map_shape)
+    if map_mask is None:
+        return features
+    flow = features.flow
+    cell_mask = occlusion_cell_mask(mask, *flow.shape, flow.cell_size)
+    if cell_mask.any():
+        flow = FlowGrid(flow.centers, flow.flow, flow.covariance, flow.valid & ~cell_mask, flow.cell_size)
+    return FrameFeatures(features.classes, np.where(map_mask[None], np.float32(0), features.llr),
+                         features.downsample, features.image_width, features.image_height, flow, map_mask)
+
+
 class FeatureExtractor:
     """Streaming feature extraction for one camera (see the module docstring)."""
 
@@ -167,7 +182,6 @@ class FeatureExtractor:
         height, width = image.shape[:2]
         grey = to_grey(image)
         m = measurements(image, cfg.downsample)
-        map_mask = occlusion_map_mask(occlusion_mask, cfg.downsample, m.shape[:2])
         if self.background is not None and self.background.shape != m.shape[:2]:
             raise ValueError(f"frame size {width}x{height} differs from the first frames'")
         if cfg.compensate_gain:
@@ -218,16 +232,11 @@ class FeatureExtractor:
                 self.background = self.background.adapt(m, cfg.adapt_rate)
         else:
             llr = np.zeros((len(self.classes),) + m.shape[:2], np.float32)
-        if map_mask is not None:
-            llr[:, map_mask] = 0.0
         # ---- flow ------------------------------------------------------------------------
         if self._prev_grey is None or self._prev_grey.shape != grey.shape:
             flow = FlowGrid.empty(height, width, cfg.flow.cell_size)
         else:
             flow = self._flow.estimate(self._prev_grey, grey)
-        cell_mask = occlusion_cell_mask(occlusion_mask, *flow.shape, cfg.flow.cell_size)
-        if cell_mask is not None:
-            flow = FlowGrid(flow.centers, flow.flow, flow.covariance, flow.valid & ~cell_mask, flow.cell_size)
         self._prev_grey = grey
         self.frame_index += 1
-        return FrameFeatures(self.classes, llr, cfg.downsample, width, height, flow, map_mask)
+        return occluded(FrameFeatures(self.classes, llr, cfg.downsample, width, height, flow), occlusion_mask)

@@ -37,8 +37,9 @@ grid cell it falls in: log p(v | u) - log p(v | 0), i.e. relative to the backgro
 zero-motion model (background cells' terms are common to all states and cancel), averaged per
 part like the appearance term.
 
-Visibility: points outside the image, behind the camera, under the occlusion mask (ratio 0,
-flow cell invalid) or hidden by a nearer part are dropped. Self-occlusion is an analytic
+Visibility: points outside the image, behind the camera, under the occlusion mask (applied to the
+features beforehand, ``vision.features.occluded``: ratio 0, flow cell invalid) or hidden by a nearer
+part are dropped. Self-occlusion is an analytic
 per-state test between part pairs that can overlap (``occluder_table``: the legs and feet of
 one side against those of the other side, the upper legs against the torso): a row of
 sample points is hidden when its axis point lies within the occluder's projected band and
@@ -64,7 +65,7 @@ from awalker_tracker.blocks import over_blocks
 from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import BodySegments, PartShape
 from awalker_tracker.vision.camera import Camera
-from awalker_tracker.vision.features import FrameFeatures, occlusion_cell_mask, occlusion_map_mask
+from awalker_tracker.vision.features import FrameFeatures
 from awalker_tracker.vision.flow import STUDENT_T_DOF, FlowGrid
 
 
@@ -422,8 +423,7 @@ def _project_segments(parts: tuple[PartShape, ...], segments: BodySegments, came
 
 
 def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, prev_segments: BodySegments,
-                          camera: Camera, features: FrameFeatures, occlusion_mask: np.ndarray | None = None,
-                          config: LikelihoodConfig = LikelihoodConfig(), silhouettes: np.ndarray | None = None,
+                          camera: Camera, features: FrameFeatures, config: LikelihoodConfig = LikelihoodConfig(), silhouettes: np.ndarray | None = None,
                           prev_silhouettes: np.ndarray | None = None) -> np.ndarray:
     """Log-likelihood (N,) of one camera's features (see the module docstring).
 
@@ -438,8 +438,8 @@ def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, 
     axes = np.empty((n, n_parts, 6)) if silhouettes is None else silhouettes
     if axes.shape != (n, n_parts, 6) or axes.dtype != np.float64 or not axes.flags.c_contiguous:
         raise ValueError(f"likelihood: silhouettes must be a C-contiguous float64 array of shape {(n, n_parts, 6)}")
-    appearance = _AppearanceTable(parts, features, occlusion_mask)
-    flow = _FlowTable(features.flow, occlusion_mask) if config.flow_weight > 0 else None
+    appearance = _AppearanceTable(parts, features)
+    flow = _FlowTable(features.flow) if config.flow_weight > 0 else None
     if flow is not None and not flow.any:
         flow = None
     prev_axes = axes                         # not read without flow
@@ -478,11 +478,8 @@ class _AppearanceTable:
     """Log-likelihood-ratio maps with a zero border (indices clamped into it contribute nothing),
     flattened (float32), and each part's class offset into them."""
 
-    def __init__(self, parts: tuple[PartShape, ...], features: FrameFeatures, occlusion_mask: np.ndarray | None):
+    def __init__(self, parts: tuple[PartShape, ...], features: FrameFeatures):
         llr = features.llr
-        mask_map = occlusion_map_mask(occlusion_mask, features.downsample, features.map_shape)
-        if mask_map is not None:
-            llr = np.where(mask_map[None], np.float32(0), llr)
         self.h, self.w = features.map_shape
         padded = np.zeros((len(features.classes), self.h + 2, self.w + 2), np.float32)
         padded[:, 1:-1, 1:-1] = llr
@@ -494,16 +491,13 @@ class _AppearanceTable:
 
 class _FlowTable:
     """Per-cell measured flow (px/frame), inverse covariance (1/px^2) and log(1 + e0^2) (the
-    zero-motion term), flat float32 arrays with a trailing 'invalid' cell; cells under the
-    occlusion mask are invalid."""
+    zero-motion term), flat float32 arrays with a trailing 'invalid' cell (the grid's invalid cells,
+    among them those under an occlusion mask, read as it)."""
 
     EMPTY: "_FlowTable"        # a table without valid cells (the kernel's flow arguments when flow is off)
 
-    def __init__(self, grid: FlowGrid, occlusion_mask: np.ndarray | None):
+    def __init__(self, grid: FlowGrid):
         valid = grid.valid
-        cell_mask = occlusion_cell_mask(occlusion_mask, *grid.shape, grid.cell_size)
-        if cell_mask is not None:
-            valid = valid & ~cell_mask
         self.any = bool(valid.any())
         self.rows, self.cols = grid.shape
         self.inv_cell = 1.0 / grid.cell_size
@@ -521,28 +515,24 @@ class _FlowTable:
         self.valid = np.append(valid.reshape(-1), False)
 
 
-_FlowTable.EMPTY = _FlowTable(FlowGrid.empty(1, 1, 1), None)
+_FlowTable.EMPTY = _FlowTable(FlowGrid.empty(1, 1, 1))
 
 
 def log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, prev_segments: BodySegments | None,
-                   cameras: list[Camera], features: list[FrameFeatures],
-                   occlusion_masks: list[np.ndarray | None] | None = None,
-                   config: LikelihoodConfig = LikelihoodConfig(), memo: SilhouetteMemo | None = None) -> np.ndarray:
+                   cameras: list[Camera], features: list[FrameFeatures], config: LikelihoodConfig = LikelihoodConfig(),
+                   memo: SilhouetteMemo | None = None) -> np.ndarray:
     """log p(z_t | s_t) (N,) up to a constant, summed over cameras (eq. 12). ``memo`` (optional)
     reuses the previous call's projections when ``prev_segments`` is that call's ``segments``."""
     if len(cameras) != len(features):
         raise ValueError(f"likelihood: {len(cameras)} cameras but {len(features)} feature frames")
-    masks = list(occlusion_masks) if occlusion_masks else [None] * len(cameras)
-    if len(masks) != len(cameras):
-        raise ValueError(f"likelihood: {len(cameras)} cameras but {len(masks)} occlusion masks")
     prev = segments if prev_segments is None else prev_segments
     total = np.zeros(len(segments))
     projected = []
-    for index, (camera, feats, mask) in enumerate(zip(cameras, features, masks)):
+    for index, (camera, feats) in enumerate(zip(cameras, features)):
         _check_inputs(parts, segments, camera, feats)
         axes = np.empty((len(segments), segments.origin.shape[1], 6))
         prev_axes = axes if prev is segments else (memo.lookup(prev, index) if memo is not None else None)
-        total += camera_log_likelihood(parts, segments, prev, camera, feats, mask, config, axes, prev_axes)
+        total += camera_log_likelihood(parts, segments, prev, camera, feats, config, axes, prev_axes)
         projected.append(axes)
     if memo is not None:
         memo.store(segments, projected)
