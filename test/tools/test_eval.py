@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.inference import gait
 from awalker_tools import evaluation
 from awalker_tools.cli import main
 from awalker_tools.evaluation import PoseTrack
@@ -247,6 +248,7 @@ def test_gait_is_compared_over_the_frames_the_estimate_covers():
     result = evaluation.gait_comparison(estimate, truth, summary)["comparison"]
     assert result["true_strikes"] == sum(late < f for f in strikes)
     assert result["matched_strikes"] == result["true_strikes"]
-    # the walker's strikes are taken as the end of a double support: 0.2 x the 0.5 s steps earlier
-    assert result["timing_error_s_median"] == pytest.approx(0.1, abs=1e-9)
-    assert result["timing_bias_s_median"] == pytest.approx(-0.1, abs=1e-9)      # reported early
+    # the walker's strikes are dated late in a double support: WALKER_STRIKE_DELAY x the 0.5 s steps earlier
+    shift = gait.WALKER_STRIKE_DELAY * 0.5
+    assert result["timing_error_s_median"] == pytest.approx(shift, abs=1e-9)
+    assert result["timing_bias_s_median"] == pytest.approx(-shift, abs=1e-9)      # reported early

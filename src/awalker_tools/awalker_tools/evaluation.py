@@ -304,7 +304,7 @@ def track_steps(track: PoseTrack, stance_leg: np.ndarray | None = None,
                 strike_fraction: np.ndarray | None = None) -> list:
     """The steps of a pose track (``inference.gait``): from its stance legs (0 left / 1 right per frame)
     when given (the tracker's own strikes, timed within the frame by ``strike_fraction``, the heel strike
-    a human double support before: ``gait.WALKER_STRIKE_DELAY``), else from its heel markers."""
+    ``gait.WALKER_STRIKE_DELAY`` x the step time before), else from its heel markers."""
     from awalker_tracker.inference import gait
 
     from awalker_tracker.model.body import MARKER_NAMES
