@@ -10,17 +10,19 @@ import numpy as np
 
 from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription, BodyPoseBatch, BodySegments
 from awalker_tracker.model.kinematics import (
+    CHORD_LEAN,
     DOF_NAMES,
     KinematicConfig,
     KinematicState,
     _initial_dofs,
     _initial_leg_scale,
+    _clearance,
     _initial_state,
     _plane_origin,
     leg_angles,
     truncated_normal,
 )
-from awalker_tracker.model.walker import LEFT, WalkerParams, WalkerState
+from awalker_tracker.model.walker import LEFT, WalkerParams, WalkerState, hip_position
 
 _D = len(DOF_NAMES)
 _SIDE = np.array([1.0, -1.0])  # +1 left, -1 right: mirrors abduction, rotation, inversion
@@ -87,16 +89,25 @@ class _LocalPose:
     ankles: np.ndarray  # (N, 2, 3)
     foot: np.ndarray    # (N, 2, 3, 3) columns along the foot (heel->toe), left, up
 
+def _thigh_lead(body: BodyDescription, knee: np.ndarray) -> np.ndarray:
+    """How far (rad) the thigh leans ahead of the walker's leg at knee flexion ``knee`` (rad): ahead of the
+    hip-ankle chord, which leans ``CHORD_LEAN`` back from the walker's leg."""
+    return np.arctan2(body.lower_leg_length * np.sin(knee),
+                      body.upper_leg_length + body.lower_leg_length * np.cos(knee)) - CHORD_LEAN
+
+
 def _local_pose(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray) -> _LocalPose:
-    """Forward kinematics relative to the pelvis. legs (N, 2) sagittal leg angles, dofs (N, 13), leg
-    scales (N,) on thigh and shank lengths."""
+    """Forward kinematics relative to the pelvis. legs (N, 2) sagittal leg angles (of the hip-ankle
+    chords), dofs (N, 13), leg scales (N,) on thigh and shank lengths."""
     d = KinematicState.unpack(dofs)
     heading = _rot_z(d["heading"])                                            # (N,3,3)
     torso = _turn(_turn(heading, 1, d["torso_lean"][:, 0]), 0, d["torso_lean"][:, 1])
     hips = (0.5 * body.hip_width) * _SIDE[None, :, None] * torso[:, None, :, 1]
-    # Leg angle phi about the lateral axis (foot ahead for phi > 0), then abduction, rotation.
+    # Chord angle phi about the lateral axis (foot ahead for phi > 0) plus the thigh's lead, then
+    # abduction, rotation.
     thigh = np.repeat(heading[:, None], 2, axis=1)
-    thigh = _turn(_turn(_turn(thigh, 1, -legs), 0, _SIDE * d["hip_abduction"]), 2, -_SIDE * d["hip_rotation"])
+    pitch = legs + _thigh_lead(body, d["knee"])
+    thigh = _turn(_turn(_turn(thigh, 1, -pitch), 0, _SIDE * d["hip_abduction"]), 2, -_SIDE * d["hip_rotation"])
     knees = hips - (body.upper_leg_length * scale)[:, None, None] * thigh[..., :, 2]
     shank, ankles, foot = _lower_legs(body, thigh, knees, dofs, scale)
     return _LocalPose(torso, hips, thigh, knees, shank, ankles, foot)
@@ -105,9 +116,11 @@ def _local_pose(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray, scale
 def _lower_legs(body: BodyDescription, thigh: np.ndarray, knees: np.ndarray,
                 dofs: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Shank frames, ankle positions and foot frames (N, 2, ...) below the given thighs and knees."""
-    shank = _turn(thigh, 1, dofs[:, 7:9])                         # knee flexion
+    knee = dofs[:, 7:9]
+    shank = _turn(thigh, 1, knee)                                 # knee flexion
     ankles = knees - (body.lower_leg_length * scale)[:, None, None] * shank[..., :, 2]
-    foot = _turn(_turn(shank, 1, -dofs[:, 9:11]), 0, -_SIDE * dofs[:, 11:13])   # ankle flexion, inversion
+    # ankle flexion (the DOF counts from the hip-ankle chord), inversion
+    foot = _turn(_turn(shank, 1, -(dofs[:, 9:11] + knee - _thigh_lead(body, knee))), 0, -_SIDE * dofs[:, 11:13])
     return shank, ankles, foot
 
 
@@ -189,23 +202,85 @@ def _contact_translation(body: BodyDescription, local: _LocalPose, leg: np.ndarr
     return np.column_stack([ground_xy - point[:, :2], -point[:, 2]])
 
 
-def _swing_foot_lowest_z(body: BodyDescription, shank_length: np.ndarray, thigh_z: np.ndarray, knee_z: np.ndarray,
-                         knee: np.ndarray, ankle_turns: tuple[np.ndarray, ...], shift_z: np.ndarray) -> np.ndarray:
-    """World height (M,) of the lowest point of the swing foot's sole for a given swing knee angle.
-
-    thigh_z (M, 1, 3): the z row of the swing thigh's frame; knee_z (M,): the knee's height
-    (pelvis-relative); knee (M,) rad; ankle_turns: cos and sin (M, 1) of the foot's two turns
-    (flexion about y, inversion about x). Only the frames' z rows are turned (the height needs no more).
-    """
+def _foot_lowest_z(body: BodyDescription, swing: _Leg, knee: np.ndarray, shift_z: np.ndarray) -> np.ndarray:
+    """World height (M,) of the lowest point of a foot's sole for a given knee angle knee (M,) rad;
+    the thigh (which leads the chord by the knee's lead) is posed anew for it. Only the frames' z rows
+    are turned (the height needs no more)."""
+    thigh_z = np.zeros((knee.shape[0], 1, 3))
+    thigh_z[:, 0, 2] = 1.0                                        # the heading leaves the z row alone
+    thigh_z = _turn(_turn(_turn(thigh_z, 1, -(swing.leg + _thigh_lead(body, knee))), 0, swing.abduction), 2,
+                    swing.rotation)
+    knee_z = swing.hip_z - swing.thigh_length * thigh_z[:, 0, 2]
     shank_z = _turn(thigh_z, 1, knee)
-    ankle_z = knee_z - shank_length * shank_z[:, 0, 2]
-    c_flex, s_flex, c_inv, s_inv = ankle_turns
-    foot_z = _turn_cs(_turn_cs(shank_z, 1, c_flex, s_flex), 0, c_inv, s_inv)[:, 0]
+    ankle_z = knee_z - swing.shank_length * shank_z[:, 0, 2]
+    flexion = -(swing.ankle + knee - _thigh_lead(body, knee))
+    foot_z = _turn(_turn(shank_z, 1, flexion), 0, swing.inversion)[:, 0]
     along, up = _sole_offsets(body, _lowest_roll_from(body, foot_z[:, 0], foot_z[:, 2]))
     return ankle_z + foot_z[:, 0] * along + foot_z[:, 2] * up + shift_z
 
 
-def _keep_swing_foot_above_ground(body: BodyDescription, local: _LocalPose, dofs: np.ndarray, scale: np.ndarray,
+@dataclass
+class _Leg:
+    """What a foot's height depends on besides the knee (M,): the chord angle, the thigh's
+    abduction and rotation turns and the foot's ankle DOF and inversion turn (rad), the hip height and
+    the thigh and shank lengths (m)."""
+
+    leg: np.ndarray
+    abduction: np.ndarray
+    rotation: np.ndarray
+    ankle: np.ndarray
+    inversion: np.ndarray
+    hip_z: np.ndarray
+    thigh_length: np.ndarray
+    shank_length: np.ndarray
+
+    def take(self, rows: np.ndarray) -> "_Leg":
+        return _Leg(*(getattr(self, f)[rows] for f in self.__dataclass_fields__))
+
+
+def _leg(body: BodyDescription, local: _LocalPose, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray,
+         side: np.ndarray) -> _Leg:
+    """The ``_Leg`` of leg ``side`` (N,) of each body."""
+    rows, sign = np.arange(dofs.shape[0]), _SIDE[side]
+    return _Leg(legs[rows, side], sign * dofs[rows, DOF_NAMES.index("left_hip_abduction") + side],
+                -sign * dofs[rows, DOF_NAMES.index("left_hip_rotation") + side],
+                dofs[rows, DOF_NAMES.index("left_ankle_flexion") + side],
+                -sign * dofs[rows, DOF_NAMES.index("left_ankle_inversion") + side],
+                _pick(local.hips, side)[:, 2], body.upper_leg_length * scale, body.lower_leg_length * scale)
+
+
+def _knee_at_ground(body: BodyDescription, leg: _Leg, shift_z: np.ndarray, below: np.ndarray, above: np.ndarray,
+                    iterations: int) -> np.ndarray:
+    """Knee angles (M,) in [below, above] where the foot's lowest point reaches height 0 with the pelvis at
+    ``shift_z`` (bisection; the end of the bracket on the foot's clear side)."""
+    for _ in range(iterations):
+        middle = 0.5 * (below + above)
+        clear = _foot_lowest_z(body, leg, middle, shift_z) >= 0.0
+        above = np.where(clear, middle, above)
+        below = np.where(clear, below, middle)
+    return above
+
+
+def _land_knees(body: BodyDescription, local: _LocalPose, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray,
+                landing: np.ndarray, struck: np.ndarray, shift_z: np.ndarray, iterations: int = 14) -> None:
+    """Heel strike (rows ``struck``): where the landing foot (leg ``landing``) is above the ground with
+    the pelvis at ``shift_z`` (held by the old contact), straighten its knee (in place in ``dofs``) just
+    enough for it to touch, by bisection in [0, knee]; fully straight if even that does not reach."""
+    rows = np.arange(dofs.shape[0])
+    knee_col = DOF_NAMES.index("left_knee") + landing
+    leg, knee = _leg(body, local, legs, dofs, scale, landing.astype(np.intp)), dofs[rows, knee_col]
+    high = struck & (knee > 0) & (_foot_lowest_z(body, leg, knee, shift_z) > 0.0)
+    straight = high & (_foot_lowest_z(body, leg, np.zeros_like(knee), shift_z) >= 0.0)
+    dofs[straight, knee_col[straight]] = 0.0
+    bend = np.flatnonzero(high & ~straight)
+    if bend.size == 0:
+        return
+    dofs[bend, knee_col[bend]] = _knee_at_ground(body, leg.take(bend), shift_z[bend], np.zeros(bend.size), knee[bend],
+                                                 iterations)
+
+
+def _keep_swing_foot_above_ground(body: BodyDescription, local: _LocalPose, legs: np.ndarray, dofs: np.ndarray,
+                                  scale: np.ndarray,
                                   stance_leg: np.ndarray, shift_z: np.ndarray, iterations: int = 14) -> None:
     """Ground clearance: where the swing foot would go below z = 0, bend the swing knee (in place
     in ``dofs``) just enough, found by bisection. The knee-less walker's trailing leg sweeps
@@ -214,27 +289,14 @@ def _keep_swing_foot_above_ground(body: BodyDescription, local: _LocalPose, dofs
     swing = (1 - stance_leg).astype(np.intp)
     rows = np.arange(dofs.shape[0])
     knee_col = DOF_NAMES.index("left_knee") + swing
-    ankle_dofs = np.stack([dofs[rows, DOF_NAMES.index("left_ankle_flexion") + swing],
-                           dofs[rows, DOF_NAMES.index("left_ankle_inversion") + swing]], axis=1)
+    leg = _leg(body, local, legs, dofs, scale, swing)
     knee = dofs[rows, knee_col]
-    thigh_z = _pick(local.thigh, swing)[:, 2:3, :]
-    knee_z = _pick(local.hips, swing)[:, 2] - body.upper_leg_length * scale * thigh_z[:, 0, 2]
-    shank_length = body.lower_leg_length * scale
-    flex, inversion = -ankle_dofs[:, 0], -_SIDE[swing] * ankle_dofs[:, 1]
-    turns = tuple(f(a)[:, None] for a in (flex, inversion) for f in (np.cos, np.sin))
-    low = np.flatnonzero(_swing_foot_lowest_z(body, shank_length, thigh_z, knee_z, knee, turns, shift_z) < 0.0)
+    low = np.flatnonzero(_foot_lowest_z(body, leg, knee, shift_z) < 0.0)
     if low.size == 0:
         return
     # the bisection works on the low rows only, with everything but the knee angle fixed
-    thigh_z, knee_z, shift_low, shank_length = thigh_z[low], knee_z[low], shift_z[low], shank_length[low]
-    turns = tuple(t[low] for t in turns)
-    below, above = knee[low], np.full(low.size, np.pi)
-    for _ in range(iterations):
-        middle = 0.5 * (below + above)
-        clear = _swing_foot_lowest_z(body, shank_length, thigh_z, knee_z, middle, turns, shift_low) >= 0.0
-        above = np.where(clear, middle, above)
-        below = np.where(clear, below, middle)
-    dofs[low, knee_col[low]] = above
+    dofs[low, knee_col[low]] = _knee_at_ground(body, leg.take(low), shift_z[low], knee[low], np.full(low.size, np.pi),
+                                               iterations)
 
 
 
@@ -264,33 +326,38 @@ def sample_posed_kinematics_reference(
     legs = leg_angles(walker)
     local = _local_pose(body, legs, new, scale)
     old_leg = kin.contact_leg
+    new_leg = walker.stance_leg.astype(np.int8)
+    switched = new_leg != old_leg
+    before = new.copy()
+    # heel rise: the stance knee bent where the pelvis would stand above the walker's hip (not at a strike)
+    hip = np.where(switched, np.inf, hip_position(params, walker)[1])
+    _keep_swing_foot_above_ground(body, local, legs, new, scale, 1 - new_leg, hip)
+    _repose(body, local, legs, new, scale, np.flatnonzero(np.any(new != before, axis=1)))
     old_foot = _pick(local.foot, old_leg)
     beta = _lowest_roll(body, old_foot)
     # Roll without slip: the ground contact advances by the arc length rolled on the sole.
     contact = kin.contact_point + (body.sole_radius * (beta - kin.contact_roll))[:, None] * _horizontal_direction(old_foot)
-    new_leg = walker.stance_leg.astype(np.int8)
-    switched = new_leg != old_leg
     if np.any(switched):
         shift = _contact_translation(body, local, old_leg, beta, contact)
+        # the landing knee straightened until the foot reaches the ground, then that leg posed again
+        stanced = new.copy()
+        _land_knees(body, local, legs, new, scale, new_leg, switched, shift[:, 2])
+        _repose(body, local, legs, new, scale, np.flatnonzero(np.any(new != stanced, axis=1)))
         new_beta = _lowest_roll(body, _pick(local.foot, new_leg))
         new_point = _sole_point(body, _pick(local.ankles, new_leg), _pick(local.foot, new_leg), new_beta)
         contact = np.where(switched[:, None], new_point[:, :2] + shift[:, :2], contact)
         beta = np.where(switched, new_beta, beta)
     shift = _contact_translation(body, local, new_leg, beta, contact)
-    before = new.copy()
+    landed = new.copy()
     # Clearance while the swing leg trails the stance leg (early swing); later the foot must be
     # free to come down for heel strike, and is only kept out of the ground.
-    margin = np.where(walker.stance_angle > walker.swing_angle, config.swing_clearance, 0.0)
-    _keep_swing_foot_above_ground(body, local, new, scale, new_leg, shift[:, 2] - margin)
-    # The clearance moves the knee without giving it velocity (a position projection): shift
-    # psi_{t-1} along, so that eq. (6) next frame sees the sampled velocity.
+    _keep_swing_foot_above_ground(body, local, legs, new, scale, new_leg, shift[:, 2] - _clearance(config, walker))
+    # The landing and the clearance move knees without giving them velocity (position projections):
+    # shift psi_{t-1} along, so that eq. (6) next frame sees the sampled velocity.
     current = current + (new - before)
-    # The clearance bent some swing knees: pose those lower legs again (their contact foot and
-    # so ``shift`` are unchanged).
-    changed = np.flatnonzero(np.any(new != before, axis=1))
-    if changed.size:
-        local.shank[changed], local.ankles[changed], local.foot[changed] = _lower_legs(
-            body, local.thigh[changed], local.knees[changed], new[changed], scale[changed])
+    # The clearance bent some swing knees: pose those legs again (their contact foot and so ``shift``
+    # are unchanged; the thigh leads the chord by the new knee's lead).
+    _repose(body, local, legs, new, scale, np.flatnonzero(np.any(new != landed, axis=1)))
     named = KinematicState.unpack(new)
     state = KinematicState(
         heading=named["heading"], torso_lean=named["torso_lean"], hip_abduction=named["hip_abduction"],
@@ -300,6 +367,15 @@ def sample_posed_kinematics_reference(
         leg_scale=scale,
     )
     return state, _posed_body(body, legs, new, local, shift)
+
+
+def _repose(body: BodyDescription, local: _LocalPose, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray,
+            rows: np.ndarray) -> None:
+    """Pose the legs of bodies ``rows`` again (in place in ``local``) after their knees moved."""
+    if rows.size:
+        again = _local_pose(body, legs[rows], dofs[rows], scale[rows])
+        for name in ("thigh", "knees", "shank", "ankles", "foot"):
+            getattr(local, name)[rows] = getattr(again, name)
 
 
 def pose_body_reference(body: BodyDescription, params: WalkerParams, walker: WalkerState, kin: KinematicState) -> BodyPoseBatch:
@@ -351,9 +427,11 @@ def _posed_body(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray, local
 
     joints = np.empty((n, len(JOINT_NAMES)))
     joints[:, 0:3] = dofs[:, 0:3]               # torso pitch, roll, yaw (heading)
-    for side in (0, 1):                         # hip flexion (walker leg angle), abduction, rotation, knee, ankle x2
-        joints[:, 3 + 6 * side] = legs[:, side]
+    lead = _thigh_lead(body, dofs[:, 7:9])
+    for side in (0, 1):                         # hip flexion (the thigh's angle), abduction, rotation, knee, ankle x2
+        joints[:, 3 + 6 * side] = legs[:, side] + lead[:, side]
         joints[:, 4 + 6 * side: 9 + 6 * side] = dofs[:, 3 + side:13:2]
+        joints[:, 7 + 6 * side] += dofs[:, 7 + side] - lead[:, side]      # ankle flexion from the shank
     return BodyPoseBatch(markers=markers, joint_angles=joints, segments=BodySegments(origin, rotation))
 
 
@@ -389,9 +467,19 @@ def initial_kinematics_reference(
     # the sampling and the state assembly are the package's (not compiled); the sole geometry is the reference's
     walker, dofs = _initial_dofs(config, body, walker, heading, n, rng, heading_spread, joint_spread)
     scale = _initial_leg_scale(config, n, rng, leg_scale_spread)
-    local = _local_pose(body, leg_angles(walker), dofs, scale)
+    legs = leg_angles(walker)
+    local = _local_pose(body, legs, dofs, scale)
     leg = walker.stance_leg.astype(np.int8)
+    # the stance knees bent where the pelvis would stand above the walker's hip; then the swing knees bent
+    # where the swing foot would go below the ground, the body on its stance foot
+    before = dofs.copy()
+    _keep_swing_foot_above_ground(body, local, legs, dofs, scale, 1 - leg, hip_position(params, walker)[1])
+    _repose(body, local, legs, dofs, scale, np.flatnonzero(np.any(dofs != before, axis=1)))
     beta = _lowest_roll(body, _pick(local.foot, leg))
+    stance = _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), beta)
+    before = dofs.copy()
+    _keep_swing_foot_above_ground(body, local, legs, dofs, scale, leg, -stance[:, 2])
+    _repose(body, local, legs, dofs, scale, np.flatnonzero(np.any(dofs != before, axis=1)))
     point = _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), beta)
     return _initial_state(params, walker, dofs, beta, point, start_position_xy, rng, position_spread,
                           turn_rate_spread, scale)

@@ -1,6 +1,8 @@
 """CMU mocap loader: plausible body sizes and speed, resampling, errors."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from conftest import MOCAP_DIR
@@ -56,6 +58,22 @@ def test_resample_and_body_fit(trial):
     thigh_axis /= np.linalg.norm(thigh_axis, axis=1, keepdims=True)
     assert np.allclose(rot[:, 2, :, 2], thigh_axis)
     assert isinstance(body, BodyDescription)
+
+
+def test_measured_body_stands_as_tall_as_the_person(trial):
+    """The ankle height and heel offset are measured, not the template's: with the floor levelled, the
+    body's standing hip height (``leg_length``, the walker's L) is what the person's hips reach at
+    mid-stance (their highest, the knee nearly straight) to 1.5 cm (0.8); the template's ankle stood it
+    2.5 cm taller."""
+    from awalker_tools.mocap_motion import level_floor
+
+    markers = level_floor(trial.markers, trial.rate)
+    body = body_from_markers(markers)
+    highest_hip = np.percentile(markers[:, [M["left_hip"], M["right_hip"]], 2], 99)
+    assert 0.0 < body.leg_length - highest_hip < 0.015
+    template_ankle = replace(body, ankle_height=BodyDescription.default().ankle_height)
+    assert template_ankle.leg_length - highest_hip > 0.02
+    assert 0.03 < body.ankle_height < 0.06 and 0.04 < body.heel_offset < 0.06
 
 
 def test_bad_files_are_input_errors(tmp_path):

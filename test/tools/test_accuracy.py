@@ -187,7 +187,9 @@ def test_feet_on_the_ground(runs, name: str):
     # Turning: the heading turns the planted foot about its contact point, so heel and toe markers slip a
     # little, as in the truth walker (skate mean 1.5 mm, max 13.5 mm); tracker seeds 0-4: mean 1.4-2.0, max 8.3-12.6.
     # Tracker seeds 0-9 (2026-11-26): worst mean 1.18 mm (speed_change, mocap), max 7.8 (mocap); turn 2.2 and 14.6.
-    mean_bound, max_bound = (2.5, 18.0) if name == "turn" else (1.5, 10.0)
+    # With the knees bent in stance (2026-11-27), tracker seeds 1-4: the turn's mean 1.6-2.5 mm, max 5.6-13.3
+    # (the bent stance leg turns about the contact with the knee ahead of it); bound 15 % above the worst.
+    mean_bound, max_bound = (2.9, 18.0) if name == "turn" else (1.5, 10.0)
     assert feet["skate_mm"]["mean"] < mean_bound and feet["skate_mm"]["max"] < max_bound
     assert feet["penetration_mm"]["max"] < 2.0
     assert feet["float_mm"]["mean"] < 8.0

@@ -133,7 +133,7 @@ def test_the_column_is_the_upper_bodys_and_a_ghost_at_the_feet_does_not_move_it(
     llr = side.llr.copy()
     d = side.downsample
     u0, v1, middle = int(clean.box[0] / d), int(clean.box[3] / d), int(clean.feet_uv[0] / d)
-    llr[:, v1 - 3 : v1 + 1, max(u0 - 25, 0) : middle] = 10.0  # a foot-high ghost reaching 25 map px behind
+    llr[:, v1 - 3 : v1 + 1, max(u0 - 35, 0) : middle] = 10.0  # a foot-high ghost reaching 35 map px behind
     ghosted = person_blobs(replace(side, llr=llr), "side")[0]
     assert ghosted.box[0] < clean.box[0] - 40                 # one blob, wider
     assert ghosted.feet_uv[0] == pytest.approx(clean.feet_uv[0], abs=1.0)
@@ -141,6 +141,36 @@ def test_the_column_is_the_upper_bodys_and_a_ghost_at_the_feet_does_not_move_it(
     assert d * cols.mean() < clean.feet_uv[0] - 8             # the whole blob's mean column would move
     pelvis_u = cameras[0].project(markers[:1])[0][0, 0]
     assert ghosted.feet_uv[0] == pytest.approx(pelvis_u, abs=6.0)
+
+
+def test_a_row_lost_across_the_waist_does_not_cut_the_person_in_two(scene):
+    """A belt or a waist whose colours are near the background's leaves a map row of the body below the
+    threshold: the pieces above and below are still one blob, with the box and column of the whole,
+    while a gap of two rows still parts two things (a person and a lamp above them), and a piece beside
+    the person one row lower is not joined."""
+    from dataclasses import replace
+
+    from awalker_tracker.vision.detection import person_blobs
+
+    _, features, _ = scene
+    side = features[0]
+    clean = person_blob(side, "side")
+    d = side.downsample
+    u0, v0, u1, v1 = (int(round((c + 0.5) / d)) for c in clean.box)
+    waist = (v0 + v1) // 2
+    llr = side.llr.copy()
+    llr[:, waist, :] = -5.0                                   # a row across the body: background
+    cut = person_blobs(replace(side, llr=llr), "side")
+    assert cut[0].box == clean.box and cut[0].feet_uv == pytest.approx(clean.feet_uv, abs=d)
+    assert cut[0].area_px == pytest.approx(clean.area_px, rel=0.05)
+    two_rows = llr.copy()
+    two_rows[:, waist + 1, :] = -5.0                          # two rows: two blobs
+    assert person_blobs(replace(side, llr=two_rows), "side")[0].box != clean.box
+    beside = side.llr.copy()
+    beside[:, v0 - 10 : v0 - 1, u1 + 3 : u1 + 25] = 10.0       # a block to the right ending a row above the head
+    beside[:, v0 - 1, :] = -5.0
+    blobs = person_blobs(replace(side, llr=beside), "side")
+    assert any(b.box[:2] == clean.box[:2] and b.box[3] == clean.box[3] for b in blobs)   # the person alone
 
 
 def test_ground_track_fit_drops_a_misplaced_detection():

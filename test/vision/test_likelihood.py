@@ -105,12 +105,12 @@ def test_occlusion_mask_removes_its_pixels_and_cells(scene):
     cam = cameras[0]
     true = poses[FRAME]
     bent = Pose(true.walker.copy(), true.kin.copy())
-    bent.kin.knee[:, 1] += 0.4                      # only the right shank and foot move
+    bent.kin.knee[:, 1] += 0.4                      # only the right leg moves (the thigh leads the chord)
     batch = stacked([true, bent]).segments()
     prev = repeat(poses[FRAME - 1].segments(), 2)
-    knee_v = cam.project(true.segments().origin[0, 5])[0][1]   # right lower leg starts at the knee
+    hip_v = cam.project(true.segments().origin[0, 3])[0][1]    # right upper leg starts at the hip
     mask = np.zeros((cam.height, cam.width), np.uint8)
-    mask[int(knee_v) - 12:, :] = 255
+    mask[int(hip_v) - 12:, :] = 255
     free = log_likelihood(BODY.parts, batch, prev, cameras[:1], features[:1])
     masked = log_likelihood(BODY.parts, batch, prev, cameras[:1], [occluded(features[0], mask)])
     assert free[0] - free[1] > 1.0                   # visible: bending the knee is detected

@@ -303,12 +303,27 @@ def walking_direction(pelvis: np.ndarray, rate: float) -> float:
     return float(np.arctan2(ahead[1], ahead[0]))
 
 
+# Feet whose lowest marker lies within this of the other's both stand on the ground (a double support).
+ON_GROUND_M = 0.02
+
+
+def stance_foot(markers: np.ndarray, heading: float) -> int:
+    """The foot (0 left, 1 right) a start description names for markers (13, 3) of one frame: the foot on
+    the ground, and at a double support (both within ``ON_GROUND_M`` of the floor) the trailing one along
+    ``heading`` (rad), on which the walker still stands until its toe-off (README, start description)."""
+    lowest = np.array([min(markers[_M[f"{side}_heel"], 2], markers[_M[f"{side}_toe"], 2]) for side in ("left", "right")])
+    if abs(lowest[0] - lowest[1]) > ON_GROUND_M:
+        return int(np.argmin(lowest))
+    direction = np.array([np.cos(heading), np.sin(heading)])
+    ahead = [float(markers[_M[f"{side}_heel"], :2] @ direction) for side in ("left", "right")]
+    return int(np.argmin(ahead))
+
+
 def _start_from_markers(markers: np.ndarray, rate: float, first_frame: int, speed: float,
                         step_length: float) -> dict:
     pelvis = markers[:, _M["pelvis"]]
     heading = walking_direction(pelvis, rate)
-    feet_z = markers[0, [_M["left_heel"], _M["right_heel"], _M["left_toe"], _M["right_toe"]], 2]
-    stance = "left" if min(feet_z[0], feet_z[2]) <= min(feet_z[1], feet_z[3]) else "right"
+    stance = "left" if stance_foot(markers[0], heading) == 0 else "right"
     return {"start": {
         "frame": int(first_frame),
         "position": [round(float(pelvis[0, 0]), 4), round(float(pelvis[0, 1]), 4)],
@@ -439,7 +454,6 @@ def walker_motion(config: SynthConfig, start_xy: np.ndarray, heading: float, rng
     markers_arr = np.array(markers)
     start = _start_from_markers(markers_arr, config.rate, config.background_frames, config.speed, config.step_length)
     start["start"]["heading"] = round(float(heading), 4)
-    start["start"]["stance_leg"] = "left"  # the walker starts on its left leg
     return Motion(markers_arr, BodySegments(np.array(origins), np.array(rotations)), body, np.array(joints), start)
 
 

@@ -17,15 +17,14 @@ reporting a measured proportion.
 Heel-strike time of a walker's step: a person's support passes from foot to foot over a double
 support (heel strike to the other foot's toe-off, ``HUMAN_DOUBLE_SUPPORT`` = 10 % of the stride each
 time in normal walking; Perry and Burnfield, *Gait Analysis*), the walker's in one instant, which the
-tracked walker places late in the person's double support: the heel struck ``WALKER_STRIKE_DELAY`` =
-0.16 x the step time (0.8 of a double support) before it (``StepCounter(double_support=...)``; the
-first step, with no step time yet, uses ``TYPICAL_STEP_TIME_S``). Measured on the real-walks benchmark
-(``benchmarks/bench_realwalks.py``, hand-started, tracker seeds 0-4): the median over runs of each run's
-median timing error is least at 0.16 on the walk 07_01 (60 runs, one and two cameras: 0.016 s; 0.1,
-the middle of the double support, 0.035 s, the strikes late; 0.2, its end, 0.032 s, early). Held out,
-07_02: 0.026 s against 0.033 at 0.2; hands-off runs (108): one camera 0.027 s against 0.030, two
-cameras 0.022 against 0.031; the median signed error within 0.013 s of 0 in every setting. Steps from
-heel markers are not shifted.
+tracked walker places after the person's heel strike: the heel struck ``WALKER_STRIKE_DELAY`` = 0.28 x
+the step time before it (``StepCounter(double_support=...)``; the first step, with no step time yet,
+uses ``TYPICAL_STEP_TIME_S``). Measured on the real-walks benchmark (``benchmarks/bench_realwalks.py``,
+hand-started, tracker seeds 0-4), with the body's feet landing where the walker's do (``kinematics``
+*Knees*): the median over runs of each run's median timing error is least at 0.28 on the walk 07_01
+(60 runs, one and two cameras: 0.016 s; 0.2, a whole double support, 0.049 s and 0.16 0.069 s, the
+strikes late; 0.36, 0.041 s, early). Held out, 07_02: 0.012 s (0.2: 0.050 s). Steps from heel markers
+are not shifted.
 """
 from __future__ import annotations
 
@@ -40,7 +39,7 @@ _M = {n: i for i, n in enumerate(MARKER_NAMES)}
 _FOOT = {0: ("left_heel", "left_toe"), 1: ("right_heel", "right_toe")}
 
 HUMAN_DOUBLE_SUPPORT = 0.10    # each double support, share of the stride (normal walking)
-WALKER_STRIKE_DELAY = 0.16     # share of the step time (half a stride): 0.8 of a double support, measured (above)
+WALKER_STRIKE_DELAY = 0.28     # share of the step time (half a stride): the walker's strike after the heel's (above)
 TYPICAL_STEP_TIME_S = 0.55     # s, 110 steps/min: the first step's, before one is measured
 
 

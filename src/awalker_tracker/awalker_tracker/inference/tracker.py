@@ -129,6 +129,9 @@ class InitialSpread:
     step_length_fraction: float = 0.10
     joint_rad: float = 0.05
     random_phase: bool = True          # uniform phase within the first step
+    # share of the named stance leg's step the phase is drawn from (its last part): a start names the foot
+    # the walker stands on, at a double support the trailing one (the walker changes stance at its toe-off)
+    named_leg_phase_share: float = 0.75
 
 
 @dataclass(frozen=True)
@@ -259,8 +262,10 @@ class TrackerModel:
                              f"{step_length:.3f} m in the gait table; give values inside "
                              f"{self.gaits.speeds[0]:.2f}-{self.gaits.speeds[-1]:.2f} m/s, "
                              f"{self.gaits.step_lengths[0]:.2f}-{self.gaits.step_lengths[-1]:.2f} m")
+        spread = self.config.spread
         return self._fresh(n, np.asarray(s.position, float), np.full(n, s.heading), np.full(n, s.speed),
-                           np.full(n, step_length), self._start_legs(n, rng), rng, self.config.spread)
+                           np.full(n, step_length), self._start_legs(n, rng), rng, spread,
+                           phase_share=spread.named_leg_phase_share if s.stance_leg is not None else 1.0)
 
     def _start_legs(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """(N,) stance legs of the initial particles: the start's, or half each when it is unknown."""
@@ -269,9 +274,11 @@ class TrackerModel:
         return rng.permutation(np.arange(n) % 2).astype(np.int8)
 
     def _fresh(self, n: int, pelvis_xy: np.ndarray, heading: np.ndarray, speed: np.ndarray, step: np.ndarray,
-               stance_leg: np.ndarray, rng: np.random.Generator, spread: InitialSpread) -> TrackerStates:
+               stance_leg: np.ndarray, rng: np.random.Generator, spread: InitialSpread,
+               phase_share: float = 1.0) -> TrackerStates:
         """N new particles on cyclic gaits around the given speeds and step lengths (per particle),
-        pelvis above ``pelvis_xy`` ((2,) or (N, 2), m), walking along ``heading`` (rad), with ``spread``."""
+        pelvis above ``pelvis_xy`` ((2,) or (N, 2), m), walking along ``heading`` (rad), with ``spread``
+        (a random phase within the first ``phase_share`` of the step)."""
         speed, step = self._sample_gaits(speed, step, spread, rng)
         walker = self._gaits.gait_initial_state(self.params, speed, step, contact_origin=0.0,
                                                stance_leg=stance_leg, table=self.gaits)
@@ -279,7 +286,7 @@ class TrackerModel:
         control = self._control.initial_control(self.prior, n, rng, stiffness=np.asarray(stiffness, float),
                                                 toe_off_impulse=np.asarray(impulse, float))
         if spread.random_phase:
-            walker, control = self._random_phase(walker, control, speed, step, rng)
+            walker, control = self._random_phase(walker, control, speed, step, rng, phase_share)
         kin = self._kin.initial_kinematics(
             self.kin_config, walker, pelvis_xy, heading, n, rng, body=self.body,
             params=self.params, position_spread=spread.position_m, heading_spread=spread.heading_rad,
@@ -322,10 +329,10 @@ class TrackerModel:
         return np.where(known, speed, clamped), np.where(known, step, usual)
 
     def _random_phase(self, walker: WalkerState, control: Any, speed: np.ndarray, step: np.ndarray,
-                      rng: np.random.Generator) -> tuple[WalkerState, Any]:
-        """Advance each particle by a uniform number of frames within its first step."""
+                      rng: np.random.Generator, share: float = 1.0) -> tuple[WalkerState, Any]:
+        """Advance each particle by a uniform number of frames within the last ``share`` of its first step."""
         frames_per_step = np.maximum(1, np.floor(step / speed / self.config.dt)).astype(int)
-        offsets = (rng.random(walker.stance_angle.size) * frames_per_step).astype(int)
+        offsets = (((1.0 - share) + share * rng.random(walker.stance_angle.size)) * frames_per_step).astype(int)
         for j in range(int(offsets.max())):
             moved, moved_control, events = self._control.sample_transition(
                 self.params, self.prior, walker, control, self.config.dt, rng)

@@ -66,8 +66,9 @@ PART_CLASS_OF: dict[str, str] = {
     "left_upper_leg": "legs", "right_upper_leg": "legs", "left_lower_leg": "legs", "right_lower_leg": "legs",
     "left_foot": "feet", "right_foot": "feet",
 }
-# Joint angles reported with a pose (rad). hip_flexion is the leg's global sagittal angle from
-# the vertical (= the walker's leg angle, foot ahead positive); torso_yaw is the heading.
+# Joint angles reported with a pose (rad). hip_flexion is the thigh's global sagittal angle from
+# the vertical (foot ahead positive: the walker's leg angle plus the thigh's lead over the hip-ankle
+# chord, kinematics *Knees*); ankle_flexion is the foot's from the shank; torso_yaw is the heading.
 JOINT_NAMES: tuple[str, ...] = (
     "torso_pitch", "torso_roll", "torso_yaw",
     "left_hip_flexion", "left_hip_abduction", "left_hip_rotation", "left_knee",

@@ -2,7 +2,8 @@
 
 State of N particles (``KinematicState``): torso orientation (heading = torso yaw, pitch,
 roll), hip abduction and rotation, knees, ankle flexion and inversion (13 DOFs, ``DOF_NAMES``);
-the two sagittal hip angles ("Hip X") are the walker's leg angles, so with them the body has
+the two sagittal hip angles ("Hip X") follow the walker's leg angles (the hip-ankle chords lie
+along them; *Knees* below), so with them the body has
 3 torso-orientation DOFs and 12 joint angles as in the paper. The torso position is not free:
 it follows from the stance-foot ground contact.
 
@@ -52,11 +53,32 @@ clearance of human gait) above the ground while the swing leg trails the stance 
 below the ground later in the swing, the knee is bent just enough to clear it (a
 pose-dependent lower joint limit, applied as a position projection that adds no knee velocity).
 
-Known consequence of the knee-less walker and Table 1's swing knee (k = 15, alpha = 0.9): the
-clearance keeps the swing knee bent through most of the swing and it is still bent at heel
-strike, so the foot lands short of the knee-less walker's foot and the body walks slower than the
-walker (~0.7 x on the hand-made walk of ``test_kinematics``; measure speed from the pelvis, not
-from the walker).
+Knees (our reading of "the sagittal hip angle equals the walker's leg angle", and our change to
+Table 1's stance-knee rest): the walker's leg is the straight line from the hip to the rolling foot, so
+the hip-ankle *chord* follows the walker's leg angle phi, and a bent knee shortens the chord instead of
+swinging the shank back: the thigh leans ahead of the chord by delta = atan2(l_shank sin knee,
+l_thigh + l_shank cos knee), the shank trails it by knee - delta, and the foot hangs from the walker's
+leg (the ankle DOF counts from its direction, so a bent knee does not tip the foot; the reported ankle
+flexion is the angle from the shank, the reported hip flexion the thigh's angle). The chord leans
+``CHORD_LEAN`` (0.08 rad) back from the walker's leg (``_thigh_lead`` is delta less it): the walker's
+leg ends at the rolling contact, where a person's centre of pressure lies ahead of the ankle over
+the stance (heel, flat foot, forefoot), so their hip rides ahead of the stance ankle (CMU subject 7: a
+median 65 mm over single support) where a chord along phi kept ours over it (-14 mm in the prior; with
+the lean +46) and the tracked pelvis 7 cm behind the person's on the real walks. The stance knee rests
+at ``stance_knee_rest`` 0.4 rad (Table 1: 0): people walk with the stance knee bent (CMU subject 7: a
+median 20-27 degrees over stance), which holds the hips lower and the knees ahead of the hip-ankle line
+(7-9 cm on those walks), where a straight stance leg carried the pelvis 2 cm high and the knees 6-7 cm
+behind. With Table 1's slow knee (k = 20, alpha 0.75) it reaches ~9 degrees on average over the stance
+in the prior. Measured on the real walks (README "Knees"). Since the feet land where the walker's do,
+the body walks at the walker's speed (with the thigh at phi, a swing knee still bent at heel strike
+landed the foot short and the body walked at 0.7x). Two position projections keep the body with the
+walker at heel strike, when the walker's rigid legs meet the ground together: *heel rise*
+(``_stance_knee``): late in a long stance the stance foot stands on its toe, which would carry the
+pelvis above the walker's hip (``walker.hip_position``), so the stance knee bends just enough to keep it
+there (people flex it ~35 degrees at toe-off); *landing* (``_landing_knee``): a landing knee still bent
+holds the foot above the ground, so it is straightened until the foot touches (on the hand-made walk of
+``test_kinematics`` from 0.34 to 0.24 rad, median, and the pelvis drops a median 3 mm in that frame;
+19 mm without the lean).
 
 Turning (our addition to Table 1; ``TurnPrior``): Table 1's torso "up" row alone (alpha 0.75,
 k 0, sigma 300 deg/s^2) makes the heading a quickly damped random walk: about 10 degrees of drift in
@@ -74,7 +96,8 @@ absolute against 46-64 over seeds 0-2).
 Step width (our change to Table 1's rest; ``KinematicConfig.step_width``): Table 1's hips rest
 unabducted, so the feet tread the hip joints' distance apart (0.18 m for the default body), where people
 tread about 0.1 m apart (centre to centre; the real walks' person 0.07 m). Both hips rest adducted by
-asin((hip_width - step_width) / (2 L)) (-0.044 rad for the default body at 0.10 m), from the start pose
+asin((hip_width - step_width) / (2 c)), c the hip-ankle chord at the stance knee's rest (-0.050 rad for
+the default body at 0.10 m), from the start pose
 on (Table 1's hip spring, k = 5 1/s^2, would take seconds to get there). ``step_width=None`` keeps
 Table 1's rest (``synth`` draws its walker renders so).
 
@@ -122,7 +145,7 @@ from awalker_tracker.model.body import (
     BodyPoseBatch,
     BodySegments,
 )
-from awalker_tracker.model.walker import LEFT, WalkerParams, WalkerState, stance_contact_x
+from awalker_tracker.model.walker import LEFT, WalkerParams, WalkerState, hip_position, stance_contact_x
 
 DOF_NAMES: tuple[str, ...] = (
     "torso_pitch", "torso_roll", "heading",
@@ -132,6 +155,7 @@ DOF_NAMES: tuple[str, ...] = (
 )
 _D = len(DOF_NAMES)
 _LEFT_ABDUCTION = DOF_NAMES.index("left_hip_abduction")    # the right one follows it
+_LEFT_KNEE = DOF_NAMES.index("left_knee")
 
 
 @dataclass(frozen=True)
@@ -198,6 +222,7 @@ class KinematicConfig:
     table: dict[str, JointPrior] = field(default_factory=lambda: dict(TABLE1))
     sigma_unit: float = np.pi / 180.0       # Table 1 sigma is in deg/s^2 (see module docstring)
     swing_knee_rest_gain: float = 2.5       # psi_bar_swing_knee = gain * psi_hip (the paper: 5; module doc)
+    stance_knee_rest: float = 0.4           # rad, psi_bar of the stance knee (Table 1: 0; module doc, *Knees*)
     swing_clearance: float = 0.02           # m: the swing foot's sole stays this far above the ground
     turning: TurnPrior = TurnPrior()
     # m: how far apart (centre to centre) the feet tread with the hips at rest (module doc, *Step width*);
@@ -210,18 +235,22 @@ class KinematicConfig:
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"KinematicConfig.dt must be > 0 s, got {self.dt!r}")
+        if not (np.isfinite(self.stance_knee_rest) and 0.0 <= self.stance_knee_rest < np.pi / 2):
+            raise ValueError(f"KinematicConfig.stance_knee_rest must lie in [0, pi/2) rad, got {self.stance_knee_rest!r}")
         if self.step_width is not None and not (np.isfinite(self.step_width) and 0.0 <= self.step_width <= 0.5):
             raise ValueError(f"KinematicConfig.step_width must lie in 0-0.5 m (or be None), got {self.step_width!r}")
 
     def hip_abduction_rest(self, body: BodyDescription) -> float:
         """psi_bar of both hips' abduction (rad, away from the midline +): Table 1's, or with ``step_width``
-        the adduction that brings each foot (body.leg_length below its hip joint) to step_width / 2 from
-        the midline, within Table 1's limits."""
+        the adduction that brings each ankle (the hip-ankle chord at the stance knee's rest below its hip
+        joint) to step_width / 2 from the midline, within Table 1's limits."""
         row = self.table["hip_front"]
         if self.step_width is None:
             return float(row.rest)
         inward = 0.5 * (body.hip_width - self.step_width)
-        return float(np.clip(-np.arcsin(np.clip(inward / body.leg_length, -1.0, 1.0)), row.lower, row.upper))
+        thigh, shank = body.upper_leg_length, body.lower_leg_length
+        chord = np.sqrt(thigh**2 + shank**2 + 2 * thigh * shank * np.cos(self.stance_knee_rest))
+        return float(np.clip(-np.arcsin(np.clip(inward / chord, -1.0, 1.0)), row.lower, row.upper))
 
     def noise_scale(self, row: str) -> float:
         """Factor on Table 1's sigma of ``row`` at this dt (1 at 1/30 s): eta is the discretised noise of a
@@ -246,6 +275,7 @@ class KinematicConfig:
         rows = [self.table[r] for r in _DOF_ROWS]
         rest = np.array([r.rest for r in rows])
         rest[[_LEFT_ABDUCTION, _LEFT_ABDUCTION + 1]] = self.hip_abduction_rest(body)
+        rest[[_LEFT_KNEE, _LEFT_KNEE + 1]] = self.stance_knee_rest
         return {
             "alpha": np.array([self.alpha(r) for r in _DOF_ROWS]),
             "stiffness": np.array([r.stiffness for r in rows]),
@@ -429,7 +459,8 @@ def initial_kinematics(
     torso yaw ``heading`` (rad); Gaussian spreads (m, rad, rad; joints truncated to their limits; turn rate rad/s).
 
     ``walker`` has N or 1 entries (broadcast). Zero joint velocities. The swing knee starts at
-    min(its rest angle gain x psi_hip, 0.6 rad) so the swing foot clears the ground.
+    min(its rest angle gain x psi_hip, 0.6 rad), bent further where the swing foot would otherwise go
+    below the ground (a foot trailing in double support stays on it); the stance knee at its rest.
     """
     body = body or BodyDescription.default()
     params = params or body.walker_params()
@@ -438,9 +469,19 @@ def initial_kinematics(
     beta = np.empty(n)
     point = np.empty((n, 3))
     scale = _initial_leg_scale(config, n, rng, leg_scale_spread)
-    _sole_points_kernel(_geometry(body), leg_angles(walker), dofs, scale, leg, beta, True, point)
+    legs = leg_angles(walker)
+    _initial_clearance_kernel(_geometry(body), legs, dofs, scale, leg, np.zeros(n),
+                              np.ascontiguousarray(hip_position(params, walker)[1], float))
+    _sole_points_kernel(_geometry(body), legs, dofs, scale, leg, beta, True, point)
     return _initial_state(params, walker, dofs, beta, point, start_position_xy, rng, position_spread,
                           turn_rate_spread, scale)
+
+
+def _clearance(config: KinematicConfig, walker: WalkerState) -> np.ndarray:
+    """(N,) m the swing foot's wanted clearance: ``swing_clearance`` while the swing leg trails the stance
+    leg (early swing); later the foot must be free to come down for heel strike, and is only kept out
+    of the ground."""
+    return np.where(walker.stance_angle > walker.swing_angle, config.swing_clearance, 0.0)
 
 
 def _initial_leg_scale(config: KinematicConfig, n: int, rng: np.random.Generator, spread: float) -> np.ndarray:
@@ -465,7 +506,7 @@ def _initial_dofs(config: KinematicConfig, body: BodyDescription, walker: Walker
     dofs[:, 2] = np.asarray(heading, float) + heading_spread * rng.standard_normal(n)
     dofs[:, [_LEFT_ABDUCTION, _LEFT_ABDUCTION + 1]] = p["rest"][_LEFT_ABDUCTION]
     swing_knee = np.clip(config.swing_knee_rest_gain * (walker.stance_angle - walker.swing_angle), 0.05, 0.6)
-    stance_knee = np.full(n, 0.05)
+    stance_knee = np.full(n, p["rest"][_LEFT_KNEE])
     left_stance = walker.stance_leg == LEFT
     dofs[:, 7] = np.where(left_stance, stance_knee, swing_knee)
     dofs[:, 8] = np.where(left_stance, swing_knee, stance_knee)
@@ -568,9 +609,7 @@ def _sample_kinematics(
     if heading is not None:
         new[:, DOF_NAMES.index("heading")] = heading
     legs = leg_angles(walker)
-    # Clearance while the swing leg trails the stance leg (early swing); later the foot must be
-    # free to come down for heel strike, and is only kept out of the ground.
-    margin = np.where(walker.stance_angle > walker.swing_angle, config.swing_clearance, 0.0)
+    margin = _clearance(config, walker)
     previous = current             # becomes psi_{t-1} of the next frame (moved with the clearance)
     contact = np.empty((n, 2))
     beta = np.empty(n)
@@ -580,10 +619,11 @@ def _sample_kinematics(
     contact_point, contact_roll = (np.ascontiguousarray(kin.contact_point, float),
                                    np.ascontiguousarray(kin.contact_roll, float))
     stance_x = np.ascontiguousarray(stance_contact_x(params, walker), float)
+    hip_height = np.ascontiguousarray(hip_position(params, walker)[1], float)
     over_blocks(n, lambda rows: _sample_kernel(
         geometry, legs[rows], new[rows], scale[rows], previous[rows], contact_point[rows], contact_roll[rows],
         contact_leg[rows],
-        stance_leg[rows], margin[rows], stance_x[rows], contact[rows], beta[rows], plane_origin[rows],
+        stance_leg[rows], margin[rows], stance_x[rows], hip_height[rows], contact[rows], beta[rows], plane_origin[rows],
         pose.markers[rows], pose.joint_angles[rows], pose.segments.origin[rows], pose.segments.rotation[rows]))
     named = KinematicState.unpack(new)
     state = KinematicState(
@@ -712,6 +752,21 @@ def _copy_frame(frames: np.ndarray, source: int, target: int) -> None:
             frames[target, row, col] = frames[source, row, col]
 
 
+# rad: how far each leg's hip-ankle chord leans back from the walker's leg (module doc, *Knees*)
+CHORD_LEAN = 0.08
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _thigh_lead(g: _Geometry, knee: float) -> float:
+    """How far (rad) the thigh leans ahead of the walker's leg at knee flexion ``knee`` (rad): ahead of the
+    hip-ankle chord by delta = atan2(l_shank sin knee, l_thigh + l_shank cos knee), the chord itself
+    ``CHORD_LEAN`` behind the walker's leg; the shank then trails the walker's leg by knee - lead, and
+    the foot, counted from the walker's leg, does not tip with the knee. (A leg scale multiplies both
+    lengths and leaves it unchanged.)"""
+    return math.atan2(g.lower_leg_length * math.sin(knee),
+                      g.upper_leg_length + g.lower_leg_length * math.cos(knee)) - CHORD_LEAN
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
 def _local_pose(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, frames: np.ndarray,
                 points: np.ndarray) -> None:
@@ -723,32 +778,52 @@ def _local_pose(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndar
     _turn(frames, _TORSO, 1, math.cos(dofs[i, 0]), math.sin(dofs[i, 0]))    # pitch: lean forward
     _turn(frames, _TORSO, 0, math.cos(dofs[i, 1]), math.sin(dofs[i, 1]))    # roll: lean to the right
     for side in range(2):
-        sign, thigh = 1.0 - 2.0 * side, _THIGH + side
-        for k in range(3):
-            points[_HIP + side, k] = (0.5 * g.hip_width) * sign * frames[_TORSO, k, 1]
-        # leg angle phi about the lateral axis (foot ahead for phi > 0), then abduction, rotation
-        _set_heading(frames, thigh, c_head, s_head)
-        _turn(frames, thigh, 1, math.cos(legs[i, side]), -math.sin(legs[i, side]))
-        _turn(frames, thigh, 0, math.cos(dofs[i, 3 + side]), sign * math.sin(dofs[i, 3 + side]))
-        _turn(frames, thigh, 2, math.cos(dofs[i, 5 + side]), -sign * math.sin(dofs[i, 5 + side]))
-        for k in range(3):
-            points[_KNEE + side, k] = points[_HIP + side, k] - (scale[i] * g.upper_leg_length) * frames[thigh, k, 2]
-        _lower_leg(g, dofs, scale, i, side, frames, points)
+        _leg_pose(g, legs, dofs, scale, i, side, frames, points)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _leg_pose(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, side: int,
+              frames: np.ndarray, points: np.ndarray) -> None:
+    """Hip, thigh frame, knee and what lies below of leg ``side`` of body i (the torso frame is set): the
+    hip-ankle chord at the walker's leg angle phi (foot ahead for phi > 0), the thigh ahead of it by the
+    knee's ``_thigh_lead``, then abduction and rotation."""
+    sign, thigh = 1.0 - 2.0 * side, _THIGH + side
+    for k in range(3):
+        points[_HIP + side, k] = (0.5 * g.hip_width) * sign * frames[_TORSO, k, 1]
+    pitch = legs[i, side] + _thigh_lead(g, dofs[i, 7 + side])
+    _set_heading(frames, thigh, math.cos(dofs[i, 2]), math.sin(dofs[i, 2]))
+    _turn(frames, thigh, 1, math.cos(pitch), -math.sin(pitch))
+    _turn(frames, thigh, 0, math.cos(dofs[i, 3 + side]), sign * math.sin(dofs[i, 3 + side]))
+    _turn(frames, thigh, 2, math.cos(dofs[i, 5 + side]), -sign * math.sin(dofs[i, 5 + side]))
+    for k in range(3):
+        points[_KNEE + side, k] = points[_HIP + side, k] - (scale[i] * g.upper_leg_length) * frames[thigh, k, 2]
+    _lower_leg(g, dofs, scale, i, side, frames, points)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _lower_leg(g: _Geometry, dofs: np.ndarray, scale: np.ndarray, i: int, side: int, frames: np.ndarray,
                points: np.ndarray) -> None:
     """Shank frame, ankle position and foot frame of leg ``side`` of body i below its thigh and knee
-    (knee flexion, then ankle flexion and inversion from ``dofs`` (N, 13); the shank ``scale[i]`` x its length)."""
+    (knee flexion, then ankle flexion and inversion from ``dofs`` (N, 13); the shank ``scale[i]`` x its length).
+    The foot hangs from the hip-ankle chord: its flexion counts from the chord's direction, the shank's
+    own plus knee - delta (``_ankle_from_shank``), so that a bent knee does not tip the foot."""
     sign, shank, foot = 1.0 - 2.0 * side, _SHANK + side, _FOOT + side
+    knee = dofs[i, 7 + side]
     _copy_frame(frames, _THIGH + side, shank)
-    _turn(frames, shank, 1, math.cos(dofs[i, 7 + side]), math.sin(dofs[i, 7 + side]))            # knee flexion
+    _turn(frames, shank, 1, math.cos(knee), math.sin(knee))                                      # knee flexion
     for k in range(3):
         points[_ANKLE + side, k] = points[_KNEE + side, k] - (scale[i] * g.lower_leg_length) * frames[shank, k, 2]
     _copy_frame(frames, shank, foot)
-    _turn(frames, foot, 1, math.cos(dofs[i, 9 + side]), -math.sin(dofs[i, 9 + side]))            # ankle flexion
+    flexion = _ankle_from_shank(g, dofs[i, 9 + side], knee)
+    _turn(frames, foot, 1, math.cos(flexion), -math.sin(flexion))                                # ankle flexion
     _turn(frames, foot, 0, math.cos(dofs[i, 11 + side]), -sign * math.sin(dofs[i, 11 + side]))   # inversion
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _ankle_from_shank(g: _Geometry, ankle: float, knee: float) -> float:
+    """The foot's flexion (rad) from its shank for the ankle DOF ``ankle`` (counted from the hip-ankle
+    chord) at knee flexion ``knee``: ankle + knee - delta."""
+    return ankle + knee - _thigh_lead(g, knee)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -787,18 +862,28 @@ def _sole_point(g: _Geometry, frames: np.ndarray, points: np.ndarray, side: int,
 
 
 @numba.njit(cache=True, nogil=True)
-def _swing_foot_lowest_z(g: _Geometry, shank_length: float, thigh_z: tuple[float, float, float], knee_z: float,
-                         knee: float, ankle_turns: tuple[float, float, float, float], shift_z: float) -> float:
-    """World height (m) of the lowest point of the swing foot's sole for the swing knee angle ``knee``
-    (rad), given the shank's length (m), the z row of the thigh frame, the knee's pelvis-relative height
-    knee_z (m), the cosines and sines (c_flex, s_flex, c_inv, s_inv) of the foot's turns about its y
-    (flexion) and x (inversion) axes and the pelvis height shift_z (m). Only the frames' z rows are turned
+def _foot_lowest_z(g: _Geometry, lengths: tuple[float, float], leg: float, hip_turns: tuple[float, float, float, float],
+                         hip_z: float, knee: float, ankle: float, inversion_turn: tuple[float, float],
+                         shift_z: float) -> float:
+    """World height (m) of the lowest point of a foot's sole for its knee angle ``knee`` (rad), given
+    the thigh's and shank's lengths (m), the walker's leg angle ``leg`` (rad), the cosines
+    and sines (c_abd, s_abd, c_rot, s_rot) of the thigh's turns about its x (abduction) and z (rotation)
+    axes, the hip's pelvis-relative height hip_z (m), the ankle DOF (rad, from the chord), the cosine and
+    sine of the foot's inversion turn and the pelvis height shift_z (m). The thigh leads the chord by the
+    knee's ``_thigh_lead``, so it is turned anew for each knee angle; only the frames' z rows are turned
     (the height needs no more)."""
-    c_flex, s_flex, c_inv, s_inv = ankle_turns
-    x, y, z = thigh_z
+    c_abd, s_abd, c_rot, s_rot = hip_turns
+    c_inv, s_inv = inversion_turn
+    pitch = leg + _thigh_lead(g, knee)
+    x, y, z = math.sin(pitch), 0.0, math.cos(pitch)                 # thigh: the heading leaves z alone
+    y, z = c_abd * y + s_abd * z, c_abd * z - s_abd * y             # abduction about x
+    x, y = c_rot * x + s_rot * y, c_rot * y - s_rot * x             # rotation about z
+    knee_z = hip_z - lengths[0] * z
     c, s = math.cos(knee), math.sin(knee)
     x, z = c * x - s * z, c * z + s * x                             # shank: knee flexion about y
-    ankle_z = knee_z - shank_length * z
+    ankle_z = knee_z - lengths[1] * z
+    flexion = -_ankle_from_shank(g, ankle, knee)
+    c_flex, s_flex = math.cos(flexion), math.sin(flexion)
     x, z = c_flex * x - s_flex * z, c_flex * z + s_flex * x         # foot: ankle flexion about y
     y, z = c_inv * y + s_inv * z, c_inv * z - s_inv * y             # inversion about x
     # The sole is an arc of radius rho in the foot's sagittal plane through the sole line's heel and
@@ -814,30 +899,80 @@ def _swing_foot_lowest_z(g: _Geometry, shank_length: float, thigh_z: tuple[float
 
 
 @numba.njit(cache=True, nogil=True)
-def _clear_knee(g: _Geometry, dofs: np.ndarray, scale: np.ndarray, i: int, swing: int, frames: np.ndarray,
-                points: np.ndarray, shift_z: float) -> float:
-    """Ground clearance: where body i's swing foot sole would go below z = 0 (``shift_z``: the pelvis
-    height minus the wanted clearance, m), the swing knee angle (rad) that bends it just enough,
-    found by bisection (14 halvings of [knee, pi]); else the sampled knee angle. The knee-less
-    walker's trailing leg sweeps through the floor after toe-off; this pose-dependent lower knee
-    limit keeps the body physical (no penetration), like the joint limits of eq. (6)."""
-    sign, thigh = 1.0 - 2.0 * swing, _THIGH + swing
-    knee = dofs[i, 7 + swing]
-    flexion, inversion = -dofs[i, 9 + swing], -sign * dofs[i, 11 + swing]
-    turns = (math.cos(flexion), math.sin(flexion), math.cos(inversion), math.sin(inversion))
-    thigh_z = (frames[thigh, 2, 0], frames[thigh, 2, 1], frames[thigh, 2, 2])
-    knee_z = points[_KNEE + swing, 2]
-    shank_length = scale[i] * g.lower_leg_length
-    if _swing_foot_lowest_z(g, shank_length, thigh_z, knee_z, knee, turns, shift_z) >= 0.0:
-        return knee
-    below, above = knee, math.pi
+def _foot_height(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, side: int,
+                 points: np.ndarray, knee: float, shift_z: float) -> float:
+    """Height (m) of the lowest point of body i's foot ``side`` with its knee at ``knee`` (rad), the
+    pelvis at height ``shift_z`` (m)."""
+    sign = 1.0 - 2.0 * side
+    abduction, rotation, inversion = sign * dofs[i, 3 + side], -sign * dofs[i, 5 + side], -sign * dofs[i, 11 + side]
+    return _foot_lowest_z(g, (scale[i] * g.upper_leg_length, scale[i] * g.lower_leg_length), legs[i, side],
+                                (math.cos(abduction), math.sin(abduction), math.cos(rotation), math.sin(rotation)),
+                                points[_HIP + side, 2], knee, dofs[i, 9 + side],
+                                (math.cos(inversion), math.sin(inversion)), shift_z)
+
+
+@numba.njit(cache=True, nogil=True)
+def _knee_at_ground(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, side: int,
+                    points: np.ndarray, shift_z: float, low: float, high: float) -> float:
+    """The knee angle (rad) in [low, high] at which the lowest point of body i's foot ``side`` reaches
+    height 0 (``shift_z``: the pelvis height, m), found by bisection (14 halvings): bending the knee
+    shortens the hip-ankle chord and lifts the foot, so the height grows with the knee. Returns the
+    end of the bracket on the foot's clear side (height >= 0)."""
+    below, above = low, high
     for _ in range(14):
         middle = 0.5 * (below + above)
-        if _swing_foot_lowest_z(g, shank_length, thigh_z, knee_z, middle, turns, shift_z) >= 0.0:
+        if _foot_height(g, legs, dofs, scale, i, side, points, middle, shift_z) >= 0.0:
             above = middle
         else:
             below = middle
     return above
+
+
+@numba.njit(cache=True, nogil=True)
+def _clear_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, swing: int,
+                points: np.ndarray, shift_z: float) -> float:
+    """Ground clearance: where body i's foot ``swing`` would go below z = 0 (``shift_z``: the pelvis
+    height minus the wanted clearance, m), the knee angle (rad) that bends it just enough
+    (``_knee_at_ground`` in [knee, pi]); else the sampled knee angle. The knee-less walker's trailing
+    leg sweeps through the floor after toe-off; this pose-dependent lower knee limit keeps the body
+    physical (no penetration), like the joint limits of eq. (6). (``_stance_knee`` uses it too.)"""
+    knee = dofs[i, 7 + swing]
+    if _foot_height(g, legs, dofs, scale, i, swing, points, knee, shift_z) >= 0.0:
+        return knee
+    return _knee_at_ground(g, legs, dofs, scale, i, swing, points, shift_z, knee, math.pi)
+
+
+@numba.njit(cache=True, nogil=True)
+def _landing_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, leg: int,
+                  points: np.ndarray, shift_z: float) -> float:
+    """Heel strike: the walker's feet meet the ground together, but a landing knee still bent holds the
+    kinematic foot above it (the chord is shorter than the walker's leg). Where body i's landing foot
+    ``leg`` is above the ground (``shift_z``: the pelvis height held by the old contact, m), the knee
+    straightened just enough for it to touch (``_knee_at_ground`` in [0, knee]; fully straight if even
+    that does not reach); else the sampled knee angle. Without it the body dropped by the gap at the
+    contact's snap to the ground (up to 6 cm)."""
+    knee = dofs[i, 7 + leg]
+    if knee <= 0.0 or _foot_height(g, legs, dofs, scale, i, leg, points, knee, shift_z) <= 0.0:
+        return knee
+    if _foot_height(g, legs, dofs, scale, i, leg, points, 0.0, shift_z) >= 0.0:
+        return 0.0
+    return _knee_at_ground(g, legs, dofs, scale, i, leg, points, shift_z, 0.0, knee)
+
+
+@numba.njit(cache=True, nogil=True)
+def _stance_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, previous: np.ndarray, i: int,
+                 leg: int, frames: np.ndarray, points: np.ndarray, hip_height: float) -> None:
+    """Heel rise: the stance foot hangs from the hip-ankle chord, so late in the stance it stands on its
+    toe and would carry the pelvis above the walker's hip (4-5 cm at the end of a 0.7 m step, where the
+    landing foot then cannot reach the ground). Where body i's pelvis at ``hip_height`` (m, the walker's)
+    would put its stance foot ``leg`` below the ground, the stance knee is bent just enough
+    (``_clear_knee``: people flex it ~35 degrees at toe-off), as a position projection (``previous``
+    moves along), and the leg posed again."""
+    knee = _clear_knee(g, legs, dofs, scale, i, leg, points, hip_height)
+    if knee != dofs[i, 7 + leg]:
+        previous[i, 7 + leg] += knee - dofs[i, 7 + leg]
+        dofs[i, 7 + leg] = knee
+        _leg_pose(g, legs, dofs, scale, i, leg, frames, points)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -884,15 +1019,17 @@ def _write_posed_body(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, i: int, 
             rotation[i, 6 + side, k, 2] = frames[foot, k, 0]
     joints[i, 0], joints[i, 1], joints[i, 2] = dofs[i, 0], dofs[i, 1], dofs[i, 2]   # torso pitch, roll, yaw
     for side in range(2):
-        joints[i, 3 + 6 * side] = legs[i, side]                           # hip flexion = walker leg angle
+        knee = dofs[i, 7 + side]
+        joints[i, 3 + 6 * side] = legs[i, side] + _thigh_lead(g, knee)   # hip flexion: the thigh's angle
         for j in range(5):                                                # abduction, rotation, knee, ankle x2
             joints[i, 4 + 6 * side + j] = dofs[i, 3 + side + 2 * j]
+        joints[i, 7 + 6 * side] = _ankle_from_shank(g, dofs[i, 9 + side], knee)   # ankle flexion from the shank
 
 
 @numba.njit(cache=True, nogil=True)
 def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, previous: np.ndarray,
                    contact_point: np.ndarray, contact_roll: np.ndarray, contact_leg: np.ndarray,
-                   stance_leg: np.ndarray, clearance: np.ndarray, stance_x: np.ndarray,
+                   stance_leg: np.ndarray, clearance: np.ndarray, stance_x: np.ndarray, hip_height: np.ndarray,
                    new_contact: np.ndarray, new_roll: np.ndarray, plane_origin: np.ndarray, markers: np.ndarray,
                    joints: np.ndarray, origin: np.ndarray, rotation: np.ndarray) -> None:
     """The deterministic part of sampling k_t for N particles, after eq. (6) drew the DOFs:
@@ -900,12 +1037,16 @@ def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.n
     legs (N, 2) rad; dofs (N, 13) the sampled DOFs, in place: swing knees bent for ground clearance;
     scale (N,) the leg scales; previous (N, 13) psi_{t-1}, in place: moved along with those knees;
     contact_point (N, 2) m, contact_roll (N,) rad, contact_leg (N,) of the previous frame; stance_leg (N,) the walker's;
-    clearance (N,) m the wanted swing-foot clearance; stance_x (N,) m the walker's stance contact x.
+    clearance (N,) m the wanted swing-foot clearance; stance_x (N,) m the walker's stance contact x;
+    hip_height (N,) m the walker's hip height over the ground, which the stance knee keeps the body's
+    pelvis from exceeding (``_stance_knee``).
     Writes the new contact (N, 2), its roll (N,), the plane origin (N, 2) and the posed bodies."""
     frames, points = _scratch()
     for i in range(dofs.shape[0]):
         _local_pose(g, legs, dofs, scale, i, frames, points)
         old, leg = contact_leg[i], stance_leg[i]
+        if leg == old:
+            _stance_knee(g, legs, dofs, scale, previous, i, leg, frames, points, hip_height[i])
         # Roll without slip: the ground contact advances by the arc length rolled on the sole,
         # along the old contact foot's heel->toe direction on the ground.
         beta = _foot_lowest_roll(g, frames, old)
@@ -914,9 +1055,15 @@ def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.n
         rolled = g.sole_radius * (beta - contact_roll[i])
         cx, cy = contact_point[i, 0] + rolled * (dx / norm), contact_point[i, 1] + rolled * (dy / norm)
         if leg != old:
-            # heel strike: the contact passes to the new stance foot's lowest point, put where the
-            # body (held by the old contact) has that point; its height snaps to the ground
-            px, py, _ = _sole_point(g, frames, points, old, beta)
+            # heel strike: the landing knee straightened until the foot reaches the ground (the body
+            # held by the old contact), then the contact passes to the new stance foot's lowest point,
+            # put where the body has that point; its height snaps to the ground
+            px, py, pz = _sole_point(g, frames, points, old, beta)
+            knee = _landing_knee(g, legs, dofs, scale, i, leg, points, -pz)
+            if knee != dofs[i, 7 + leg]:
+                previous[i, 7 + leg] += knee - dofs[i, 7 + leg]       # a position projection, as below
+                dofs[i, 7 + leg] = knee
+                _leg_pose(g, legs, dofs, scale, i, leg, frames, points)
             beta = _foot_lowest_roll(g, frames, leg)
             qx, qy, _ = _sole_point(g, frames, points, leg, beta)
             cx, cy = qx + (cx - px), qy + (cy - py)
@@ -924,13 +1071,13 @@ def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.n
         px, py, pz = _sole_point(g, frames, points, leg, beta)
         shift = (cx - px, cy - py, -pz)
         swing = 1 - leg
-        knee = _clear_knee(g, dofs, scale, i, swing, frames, points, shift[2] - clearance[i])
+        knee = _clear_knee(g, legs, dofs, scale, i, swing, points, shift[2] - clearance[i])
         if knee != dofs[i, 7 + swing]:
             # a position projection: psi_{t-1} moves along, so that eq. (6) next frame sees the
             # sampled knee velocity; the stance foot (and so ``shift``) is unchanged
             previous[i, 7 + swing] += knee - dofs[i, 7 + swing]
             dofs[i, 7 + swing] = knee
-            _lower_leg(g, dofs, scale, i, swing, frames, points)
+            _leg_pose(g, legs, dofs, scale, i, swing, frames, points)
         new_contact[i, 0], new_contact[i, 1] = cx, cy
         new_roll[i] = beta
         plane_origin[i, 0] = cx - stance_x[i] * math.cos(dofs[i, 2])
@@ -964,6 +1111,21 @@ def _sole_points_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale:
         if lowest:
             beta[i] = _foot_lowest_roll(g, frames, leg[i])
         out[i, 0], out[i, 1], out[i, 2] = _sole_point(g, frames, points, leg[i], beta[i])
+
+
+@numba.njit(cache=True, nogil=True)
+def _initial_clearance_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray,
+                              stance_leg: np.ndarray, clearance: np.ndarray, hip_height: np.ndarray) -> None:
+    """Initial knees (in ``dofs`` (N, 13), in place): the stance knee bent where the pelvis would stand above
+    the walker's ``hip_height`` (N,) m (``_stance_knee``), then the swing knee where the swing foot would come
+    closer to the ground than ``clearance`` (N,) m, the body standing on its stance foot's lowest point."""
+    frames, points = _scratch()
+    for i in range(dofs.shape[0]):
+        _local_pose(g, legs, dofs, scale, i, frames, points)
+        leg = stance_leg[i]
+        _stance_knee(g, legs, dofs, scale, dofs, i, leg, frames, points, hip_height[i])
+        _, _, pz = _sole_point(g, frames, points, leg, _foot_lowest_roll(g, frames, leg))
+        dofs[i, 8 - leg] = _clear_knee(g, legs, dofs, scale, i, 1 - leg, points, -pz - clearance[i])
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

@@ -287,22 +287,46 @@ def flat_foot_frames(markers: np.ndarray, side: str) -> np.ndarray:
 
 
 def body_from_markers(markers: np.ndarray, template: BodyDescription | None = None) -> BodyDescription:
-    """A body description with segment lengths measured from marker trajectories (F, 13, 3)
-    (median over frames); widths and the other sizes from ``template``."""
+    """A body description with segment sizes measured from marker trajectories (F, 13, 3) with the floor
+    at z = 0 (``mocap_motion.level_floor``), medians over frames; widths and the other sizes from
+    ``template``.
+
+    The ankle's height over the floor while its foot lies flat on it (``flat_foot_frames``) is what a tape
+    measure gives; the body stands on
+    its rocker sole's middle, ``sole_sag`` below the sole line, so ``ankle_height`` is that height less
+    the sag, and ``leg_length`` is the person's standing hip height. ``heel_offset`` is how far the heel
+    lies behind the ankle along the heel-toe line. CMU subject 7: the ankle 5.8-5.9 cm over the floor,
+    the heel 5.1 cm behind it, where the template's ankle (6.6 cm, plus the 1 cm sag) stood the body
+    1.7 cm taller than the person drawn on those markers (``synth --person dressed``)."""
     template = template or BodyDescription.default()
     idx = {n: i for i, n in enumerate(MARKER_NAMES)}
 
     def length(a: str, b: str) -> float:
         return float(np.median(np.linalg.norm(markers[:, idx[a]] - markers[:, idx[b]], axis=-1)))
 
-    return replace(
+    def ankle_over_floor(side: str) -> float:
+        flat = flat_foot_frames(markers, side)
+        return float(np.median(markers[flat, idx[f"{side}_ankle"], 2])) if flat.any() else template.ankle_height
+
+    def heel_behind(side: str) -> float:
+        heel, toe, ankle = (markers[:, idx[f"{side}_{name}"]] for name in ("heel", "toe", "ankle"))
+        along = toe - heel
+        along /= np.maximum(np.linalg.norm(along, axis=-1, keepdims=True), 1e-12)
+        return float(np.median(np.sum((ankle - heel) * along, axis=-1)))
+
+    foot_length = 0.5 * (length("left_heel", "left_toe") + length("right_heel", "right_toe"))
+    body = replace(
         template,
         upper_leg_length=0.5 * (length("left_hip", "left_knee") + length("right_hip", "right_knee")),
         lower_leg_length=0.5 * (length("left_knee", "left_ankle") + length("right_knee", "right_ankle")),
+        heel_offset=float(np.clip(0.5 * (heel_behind("left") + heel_behind("right")), 0.01, 0.5 * foot_length)),
         hip_width=length("left_hip", "right_hip"),
         torso_length=length("pelvis", "thorax"),
-        foot_length=0.5 * (length("left_heel", "left_toe") + length("right_heel", "right_toe")),
+        foot_length=foot_length,
     )
+    # Standing on the rocker sole's middle, the body's ankle is ankle_height + sole_sag over the floor.
+    over_floor = 0.5 * (ankle_over_floor("left") + ankle_over_floor("right"))
+    return replace(body, ankle_height=float(np.clip(over_floor - body.sole_sag, template.foot_radii_heel[0], 0.15)))
 
 
 def segments_from_markers(body: BodyDescription, markers: np.ndarray) -> BodySegments:

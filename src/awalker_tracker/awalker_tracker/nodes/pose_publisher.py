@@ -152,7 +152,7 @@ class PosePublisherNode(Node):
         self.marker_pub = self.create_publisher(MarkerArray, "/awalker/markers", qos)
         self.particles_pub = self.create_publisher(PointCloud2, "/awalker/particles", qos)
         self.gait_pub = self.create_publisher(GaitStep, "/awalker/gait_steps", qos)
-        self.steps = StepCounter(WALKER_STRIKE_DELAY)       # heel strikes late in a double support: dated earlier
+        self.steps = StepCounter(WALKER_STRIKE_DELAY)       # the walker's strike comes after the heel's: dated earlier
         self._first_stamp_ns: int | None = None
         self.tf_broadcaster = _tf_broadcaster(self)
         self.count = 0

@@ -57,14 +57,67 @@ class PersonDetection:
     triangulated: bool = False        # position from several cameras' planes (~0.1 m), not one feet row
 
 
+def _join_stacked(labels: np.ndarray, stats: np.ndarray, min_pixels: float) -> None:
+    """Relabel (in place) each component lying one map row below another whose columns it mostly shares
+    (at least half the narrower one's width) as that one, both of at least ``min_pixels`` map pixels: a belt
+    or a waist whose colours are near the background's leaves a row of the body below the threshold and
+    would cut the person in two. Pieces side by side, two rows or more apart, or small (a shadow or a ghost
+    under the feet) stay apart."""
+    count = stats.shape[0]
+    left, top = stats[1:, cv2.CC_STAT_LEFT], stats[1:, cv2.CC_STAT_TOP]
+    width, height = stats[1:, cv2.CC_STAT_WIDTH], stats[1:, cv2.CC_STAT_HEIGHT]
+    shared = np.minimum.outer(left + width, left + width) - np.maximum.outer(left, left)
+    # [upper, lower]: exactly one empty row between them, sharing half the narrower one's columns
+    big = stats[1:, cv2.CC_STAT_AREA] >= min_pixels
+    stacked = ((top[None, :] == (top + height)[:, None] + 1) & (shared >= 0.5 * np.minimum.outer(width, width))
+               & big[:, None] & big[None, :])
+    if not stacked.any():
+        return
+    parent = np.arange(count)
+
+    def root(k: int) -> int:
+        while parent[k] != k:
+            k = int(parent[k])
+        return k
+
+    for upper, lower in zip(*np.nonzero(stacked)):
+        parent[root(int(lower) + 1)] = root(int(upper) + 1)
+    roots = np.array([root(k) for k in range(count)])
+    labels[...] = roots[labels]
+    for k in np.flatnonzero(roots != np.arange(count)):
+        r = roots[k]
+        x0, y0 = min(stats[r, 0], stats[k, 0]), min(stats[r, 1], stats[k, 1])
+        x1 = max(stats[r, 0] + stats[r, 2], stats[k, 0] + stats[k, 2])
+        y1 = max(stats[r, 1] + stats[r, 3], stats[k, 1] + stats[k, 3])
+        stats[r, :4] = (x0, y0, x1 - x0, y1 - y0)
+        stats[r, cv2.CC_STAT_AREA] += stats[k, cv2.CC_STAT_AREA]
+        stats[k, cv2.CC_STAT_AREA] = 0
+
+
+def _fill_row_gaps(labels: np.ndarray, stats: np.ndarray) -> None:
+    """Give (in place) each background map pixel with one blob's pixels right above and below it to that
+    blob: a notch a row high across a limb or the waist, as a vertical closing would fill, but without
+    joining two blobs."""
+    above, below = labels[:-2], labels[2:]
+    gap = (labels[1:-1] == 0) & (above == below) & (above != 0)
+    rows, cols = np.nonzero(gap)
+    if rows.size:
+        filled = above[rows, cols]
+        labels[rows + 1, cols] = filled
+        np.add.at(stats[:, cv2.CC_STAT_AREA], filled, 1)
+
+
 def person_blobs(features: FrameFeatures, camera_name: str = "", threshold: float = 2.0,
                  min_area_fraction: float = 0.0015) -> list[PersonBlob]:
     """Every foreground blob big enough to be a person (``threshold`` nats, at least ``min_area_fraction``
-    of the image: 460 px of 640x480), largest first."""
+    of the image: 460 px of 640x480), largest first; pieces of one person parted by a single map row
+    are one blob (``_join_stacked``) and its one-row notches are filled (``_fill_row_gaps``)."""
     mask = (np.max(features.llr, axis=0) > threshold).astype(np.uint8)
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     d = float(features.downsample)
     min_area = min_area_fraction * features.image_width * features.image_height
+    _join_stacked(labels, stats, min_area / (d * d))
+    _fill_row_gaps(labels, stats)
     order = 1 + np.argsort(-stats[1:, cv2.CC_STAT_AREA])
     blobs = []
     for label in order:
