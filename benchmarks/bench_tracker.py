@@ -113,6 +113,20 @@ def warm_up(body, start, likelihood, observations) -> float:
     return round(time.perf_counter() - started, 3)
 
 
+def synthesised_walk(folder: Path, name: str, cameras: int, frames: int, background: int) -> dict:
+    """``synth``'s paths of a synthetic 640x480 walk (``folder``/``name``_seedS) from the first synthesis
+    seed whose walker does not fall within ``frames``."""
+    from awalker_tools.synth import SynthConfig, synthesise
+
+    for seed in range(1, 20):
+        try:
+            return synthesise(SynthConfig(out_dir=folder / f"{name}_seed{seed}", cameras=cameras, frames=frames,
+                                          background_frames=background, seed=seed), progress=False)
+        except Exception as exc:  # the walker fell: next seed
+            print(f"synth seed {seed}: {exc}", file=sys.stderr)
+    raise RuntimeError(f"bench_tracker: no synthesis seed gave a {frames}-frame walk")
+
+
 def image_sequence(cameras: int, frames: int, folder: Path):
     """A synthetic 640x480 walk seen by ``cameras`` cameras -> (body, start, cameras, observations)."""
     from awalker_tracker.inference.tracker import ImageObservation
@@ -120,17 +134,9 @@ def image_sequence(cameras: int, frames: int, folder: Path):
     from awalker_tracker.vision.camera import load_calibration
     from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
     from awalker_tools.bagio import SequenceReader
-    from awalker_tools.synth import SynthConfig, synthesise
 
     background = 5
-    for seed in range(1, 20):
-        out = folder / f"cams{cameras}_seed{seed}"
-        try:
-            paths = synthesise(SynthConfig(out_dir=out, cameras=cameras, frames=frames, background_frames=background,
-                                           seed=seed), progress=False)
-            break
-        except Exception as exc:  # the walker fell: next seed
-            print(f"synth seed {seed}: {exc}", file=sys.stderr)
+    paths = synthesised_walk(folder, f"cams{cameras}", cameras, frames, background)
     body = BodyDescription.from_yaml(paths["body"])
     start = StartDescription.from_yaml(paths["start"])
     cams = load_calibration(paths["calibration"])
@@ -158,35 +164,24 @@ def end_to_end(particles: int, folder: Path) -> dict:
             "filter_frames_per_s": round(result.summaries / max(result.seconds_in_filter, 1e-9), 2)}
 
 
-def long_walk(frames: int, folder: Path) -> Path:
-    """The bag of a synthetic 640x480 walk of ``frames`` frames, one camera (the first synthesis seed
-    whose walker does not fall)."""
-    from awalker_tools.synth import SynthConfig, synthesise
-
-    for seed in range(1, 20):
-        try:
-            return synthesise(SynthConfig(out_dir=folder / f"long_seed{seed}", cameras=1, frames=frames,
-                                          background_frames=8, seed=seed), progress=False)["bag"]
-        except Exception as exc:  # the walker fell: next seed
-            print(f"synth seed {seed}: {exc}", file=sys.stderr)
-    raise RuntimeError(f"bench_tracker: no synthesis seed gave a {frames}-frame walk")
-
-
 def sustained(particles: int, bag: Path, folder: Path) -> dict:
-    """`awalker track BAG --no-overlay` in a fresh process (as a user runs it) -> its frames/s."""
-    import re
+    """`awalker track BAG --no-overlay` in a fresh process (as a user runs it) -> its frames/s, from the
+    run.yaml it writes."""
     import subprocess
 
+    import yaml
+
+    from awalker_tools.pipeline import RUN_FILE
+
     out = folder / f"sustained_{particles}"
-    command = [sys.executable, "-m", "awalker_tools.cli", "track", str(bag), "--out", str(out),
-               "--particles", str(particles), "--no-overlay"]
-    done = subprocess.run(command, capture_output=True, text=True, check=True)
-    rates = re.search(r"(\d+) frames tracked in ([\d.]+) s \(([\d.]+) frames/s end to end, ([\d.]+) while "
-                      r"streaming, filter ([\d.]+) frames/s", done.stderr + done.stdout)
-    if rates is None:
-        raise RuntimeError(f"bench_tracker: no rates in the output of {' '.join(command)}")
-    return {"frames": int(rates[1]), "particles": particles, "end_to_end_frames_per_s": float(rates[3]),
-            "streaming_frames_per_s": float(rates[4]), "filter_frames_per_s": float(rates[5])}
+    subprocess.run([sys.executable, "-m", "awalker_tools.cli", "track", str(bag), "--out", str(out),
+                    "--particles", str(particles), "--no-overlay"], capture_output=True, text=True, check=True)
+    run = yaml.safe_load((out / RUN_FILE).read_text())
+    frames = run["posteriors"]
+    return {"frames": frames, "particles": particles,
+            "end_to_end_frames_per_s": round(frames / run["seconds"], 2),
+            "streaming_frames_per_s": round(frames / run["seconds_streaming"], 2),
+            "filter_frames_per_s": round(frames / max(run["seconds_in_filter"], 1e-9), 2)}
 
 
 def main() -> None:
@@ -238,7 +233,7 @@ def main() -> None:
                 results["end_to_end"].append(end_to_end(n, Path(tmp)))
                 print(f"end to end N={n}: {results['end_to_end'][-1]}", file=sys.stderr)
             if args.long_frames > 0:
-                walk = long_walk(args.long_frames, Path(tmp))
+                walk = synthesised_walk(Path(tmp), "long", 1, args.long_frames, 8)["bag"]
                 for n in (500, 5000):
                     results["sustained"].append(sustained(n, walk, Path(tmp)))
                     print(f"sustained N={n}: {results['sustained'][-1]}", file=sys.stderr)
