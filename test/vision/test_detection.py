@@ -163,6 +163,7 @@ def test_a_row_lost_across_the_waist_does_not_cut_the_person_in_two(scene):
     cut = person_blobs(replace(side, llr=llr), "side")
     assert cut[0].box == clean.box and cut[0].feet_uv == pytest.approx(clean.feet_uv, abs=d)
     assert cut[0].area_px == pytest.approx(clean.area_px, rel=0.05)
+    assert cut[0].area_px == clean.area_px                    # the lost row filled back (``_fill_row_gaps``)
     two_rows = llr.copy()
     two_rows[:, waist + 1, :] = -5.0                          # two rows: two blobs
     assert person_blobs(replace(side, llr=two_rows), "side")[0].box != clean.box

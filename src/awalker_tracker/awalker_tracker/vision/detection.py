@@ -64,13 +64,14 @@ def _join_stacked(labels: np.ndarray, stats: np.ndarray, min_pixels: float) -> N
     would cut the person in two. Pieces side by side, two rows or more apart, or small (a shadow or a ghost
     under the feet) stay apart."""
     count = stats.shape[0]
-    left, top = stats[1:, cv2.CC_STAT_LEFT], stats[1:, cv2.CC_STAT_TOP]
-    width, height = stats[1:, cv2.CC_STAT_WIDTH], stats[1:, cv2.CC_STAT_HEIGHT]
+    big = 1 + np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= min_pixels)      # labels of the candidates
+    if big.size < 2:
+        return
+    left, top = stats[big, cv2.CC_STAT_LEFT], stats[big, cv2.CC_STAT_TOP]
+    width, height = stats[big, cv2.CC_STAT_WIDTH], stats[big, cv2.CC_STAT_HEIGHT]
     shared = np.minimum.outer(left + width, left + width) - np.maximum.outer(left, left)
     # [upper, lower]: exactly one empty row between them, sharing half the narrower one's columns
-    big = stats[1:, cv2.CC_STAT_AREA] >= min_pixels
-    stacked = ((top[None, :] == (top + height)[:, None] + 1) & (shared >= 0.5 * np.minimum.outer(width, width))
-               & big[:, None] & big[None, :])
+    stacked = (top[None, :] == (top + height)[:, None] + 1) & (shared >= 0.5 * np.minimum.outer(width, width))
     if not stacked.any():
         return
     parent = np.arange(count)
@@ -81,7 +82,7 @@ def _join_stacked(labels: np.ndarray, stats: np.ndarray, min_pixels: float) -> N
         return k
 
     for upper, lower in zip(*np.nonzero(stacked)):
-        parent[root(int(lower) + 1)] = root(int(upper) + 1)
+        parent[root(int(big[lower]))] = root(int(big[upper]))
     roots = np.array([root(k) for k in range(count)])
     labels[...] = roots[labels]
     for k in np.flatnonzero(roots != np.arange(count)):
