@@ -278,7 +278,7 @@ class TrackerModel:
                phase_share: float = 1.0) -> TrackerStates:
         """N new particles on cyclic gaits around the given speeds and step lengths (per particle),
         pelvis above ``pelvis_xy`` ((2,) or (N, 2), m), walking along ``heading`` (rad), with ``spread``
-        (a random phase within the first ``phase_share`` of the step)."""
+        (a random phase within the last ``phase_share`` of the step)."""
         speed, step = self._sample_gaits(speed, step, spread, rng)
         walker = self._gaits.gait_initial_state(self.params, speed, step, contact_origin=0.0,
                                                stance_leg=stance_leg, table=self.gaits)

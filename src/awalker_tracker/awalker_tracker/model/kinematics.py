@@ -785,8 +785,8 @@ def _local_pose(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndar
 def _leg_pose(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, side: int,
               frames: np.ndarray, points: np.ndarray) -> None:
     """Hip, thigh frame, knee and what lies below of leg ``side`` of body i (the torso frame is set): the
-    hip-ankle chord at the walker's leg angle phi (foot ahead for phi > 0), the thigh ahead of it by the
-    knee's ``_thigh_lead``, then abduction and rotation."""
+    thigh ``_thigh_lead`` ahead of the walker's leg angle phi (foot ahead for phi > 0), so that the
+    hip-ankle chord lies ``CHORD_LEAN`` behind phi, then abduction and rotation."""
     sign, thigh = 1.0 - 2.0 * side, _THIGH + side
     for k in range(3):
         points[_HIP + side, k] = (0.5 * g.hip_width) * sign * frames[_TORSO, k, 1]
@@ -805,8 +805,8 @@ def _lower_leg(g: _Geometry, dofs: np.ndarray, scale: np.ndarray, i: int, side: 
                points: np.ndarray) -> None:
     """Shank frame, ankle position and foot frame of leg ``side`` of body i below its thigh and knee
     (knee flexion, then ankle flexion and inversion from ``dofs`` (N, 13); the shank ``scale[i]`` x its length).
-    The foot hangs from the hip-ankle chord: its flexion counts from the chord's direction, the shank's
-    own plus knee - delta (``_ankle_from_shank``), so that a bent knee does not tip the foot."""
+    The foot hangs from the walker's leg: its flexion counts from the leg's direction, the shank's own plus
+    knee - lead (``_ankle_from_shank``), so that a bent knee does not tip the foot."""
     sign, shank, foot = 1.0 - 2.0 * side, _SHANK + side, _FOOT + side
     knee = dofs[i, 7 + side]
     _copy_frame(frames, _THIGH + side, shank)
@@ -821,8 +821,8 @@ def _lower_leg(g: _Geometry, dofs: np.ndarray, scale: np.ndarray, i: int, side: 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _ankle_from_shank(g: _Geometry, ankle: float, knee: float) -> float:
-    """The foot's flexion (rad) from its shank for the ankle DOF ``ankle`` (counted from the hip-ankle
-    chord) at knee flexion ``knee``: ankle + knee - delta."""
+    """The foot's flexion (rad) from its shank for the ankle DOF ``ankle`` (counted from the walker's leg)
+    at knee flexion ``knee``: ankle + knee - ``_thigh_lead``."""
     return ankle + knee - _thigh_lead(g, knee)
 
 
@@ -868,9 +868,9 @@ def _foot_lowest_z(g: _Geometry, lengths: tuple[float, float], leg: float, hip_t
     """World height (m) of the lowest point of a foot's sole for its knee angle ``knee`` (rad), given
     the thigh's and shank's lengths (m), the walker's leg angle ``leg`` (rad), the cosines
     and sines (c_abd, s_abd, c_rot, s_rot) of the thigh's turns about its x (abduction) and z (rotation)
-    axes, the hip's pelvis-relative height hip_z (m), the ankle DOF (rad, from the chord), the cosine and
-    sine of the foot's inversion turn and the pelvis height shift_z (m). The thigh leads the chord by the
-    knee's ``_thigh_lead``, so it is turned anew for each knee angle; only the frames' z rows are turned
+    axes, the hip's pelvis-relative height hip_z (m), the ankle DOF (rad, from the walker's leg), the cosine
+    and sine of the foot's inversion turn and the pelvis height shift_z (m). The thigh leads the walker's
+    leg by the knee's ``_thigh_lead``, so it is turned anew for each knee angle; only the frames' z rows are turned
     (the height needs no more)."""
     c_abd, s_abd, c_rot, s_rot = hip_turns
     c_inv, s_inv = inversion_turn
@@ -962,9 +962,9 @@ def _landing_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.nd
 @numba.njit(cache=True, nogil=True)
 def _stance_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, previous: np.ndarray, i: int,
                  leg: int, frames: np.ndarray, points: np.ndarray, hip_height: float) -> None:
-    """Heel rise: the stance foot hangs from the hip-ankle chord, so late in the stance it stands on its
-    toe and would carry the pelvis above the walker's hip (4-5 cm at the end of a 0.7 m step, where the
-    landing foot then cannot reach the ground). Where body i's pelvis at ``hip_height`` (m, the walker's)
+    """Heel rise: the stance foot hangs from the walker's leg, so late in a long stance it stands on its
+    toe and would carry the pelvis above the walker's hip (where the landing foot then cannot reach the
+    ground). Where body i's pelvis at ``hip_height`` (m, the walker's)
     would put its stance foot ``leg`` below the ground, the stance knee is bent just enough
     (``_clear_knee``: people flex it ~35 degrees at toe-off), as a position projection (``previous``
     moves along), and the leg posed again."""

@@ -423,8 +423,9 @@ def _project_segments(parts: tuple[PartShape, ...], segments: BodySegments, came
 
 
 def camera_log_likelihood(parts: tuple[PartShape, ...], segments: BodySegments, prev_segments: BodySegments,
-                          camera: Camera, features: FrameFeatures, config: LikelihoodConfig = LikelihoodConfig(), silhouettes: np.ndarray | None = None,
-                          prev_silhouettes: np.ndarray | None = None) -> np.ndarray:
+                          camera: Camera, features: FrameFeatures, config: LikelihoodConfig = LikelihoodConfig(),
+                          silhouettes: np.ndarray | None = None, prev_silhouettes: np.ndarray | None = None
+                          ) -> np.ndarray:
     """Log-likelihood (N,) of one camera's features (see the module docstring).
 
     ``silhouettes``: optional (N, P, 6) float64 array that receives the poses' projected axes
