@@ -259,7 +259,7 @@ def test_grid_flow_matches_the_opencv_reference(scale):
         a_s, b_s = (cv2.resize(x, (sw, sh), interpolation=cv2.INTER_AREA) for x in (a, b))
     else:
         a_s, b_s = a, b
-    dense = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST).calc(a_s, b_s, None)
+    dense = -cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST).calc(b_s, a_s, None)   # backward, negated
     sub = int(round(size * scale))
     dense = dense[: rows * sub, : cols * sub] * np.float32([width / a_s.shape[1], height / a_s.shape[0]])
     tensor, magnitude = reference_tensors(b, size)

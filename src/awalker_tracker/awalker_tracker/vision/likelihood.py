@@ -33,9 +33,9 @@ leaves it off (0): on the real-walks benchmark one camera's median of the walk m
 
 Flow (eq. 9): at each row's axis point the predicted image motion u is the motion of that
 point from ``prev_segments`` to ``segments``; it is compared with the measured flow v of the
-grid cell it falls in: log p(v | u) - log p(v | 0), i.e. relative to the background's
-zero-motion model (background cells' terms are common to all states and cancel), averaged per
-part like the appearance term.
+grid cell it falls in now (the flow is the motion of the current frame's pixels, ``vision.flow``):
+log p(v | u) - log p(v | 0), i.e. relative to the background's zero-motion model (background
+cells' terms are common to all states and cancel), averaged per part like the appearance term.
 
 Visibility: points outside the image, behind the camera, under the occlusion mask (applied to the
 features beforehand, ``vision.features.occluded``: ratio 0, flow cell invalid) or hidden by a nearer
