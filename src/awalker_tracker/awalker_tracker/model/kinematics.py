@@ -862,28 +862,40 @@ def _sole_point(g: _Geometry, frames: np.ndarray, points: np.ndarray, side: int,
 
 
 @numba.njit(cache=True, nogil=True)
-def _foot_lowest_z(g: _Geometry, lengths: tuple[float, float], leg: float, hip_turns: tuple[float, float, float, float],
-                         hip_z: float, knee: float, ankle: float, inversion_turn: tuple[float, float],
-                         shift_z: float) -> float:
+def _foot_lowest_z(g: _Geometry, lengths: tuple[float, float], leg_turn: tuple[float, float],
+                   hip_turns: tuple[float, float, float, float], hip_z: float, knee: float,
+                   ankle_turn: tuple[float, float], inversion_turn: tuple[float, float], shift_z: float) -> float:
     """World height (m) of the lowest point of a foot's sole for its knee angle ``knee`` (rad), given
-    the thigh's and shank's lengths (m), the walker's leg angle ``leg`` (rad), the cosines
-    and sines (c_abd, s_abd, c_rot, s_rot) of the thigh's turns about its x (abduction) and z (rotation)
-    axes, the hip's pelvis-relative height hip_z (m), the ankle DOF (rad, from the walker's leg), the cosine
-    and sine of the foot's inversion turn and the pelvis height shift_z (m). The thigh leads the walker's
-    leg by the knee's ``_thigh_lead``, so it is turned anew for each knee angle; only the frames' z rows are turned
-    (the height needs no more)."""
+    the thigh's and shank's lengths (m), the cosine and sine of the walker's leg angle less ``CHORD_LEAN``
+    (``leg_turn``), the cosines and sines (c_abd, s_abd, c_rot, s_rot) of the thigh's turns about its x
+    (abduction) and z (rotation) axes, the hip's pelvis-relative height hip_z (m), the cosine and sine
+    of the ankle DOF plus ``CHORD_LEAN`` (``ankle_turn``; the DOF counts from the walker's leg), those of
+    the foot's inversion turn and the pelvis height shift_z (m). The thigh leads the chord by the knee's
+    delta (``_thigh_lead``), so it is turned anew for each knee angle; only the frames' z rows are turned
+    (the height needs no more). The bisection calls this ~14 times per leg, so the angles that do not
+    change with the knee come in as cosines and sines, and delta's by the law of cosines: per call one
+    cosine, one sine and one square root (no arctangent)."""
     c_abd, s_abd, c_rot, s_rot = hip_turns
     c_inv, s_inv = inversion_turn
-    pitch = leg + _thigh_lead(g, knee)
-    x, y, z = math.sin(pitch), 0.0, math.cos(pitch)                 # thigh: the heading leaves z alone
+    c_knee, s_knee = math.cos(knee), math.sin(knee)
+    # delta = atan2(l2 sin knee, l1 + l2 cos knee): its cosine and sine over the chord's length
+    across, ahead = g.upper_leg_length + g.lower_leg_length * c_knee, g.lower_leg_length * s_knee
+    chord = math.sqrt(across * across + ahead * ahead)
+    c_delta, s_delta = across / chord, ahead / chord
+    # thigh pitch = (leg - CHORD_LEAN) + delta
+    c_pitch = leg_turn[0] * c_delta - leg_turn[1] * s_delta
+    s_pitch = leg_turn[1] * c_delta + leg_turn[0] * s_delta
+    x, y, z = s_pitch, 0.0, c_pitch                                 # thigh: the heading leaves z alone
     y, z = c_abd * y + s_abd * z, c_abd * z - s_abd * y             # abduction about x
     x, y = c_rot * x + s_rot * y, c_rot * y - s_rot * x             # rotation about z
     knee_z = hip_z - lengths[0] * z
-    c, s = math.cos(knee), math.sin(knee)
-    x, z = c * x - s * z, c * z + s * x                             # shank: knee flexion about y
+    x, z = c_knee * x - s_knee * z, c_knee * z + s_knee * x         # shank: knee flexion about y
     ankle_z = knee_z - lengths[1] * z
-    flexion = -_ankle_from_shank(g, ankle, knee)
-    c_flex, s_flex = math.cos(flexion), math.sin(flexion)
+    # the foot's flexion from the shank, -_ankle_from_shank = -((ankle + CHORD_LEAN) + (knee - delta))
+    c_bend = c_knee * c_delta + s_knee * s_delta                    # knee - delta
+    s_bend = s_knee * c_delta - c_knee * s_delta
+    c_flex = ankle_turn[0] * c_bend - ankle_turn[1] * s_bend        # ankle + CHORD_LEAN + knee - delta
+    s_flex = -(ankle_turn[1] * c_bend + ankle_turn[0] * s_bend)     # its negative's sine
     x, z = c_flex * x - s_flex * z, c_flex * z + s_flex * x         # foot: ankle flexion about y
     y, z = c_inv * y + s_inv * z, c_inv * z - s_inv * y             # inversion about x
     # The sole is an arc of radius rho in the foot's sagittal plane through the sole line's heel and
@@ -898,30 +910,48 @@ def _foot_lowest_z(g: _Geometry, lengths: tuple[float, float], leg: float, hip_t
     return ankle_z + centre_z - rho * math.sqrt(x * x + z * z) + shift_z
 
 
+class _LegTurns(NamedTuple):
+    """What ``_foot_lowest_z`` needs of one leg that does not change with its knee angle."""
+
+    lengths: tuple[float, float]
+    leg_turn: tuple[float, float]
+    hip_turns: tuple[float, float, float, float]
+    hip_z: float
+    ankle_turn: tuple[float, float]
+    inversion_turn: tuple[float, float]
+
+
 @numba.njit(cache=True, nogil=True)
-def _foot_height(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, side: int,
-                 points: np.ndarray, knee: float, shift_z: float) -> float:
-    """Height (m) of the lowest point of body i's foot ``side`` with its knee at ``knee`` (rad), the
-    pelvis at height ``shift_z`` (m)."""
+def _leg_turns(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, side: int,
+               points: np.ndarray) -> _LegTurns:
+    """``_LegTurns`` of body i's leg ``side`` (its hip posed in ``points``)."""
     sign = 1.0 - 2.0 * side
     abduction, rotation, inversion = sign * dofs[i, 3 + side], -sign * dofs[i, 5 + side], -sign * dofs[i, 11 + side]
-    return _foot_lowest_z(g, (scale[i] * g.upper_leg_length, scale[i] * g.lower_leg_length), legs[i, side],
-                                (math.cos(abduction), math.sin(abduction), math.cos(rotation), math.sin(rotation)),
-                                points[_HIP + side, 2], knee, dofs[i, 9 + side],
-                                (math.cos(inversion), math.sin(inversion)), shift_z)
+    leg, ankle = legs[i, side] - CHORD_LEAN, dofs[i, 9 + side] + CHORD_LEAN
+    return _LegTurns((scale[i] * g.upper_leg_length, scale[i] * g.lower_leg_length), (math.cos(leg), math.sin(leg)),
+                     (math.cos(abduction), math.sin(abduction), math.cos(rotation), math.sin(rotation)),
+                     points[_HIP + side, 2], (math.cos(ankle), math.sin(ankle)),
+                     (math.cos(inversion), math.sin(inversion)))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _foot_height(g: _Geometry, turns: _LegTurns, knee: float, shift_z: float) -> float:
+    """Height (m) of the lowest point of a foot (``turns``: its leg) with its knee at ``knee`` (rad), the
+    pelvis at height ``shift_z`` (m)."""
+    return _foot_lowest_z(g, turns.lengths, turns.leg_turn, turns.hip_turns, turns.hip_z, knee, turns.ankle_turn,
+                          turns.inversion_turn, shift_z)
 
 
 @numba.njit(cache=True, nogil=True)
-def _knee_at_ground(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, side: int,
-                    points: np.ndarray, shift_z: float, low: float, high: float) -> float:
-    """The knee angle (rad) in [low, high] at which the lowest point of body i's foot ``side`` reaches
-    height 0 (``shift_z``: the pelvis height, m), found by bisection (14 halvings): bending the knee
-    shortens the hip-ankle chord and lifts the foot, so the height grows with the knee. Returns the
+def _knee_at_ground(g: _Geometry, turns: _LegTurns, shift_z: float, low: float, high: float) -> float:
+    """The knee angle (rad) in [low, high] at which the lowest point of a foot (``turns``: its leg)
+    reaches height 0 (``shift_z``: the pelvis height, m), found by bisection (14 halvings): bending the
+    knee shortens the hip-ankle chord and lifts the foot, so the height grows with the knee. Returns the
     end of the bracket on the foot's clear side (height >= 0)."""
     below, above = low, high
     for _ in range(14):
         middle = 0.5 * (below + above)
-        if _foot_height(g, legs, dofs, scale, i, side, points, middle, shift_z) >= 0.0:
+        if _foot_height(g, turns, middle, shift_z) >= 0.0:
             above = middle
         else:
             below = middle
@@ -937,9 +967,10 @@ def _clear_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndar
     leg sweeps through the floor after toe-off; this pose-dependent lower knee limit keeps the body
     physical (no penetration), like the joint limits of eq. (6). (``_stance_knee`` uses it too.)"""
     knee = dofs[i, 7 + swing]
-    if _foot_height(g, legs, dofs, scale, i, swing, points, knee, shift_z) >= 0.0:
+    turns = _leg_turns(g, legs, dofs, scale, i, swing, points)
+    if _foot_height(g, turns, knee, shift_z) >= 0.0:
         return knee
-    return _knee_at_ground(g, legs, dofs, scale, i, swing, points, shift_z, knee, math.pi)
+    return _knee_at_ground(g, turns, shift_z, knee, math.pi)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -952,11 +983,14 @@ def _landing_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.nd
     that does not reach); else the sampled knee angle. Without it the body dropped by the gap at the
     contact's snap to the ground (up to 6 cm)."""
     knee = dofs[i, 7 + leg]
-    if knee <= 0.0 or _foot_height(g, legs, dofs, scale, i, leg, points, knee, shift_z) <= 0.0:
+    if knee <= 0.0:
         return knee
-    if _foot_height(g, legs, dofs, scale, i, leg, points, 0.0, shift_z) >= 0.0:
+    turns = _leg_turns(g, legs, dofs, scale, i, leg, points)
+    if _foot_height(g, turns, knee, shift_z) <= 0.0:
+        return knee
+    if _foot_height(g, turns, 0.0, shift_z) >= 0.0:
         return 0.0
-    return _knee_at_ground(g, legs, dofs, scale, i, leg, points, shift_z, 0.0, knee)
+    return _knee_at_ground(g, turns, shift_z, 0.0, knee)
 
 
 @numba.njit(cache=True, nogil=True)
