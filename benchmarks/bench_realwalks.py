@@ -141,6 +141,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="no background-only frames, no start or body description: the automatic start")
     parser.add_argument("--leg-scale-spread", type=float, default=0.0,
                         help="awalker track --leg-scale-spread (the particles' leg lengths; runs named ..._legsS_sN)")
+    parser.add_argument("--fit-body", action="store_true",
+                        help="awalker track --fit-body: fit the leg length to the images, then track again (runs named ..._fit_sN)")
     parser.add_argument("--carry", choices=CARRIED, default="none",
                         help="the person carries a backpack or a shoulder bag (synth --carry): unmodelled foreground")
     args = parser.parse_args(argv)
@@ -149,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
     report: dict = {"benchmark": "realwalks", "settings": {
         "particles": args.particles, "size": list(args.size), "rate": args.rate, "seeds": args.seeds,
         "background_frames": 0 if args.hands_off else args.background_frames, "hands_off": args.hands_off,
-        "carry": args.carry, "leg_scale_spread": args.leg_scale_spread,
+        "carry": args.carry, "leg_scale_spread": args.leg_scale_spread, "fit_body": args.fit_body,
         "cpus": os.cpu_count()}, "runs": {}, "summary": {}}
     jobs = [(w, v, s) for w in args.walks for v in args.variants for s in args.settings]
     for k, (walk, variant, setting) in enumerate(jobs):
@@ -162,6 +164,7 @@ def main(argv: list[str] | None = None) -> int:
             modes += [("dead_reckoning", seed, False) for seed in args.seeds]
         for mode, seed, images in modes:
             legs = f"_legs{args.leg_scale_spread:g}" if images and args.leg_scale_spread > 0 else ""
+            legs += "_fit" if images and args.fit_body else ""
             run_name = f"{walk}_{variant}_{setting}_{mode}{suffix(args.hands_off, args.carry)}{legs}_s{seed}"
             run_dir = args.out / "runs" / run_name
             if not (run_dir / "eval.json").exists():
@@ -169,7 +172,8 @@ def main(argv: list[str] | None = None) -> int:
                     run_tracking(TrackOptions(bag=bag, out=run_dir, particles=args.particles, seed=seed,
                                               likelihood_scale=0.1 if images else 0.0, recovery=images,
                                               leg_scale_spread=args.leg_scale_spread if images else 0.0,
-                                              auto_start=args.hands_off, overlays=False, quiet=True))
+                                              auto_start=args.hands_off, overlays=False, quiet=True,
+                                              fit_body=True if images and args.fit_body else None))
                 evaluate_run(run_dir)
             result = json.loads((run_dir / "eval.json").read_text())
             entry = score(result, variant, args.rate)
