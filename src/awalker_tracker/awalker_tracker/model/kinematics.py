@@ -470,7 +470,7 @@ def initial_kinematics(
     point = np.empty((n, 3))
     scale = _initial_leg_scale(config, n, rng, leg_scale_spread)
     legs = leg_angles(walker)
-    _initial_clearance_kernel(_geometry(body), legs, dofs, scale, leg, np.zeros(n),
+    _initial_clearance_kernel(_geometry(body), legs, dofs, scale, leg,
                               np.ascontiguousarray(hip_position(params, walker)[1], float))
     _sole_points_kernel(_geometry(body), legs, dofs, scale, leg, beta, True, point)
     return _initial_state(params, walker, dofs, beta, point, start_position_xy, rng, position_spread,
@@ -861,22 +861,41 @@ def _sole_point(g: _Geometry, frames: np.ndarray, points: np.ndarray, side: int,
             points[ankle, 2] + frames[foot, 2, 0] * along + frames[foot, 2, 2] * up)
 
 
+class _LegTurns(NamedTuple):
+    """What ``_foot_height`` needs of one leg that does not change with its knee angle."""
+
+    lengths: tuple[float, float]      # m: thigh, shank (scaled)
+    leg_turn: tuple[float, float]     # cosine, sine of the walker's leg angle less CHORD_LEAN
+    hip_turns: tuple[float, float, float, float]   # c_abd, s_abd, c_rot, s_rot: the thigh's turns about x, z
+    hip_z: float                      # m: the hip's height relative to the pelvis
+    ankle_turn: tuple[float, float]   # cosine, sine of the ankle DOF plus CHORD_LEAN (from the walker's leg)
+    inversion_turn: tuple[float, float]   # cosine, sine of the foot's inversion turn
+
+
 @numba.njit(cache=True, nogil=True)
-def _foot_lowest_z(g: _Geometry, lengths: tuple[float, float], leg_turn: tuple[float, float],
-                   hip_turns: tuple[float, float, float, float], hip_z: float, knee: float,
-                   ankle_turn: tuple[float, float], inversion_turn: tuple[float, float], shift_z: float) -> float:
-    """World height (m) of the lowest point of a foot's sole for its knee angle ``knee`` (rad), given
-    the thigh's and shank's lengths (m), the cosine and sine of the walker's leg angle less ``CHORD_LEAN``
-    (``leg_turn``), the cosines and sines (c_abd, s_abd, c_rot, s_rot) of the thigh's turns about its x
-    (abduction) and z (rotation) axes, the hip's pelvis-relative height hip_z (m), the cosine and sine
-    of the ankle DOF plus ``CHORD_LEAN`` (``ankle_turn``; the DOF counts from the walker's leg), those of
-    the foot's inversion turn and the pelvis height shift_z (m). The thigh leads the chord by the knee's
-    delta (``_thigh_lead``), so it is turned anew for each knee angle; only the frames' z rows are turned
-    (the height needs no more). The bisection calls this ~14 times per leg, so the angles that do not
-    change with the knee come in as cosines and sines, and delta's by the law of cosines: per call one
-    cosine, one sine and one square root (no arctangent)."""
-    c_abd, s_abd, c_rot, s_rot = hip_turns
-    c_inv, s_inv = inversion_turn
+def _leg_turns(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, side: int,
+               points: np.ndarray) -> _LegTurns:
+    """``_LegTurns`` of body i's leg ``side`` (its hip posed in ``points``)."""
+    sign = 1.0 - 2.0 * side
+    abduction, rotation, inversion = sign * dofs[i, 3 + side], -sign * dofs[i, 5 + side], -sign * dofs[i, 11 + side]
+    leg, ankle = legs[i, side] - CHORD_LEAN, dofs[i, 9 + side] + CHORD_LEAN
+    return _LegTurns((scale[i] * g.upper_leg_length, scale[i] * g.lower_leg_length), (math.cos(leg), math.sin(leg)),
+                     (math.cos(abduction), math.sin(abduction), math.cos(rotation), math.sin(rotation)),
+                     points[_HIP + side, 2], (math.cos(ankle), math.sin(ankle)),
+                     (math.cos(inversion), math.sin(inversion)))
+
+
+@numba.njit(cache=True, nogil=True)
+def _foot_height(g: _Geometry, turns: _LegTurns, knee: float, shift_z: float) -> float:
+    """World height (m) of the lowest point of a foot's sole with its knee at ``knee`` (rad), the pelvis
+    at height ``shift_z`` (m); ``turns`` (``_leg_turns``) holds what of its leg does not change with the
+    knee. The thigh leads the chord by the knee's delta (``_thigh_lead``), so it is turned anew for each
+    knee angle; only the frames' z rows are turned (the height needs no more). The bisection calls this
+    ~14 times per leg, so the angles that do not change with the knee come in as cosines and sines, and
+    delta's by the law of cosines: per call one cosine, one sine and one square root (no arctangent)."""
+    lengths, leg_turn, ankle_turn, hip_z = turns.lengths, turns.leg_turn, turns.ankle_turn, turns.hip_z
+    c_abd, s_abd, c_rot, s_rot = turns.hip_turns
+    c_inv, s_inv = turns.inversion_turn
     c_knee, s_knee = math.cos(knee), math.sin(knee)
     # delta = atan2(l2 sin knee, l1 + l2 cos knee): its cosine and sine over the chord's length
     across, ahead = g.upper_leg_length + g.lower_leg_length * c_knee, g.lower_leg_length * s_knee
@@ -908,38 +927,6 @@ def _foot_lowest_z(g: _Geometry, lengths: tuple[float, float], leg_turn: tuple[f
         return ankle_z + x * along - z * g.ankle_height + shift_z
     centre_z = x * (0.5 * g.foot_length - g.heel_offset) + z * (rho - g.ankle_height - g.sole_sag)
     return ankle_z + centre_z - rho * math.sqrt(x * x + z * z) + shift_z
-
-
-class _LegTurns(NamedTuple):
-    """What ``_foot_lowest_z`` needs of one leg that does not change with its knee angle."""
-
-    lengths: tuple[float, float]
-    leg_turn: tuple[float, float]
-    hip_turns: tuple[float, float, float, float]
-    hip_z: float
-    ankle_turn: tuple[float, float]
-    inversion_turn: tuple[float, float]
-
-
-@numba.njit(cache=True, nogil=True)
-def _leg_turns(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, side: int,
-               points: np.ndarray) -> _LegTurns:
-    """``_LegTurns`` of body i's leg ``side`` (its hip posed in ``points``)."""
-    sign = 1.0 - 2.0 * side
-    abduction, rotation, inversion = sign * dofs[i, 3 + side], -sign * dofs[i, 5 + side], -sign * dofs[i, 11 + side]
-    leg, ankle = legs[i, side] - CHORD_LEAN, dofs[i, 9 + side] + CHORD_LEAN
-    return _LegTurns((scale[i] * g.upper_leg_length, scale[i] * g.lower_leg_length), (math.cos(leg), math.sin(leg)),
-                     (math.cos(abduction), math.sin(abduction), math.cos(rotation), math.sin(rotation)),
-                     points[_HIP + side, 2], (math.cos(ankle), math.sin(ankle)),
-                     (math.cos(inversion), math.sin(inversion)))
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _foot_height(g: _Geometry, turns: _LegTurns, knee: float, shift_z: float) -> float:
-    """Height (m) of the lowest point of a foot (``turns``: its leg) with its knee at ``knee`` (rad), the
-    pelvis at height ``shift_z`` (m)."""
-    return _foot_lowest_z(g, turns.lengths, turns.leg_turn, turns.hip_turns, turns.hip_z, knee, turns.ankle_turn,
-                          turns.inversion_turn, shift_z)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -993,6 +980,17 @@ def _landing_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.nd
     return _knee_at_ground(g, turns, shift_z, 0.0, knee)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _project_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, previous: np.ndarray, i: int,
+                  side: int, knee: float, frames: np.ndarray, points: np.ndarray) -> None:
+    """Set body i's knee ``side`` to ``knee`` (rad) as a position projection: psi_{t-1} in ``previous`` moves
+    along, so that eq. (6) next frame sees the sampled knee velocity; the leg is posed again."""
+    if knee != dofs[i, 7 + side]:
+        previous[i, 7 + side] += knee - dofs[i, 7 + side]
+        dofs[i, 7 + side] = knee
+        _leg_pose(g, legs, dofs, scale, i, side, frames, points)
+
+
 @numba.njit(cache=True, nogil=True)
 def _stance_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, previous: np.ndarray, i: int,
                  leg: int, frames: np.ndarray, points: np.ndarray, hip_height: float) -> None:
@@ -1002,11 +1000,8 @@ def _stance_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.nda
     would put its stance foot ``leg`` below the ground, the stance knee is bent just enough
     (``_clear_knee``: people flex it ~35 degrees at toe-off), as a position projection (``previous``
     moves along), and the leg posed again."""
-    knee = _clear_knee(g, legs, dofs, scale, i, leg, points, hip_height)
-    if knee != dofs[i, 7 + leg]:
-        previous[i, 7 + leg] += knee - dofs[i, 7 + leg]
-        dofs[i, 7 + leg] = knee
-        _leg_pose(g, legs, dofs, scale, i, leg, frames, points)
+    _project_knee(g, legs, dofs, scale, previous, i, leg, _clear_knee(g, legs, dofs, scale, i, leg, points, hip_height),
+                  frames, points)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -1093,11 +1088,8 @@ def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.n
             # held by the old contact), then the contact passes to the new stance foot's lowest point,
             # put where the body has that point; its height snaps to the ground
             px, py, pz = _sole_point(g, frames, points, old, beta)
-            knee = _landing_knee(g, legs, dofs, scale, i, leg, points, -pz)
-            if knee != dofs[i, 7 + leg]:
-                previous[i, 7 + leg] += knee - dofs[i, 7 + leg]       # a position projection, as below
-                dofs[i, 7 + leg] = knee
-                _leg_pose(g, legs, dofs, scale, i, leg, frames, points)
+            _project_knee(g, legs, dofs, scale, previous, i, leg, _landing_knee(g, legs, dofs, scale, i, leg, points, -pz),
+                          frames, points)
             beta = _foot_lowest_roll(g, frames, leg)
             qx, qy, _ = _sole_point(g, frames, points, leg, beta)
             cx, cy = qx + (cx - px), qy + (cy - py)
@@ -1105,13 +1097,9 @@ def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.n
         px, py, pz = _sole_point(g, frames, points, leg, beta)
         shift = (cx - px, cy - py, -pz)
         swing = 1 - leg
-        knee = _clear_knee(g, legs, dofs, scale, i, swing, points, shift[2] - clearance[i])
-        if knee != dofs[i, 7 + swing]:
-            # a position projection: psi_{t-1} moves along, so that eq. (6) next frame sees the
-            # sampled knee velocity; the stance foot (and so ``shift``) is unchanged
-            previous[i, 7 + swing] += knee - dofs[i, 7 + swing]
-            dofs[i, 7 + swing] = knee
-            _leg_pose(g, legs, dofs, scale, i, swing, frames, points)
+        # the stance foot (and so ``shift``) is unchanged by the swing knee
+        _project_knee(g, legs, dofs, scale, previous, i, swing,
+                      _clear_knee(g, legs, dofs, scale, i, swing, points, shift[2] - clearance[i]), frames, points)
         new_contact[i, 0], new_contact[i, 1] = cx, cy
         new_roll[i] = beta
         plane_origin[i, 0] = cx - stance_x[i] * math.cos(dofs[i, 2])
@@ -1149,17 +1137,18 @@ def _sole_points_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale:
 
 @numba.njit(cache=True, nogil=True)
 def _initial_clearance_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray,
-                              stance_leg: np.ndarray, clearance: np.ndarray, hip_height: np.ndarray) -> None:
+                              stance_leg: np.ndarray, hip_height: np.ndarray) -> None:
     """Initial knees (in ``dofs`` (N, 13), in place): the stance knee bent where the pelvis would stand above
-    the walker's ``hip_height`` (N,) m (``_stance_knee``), then the swing knee where the swing foot would come
-    closer to the ground than ``clearance`` (N,) m, the body standing on its stance foot's lowest point."""
+    the walker's ``hip_height`` (N,) m (``_stance_knee``), then the swing knee where the swing foot would go
+    below the ground (no clearance: a foot trailing in double support stays on it), the body standing on
+    its stance foot's lowest point."""
     frames, points = _scratch()
     for i in range(dofs.shape[0]):
         _local_pose(g, legs, dofs, scale, i, frames, points)
         leg = stance_leg[i]
         _stance_knee(g, legs, dofs, scale, dofs, i, leg, frames, points, hip_height[i])
         _, _, pz = _sole_point(g, frames, points, leg, _foot_lowest_roll(g, frames, leg))
-        dofs[i, 8 - leg] = _clear_knee(g, legs, dofs, scale, i, 1 - leg, points, -pz - clearance[i])
+        dofs[i, 8 - leg] = _clear_knee(g, legs, dofs, scale, i, 1 - leg, points, -pz)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
