@@ -152,6 +152,17 @@ def test_initial_particles_spread_around_the_start():
     assert model.kin_config.leg_scale_drift == config.leg_scale_drift > 0
     with pytest.raises(ValueError, match="leg_scale"):
         TrackerConfig(leg_scale_spread=-0.1)
+    # postures (kinematics, *Posture*): upright without cameras or with one; with two, each particle's torso
+    # rests at its own pitch around upright, wandering
+    assert np.all(states.kin.torso_rest == 0.0) and model.kin_config.posture_drift == 0.0
+    one = TrackerModel(body, start, marker_likelihood(), config, cameras=[object()])
+    assert np.all(one.initial(50, np.random.default_rng(0)).kin.torso_rest == 0.0)
+    two = TrackerModel(body, start, marker_likelihood(), config, cameras=[object(), object()])
+    states = two.initial(400, np.random.default_rng(0))
+    assert np.std(states.kin.torso_rest) == pytest.approx(config.posture_spread, rel=0.2)
+    assert two.kin_config.posture_drift == config.posture_drift > 0
+    with pytest.raises(ValueError, match="posture_spread"):
+        TrackerConfig(posture_spread=0.5)
 
 
 def test_start_outside_the_solved_gaits_is_refused_and_the_spread_redrawn():

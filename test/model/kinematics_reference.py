@@ -16,6 +16,8 @@ from awalker_tracker.model.kinematics import (
     KinematicState,
     _initial_dofs,
     _initial_leg_scale,
+    _initial_posture,
+    POSTURE_LIMIT,
     _clearance,
     _initial_state,
     _plane_origin,
@@ -164,8 +166,10 @@ def _horizontal_direction(foot: np.ndarray) -> np.ndarray:
     return xy / np.maximum(norm, 1e-9)
 
 def _eq6(config: KinematicConfig, body: BodyDescription, walker: WalkerState, current: np.ndarray,
-         previous: np.ndarray, rng: np.random.Generator, turn_rates: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-    """One step of eq. (6) for all DOFs (N, 13) with truncated noise; knees by stance/swing role.
+         previous: np.ndarray, torso_rest: np.ndarray, rng: np.random.Generator,
+         turn_rates: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """One step of eq. (6) for all DOFs (N, 13) with truncated noise; knees by stance/swing role, the torso
+    pitch towards each particle's ``torso_rest`` (N,).
 
     The heading runs eq. (6) on its deviation from the turn (``turn_rates``: omega of this frame and
     of the previous one, rad/s): h_t = h_{t-1} + omega_t dt + alpha (h_{t-1} - h_{t-2} - omega_{t-1} dt)
@@ -183,6 +187,7 @@ def _eq6(config: KinematicConfig, body: BodyDescription, walker: WalkerState, cu
     }
     for key, value in swing_values.items():
         p[key][:, knee_cols] = np.where(is_swing, value, p[key][:, knee_cols])
+    p["rest"][:, DOF_NAMES.index("torso_pitch")] = torso_rest
     dt2 = config.dt**2
     rate, previous_rate = turn_rates
     heading = DOF_NAMES.index("heading")
@@ -317,10 +322,15 @@ def sample_posed_kinematics_reference(
     turn_rate = kin.turn_rate
     if np.any(struck):      # a new step: a new turn rate
         turn_rate = np.where(struck, config.turning.sample(kin.turn_rate, rng), kin.turn_rate)
-    new = _eq6(config, body, walker, current, kin.previous, rng, (turn_rate, kin.turn_rate))
+    new = _eq6(config, body, walker, current, kin.previous, kin.torso_rest, rng, (turn_rate, kin.turn_rate))
     scale = kin.leg_scale
     if config.leg_scale_drift > 0:
         scale = np.clip(scale * np.exp(config.leg_scale_drift * rng.standard_normal(len(kin))), *config.leg_scale_range)
+    torso_rest = kin.torso_rest
+    if config.posture_drift > 0:
+        upright = config.table["torso_side"].rest
+        torso_rest = np.clip(torso_rest + config.posture_drift * rng.standard_normal(len(kin)),
+                             upright - POSTURE_LIMIT, upright + POSTURE_LIMIT)
     if heading is not None:
         new[:, DOF_NAMES.index("heading")] = heading
     legs = leg_angles(walker)
@@ -364,7 +374,7 @@ def sample_posed_kinematics_reference(
         hip_rotation=named["hip_rotation"], knee=named["knee"], ankle=named["ankle"], previous=current,
         contact_point=contact, contact_roll=beta, contact_leg=new_leg,
         plane_origin=_plane_origin(params, walker, contact, named["heading"]), turn_rate=turn_rate,
-        leg_scale=scale,
+        leg_scale=scale, torso_rest=torso_rest,
     )
     return state, _posed_body(body, legs, new, local, shift)
 
@@ -460,12 +470,14 @@ def initial_kinematics_reference(
     joint_spread: float = 0.0,
     turn_rate_spread: float = 0.0,
     leg_scale_spread: float = 0.0,
+    posture_spread: float = 0.0,
 ) -> KinematicState:
     """``kinematics.initial_kinematics`` with the sole geometry in numpy (same arguments)."""
     body = body or BodyDescription.default()
     params = params or body.walker_params()
     # the sampling and the state assembly are the package's (not compiled); the sole geometry is the reference's
-    walker, dofs = _initial_dofs(config, body, walker, heading, n, rng, heading_spread, joint_spread)
+    torso_rest = _initial_posture(config, n, rng, posture_spread)
+    walker, dofs = _initial_dofs(config, body, walker, heading, n, rng, heading_spread, joint_spread, torso_rest)
     scale = _initial_leg_scale(config, n, rng, leg_scale_spread)
     legs = leg_angles(walker)
     local = _local_pose(body, legs, dofs, scale)
@@ -482,5 +494,5 @@ def initial_kinematics_reference(
     _repose(body, local, legs, dofs, scale, np.flatnonzero(np.any(dofs != before, axis=1)))
     point = _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), beta)
     return _initial_state(params, walker, dofs, beta, point, start_position_xy, rng, position_spread,
-                          turn_rate_spread, scale)
+                          turn_rate_spread, scale, torso_rest)
 

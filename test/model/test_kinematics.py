@@ -11,6 +11,7 @@ from awalker_tracker.model.kinematics import (
     DOF_NAMES,
     JointPrior,
     KinematicConfig,
+    POSTURE_LIMIT,
     TurnPrior,
     initial_kinematics,
     leg_angles,
@@ -424,3 +425,30 @@ def test_leg_scales_spread_and_wander_only_when_asked():
     inside = (kin.leg_scale > 0.9) & (kin.leg_scale < 1.08)
     assert np.std(step[inside]) == pytest.approx(0.01 * np.sqrt(19), rel=0.15)
     assert kin.leg_scale.min() >= 0.9 and kin.leg_scale.max() <= 1.08
+
+
+def test_each_particle_leans_towards_its_own_posture():
+    """initial_kinematics(posture_spread) gives each particle its own rest pitch of the torso (Table 1's
+    upright rest plus N(0, spread^2), within +- POSTURE_LIMIT) and starts the torso at it; eq. (6) then keeps
+    each torso near its own rest, where the upright rest would pull every torso back to 0 within a second.
+    Without drift the postures stay put; with it they wander as a random walk."""
+    n, frames = 2000, 60
+    walkers = hand_made_walk(frames, n)
+    rng = np.random.default_rng(13)
+    kin = initial_kinematics(KinematicConfig(), walkers[0], [0.0, 0.0], 0.0, n, rng, body=BODY, posture_spread=0.1)
+    assert np.std(kin.torso_rest) == pytest.approx(0.1, rel=0.1)
+    assert np.abs(kin.torso_rest).max() <= POSTURE_LIMIT
+    np.testing.assert_array_equal(kin.torso_lean[:, 0], kin.torso_rest)
+    start, state = kin.torso_rest.copy(), kin
+    for f in range(1, frames):
+        state = sample_kinematics(KinematicConfig(), BODY, PARAMS, walkers[f - 1], walkers[f], None, state, rng)
+    np.testing.assert_array_equal(state.torso_rest, start)
+    pitch = state.torso_lean[:, 0]
+    assert np.median(np.abs(pitch - start)) < 0.02            # each near its own rest after 2 s
+    assert np.std(pitch) > 0.08 and np.corrcoef(pitch, start)[0, 1] > 0.95
+    upright = initial_kinematics(KinematicConfig(), walkers[0], [0.0, 0.0], 0.0, n, rng, body=BODY)
+    np.testing.assert_array_equal(upright.torso_rest, 0.0)
+    drifting, config = kin, KinematicConfig(posture_drift=0.01)
+    for f in range(1, 21):
+        drifting = sample_kinematics(config, BODY, PARAMS, walkers[f - 1], walkers[f], None, drifting, rng)
+    assert np.std(drifting.torso_rest - start) == pytest.approx(0.01 * np.sqrt(20), rel=0.15)

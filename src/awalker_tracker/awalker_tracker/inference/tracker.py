@@ -174,6 +174,16 @@ class TrackerConfig:
     # README "Leg length from the images, online".
     leg_scale_spread: float = 0.0
     leg_scale_drift: float = 0.001
+    # Postures the filter explores (kinematics module doc, *Posture*), with at least posture_min_cameras
+    # cameras: each particle's torso pitch rests at its own angle, Table 1's rest (upright) plus
+    # N(0, posture_spread^2) rad when drawn (start, re-seeds), wandering by posture_drift rad per frame (std);
+    # otherwise, and with posture_spread 0, upright for every particle. Real walks, hand-started, tracker seeds
+    # 0-4 (bench_realwalks; README "Posture"): two cameras a median 4.6 mm better per run (42 of 60 runs
+    # better; median of the walk medians 64.1 -> 59.2 mm); one camera 17.7 mm worse per run (the body then
+    # stands farther from the camera), so one camera keeps Table 1's upright torso.
+    posture_spread: float = 0.08
+    posture_drift: float = 0.002
+    posture_min_cameras: int = 2
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -185,6 +195,11 @@ class TrackerConfig:
         if not (0.0 <= self.leg_scale_spread <= 0.2 and 0.0 <= self.leg_scale_drift <= 0.05):
             raise ValueError(f"TrackerConfig: leg_scale_spread must lie in 0-0.2 and leg_scale_drift in 0-0.05, got "
                              f"{self.leg_scale_spread}, {self.leg_scale_drift}")
+        if not (0.0 <= self.posture_spread <= 0.3 and 0.0 <= self.posture_drift <= 0.02
+                and self.posture_min_cameras >= 1):
+            raise ValueError(f"TrackerConfig: posture_spread must lie in 0-0.3 rad, posture_drift in 0-0.02 rad and "
+                             f"posture_min_cameras be >= 1, got {self.posture_spread}, {self.posture_drift}, "
+                             f"{self.posture_min_cameras}")
 
 
 # ----------------------------------------------------------------------------- particle states
@@ -231,7 +246,8 @@ class TrackerModel:
                  config: TrackerConfig = TrackerConfig(), params: WalkerParams | None = None,
                  gait_table: Any = None, prior: Any = None, kinematics: Any = None,
                  cameras: list[Any] | None = None) -> None:
-        """``cameras``: the image likelihood's cameras, for re-acquiring a lost track (None: no re-acquisition)."""
+        """``cameras``: the image likelihood's cameras, for re-acquiring a lost track (None: no re-acquisition) and
+        for the postures (``TrackerConfig.posture_min_cameras``)."""
         from awalker_tracker.model import control, gaits, kinematics as kin_mod
 
         self.body = body
@@ -243,8 +259,11 @@ class TrackerModel:
         self.gaits = (gait_table if gait_table is not None else gaits.GaitTable.load()).scaled_to(self.params)
         self.prior = prior if prior is not None else control.ControlPrior.from_gait_table(
             self.gaits, kappa_bar_variance=config.kappa_bar_variance)
+        # rad: the spread of the particles' postures, 0 (upright) with fewer cameras than posture_min_cameras
+        self.posture_spread = config.posture_spread if len(cameras or ()) >= config.posture_min_cameras else 0.0
         self.kin_config = kinematics if kinematics is not None else kin_mod.KinematicConfig(
-            dt=config.dt, leg_scale_drift=config.leg_scale_drift if config.leg_scale_spread > 0 else 0.0)
+            dt=config.dt, leg_scale_drift=config.leg_scale_drift if config.leg_scale_spread > 0 else 0.0,
+            posture_drift=config.posture_drift if self.posture_spread > 0 else 0.0)
         self._control = control
         self._gaits = gaits
         self._kin = kin_mod
@@ -290,7 +309,8 @@ class TrackerModel:
         kin = self._kin.initial_kinematics(
             self.kin_config, walker, pelvis_xy, heading, n, rng, body=self.body,
             params=self.params, position_spread=spread.position_m, heading_spread=spread.heading_rad,
-            joint_spread=spread.joint_rad, leg_scale_spread=self.config.leg_scale_spread)
+            joint_spread=spread.joint_rad, leg_scale_spread=self.config.leg_scale_spread,
+            posture_spread=self.posture_spread)
         pose = self._kin.pose_body(self.body, self.params, walker, kin)
         return TrackerStates(walker, control, kin, pose, speed.copy(), np.zeros(n, bool), np.zeros(n, np.int8))
 

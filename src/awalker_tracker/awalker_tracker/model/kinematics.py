@@ -114,6 +114,16 @@ at the body description's lengths from the scaled joints (the thigh from the hip
 knee): drawing them at the scaled lengths was measured worse (real walks, seeds 0-2: two cameras 98 mm
 against 88, one camera 110 against 103).
 
+Posture (our addition; ``KinematicState.torso_rest``): Table 1's torso rests upright (psi_bar 0) on a
+spring (k = 5 1/s^2, alpha 0.9) whose noise lets the pitch wander only ~1 degree, so a person who walks
+leaning a few degrees (or whose torso's outline does: a backpack, a coat, the spine behind the body's
+centre) is tracked upright, and the likelihood, fitting that torso to the image, pulls the pelvis and with
+it the whole body behind the person's. Each particle therefore carries its own rest pitch, drawn around
+Table 1's (``initial_kinematics(posture_spread=...)``) and wandering by ``posture_drift`` (rad per frame)
+within +- ``POSTURE_LIMIT``; eq. (6) pulls the torso towards it, and the filter weighs postures as it
+weighs poses. Both are 0 by default (``synth`` draws its walkers upright, bit for bit as before); the
+tracker sets them (``TrackerConfig.posture_spread``, ``posture_drift``; measured there).
+
 ``plane_origin`` maps the walker's sagittal x to the world: the walker's stance contact
 x (``walker.stance_contact_x``) lands on ``contact_point``, x grows along the heading.
 
@@ -231,6 +241,9 @@ class KinematicConfig:
     # per frame: each particle's leg scale wanders by this (log, standard deviation) within leg_scale_range
     leg_scale_drift: float = 0.0
     leg_scale_range: tuple[float, float] = (0.85, 1.10)
+    # per frame (rad, standard deviation): each particle's posture (torso_rest) wanders by this within
+    # +- POSTURE_LIMIT of Table 1's rest (module doc, *Posture*)
+    posture_drift: float = 0.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -307,6 +320,7 @@ class KinematicState:
     plane_origin: np.ndarray    # (N, 2) world xy of the walker's sagittal x = 0
     turn_rate: np.ndarray       # (N,) omega: the heading's turn rate during this step (rad/s, left +)
     leg_scale: np.ndarray       # (N,) thigh and shank lengths x this (the body's: 1; *Leg length* in the module doc)
+    torso_rest: np.ndarray      # (N,) rad: eq. 6's psi_bar of the torso pitch, this particle's posture (*Posture*)
 
     def __len__(self) -> int:
         return int(self.heading.shape[0])
@@ -382,6 +396,9 @@ def _standard_truncated_normal(rng: np.random.Generator, lo: np.ndarray, hi: np.
 _ALPHA, _STIFFNESS, _REST, _SIGMA, _LOWER, _UPPER = range(6)
 _SWING_KNEE_ROW = _D
 _HEADING = DOF_NAMES.index("heading")
+_TORSO_PITCH = DOF_NAMES.index("torso_pitch")
+# rad: how far a particle's posture (torso_rest) may lie from Table 1's rest of the torso pitch
+POSTURE_LIMIT = 0.35
 
 
 def _eq6_table(config: KinematicConfig, body: BodyDescription) -> np.ndarray:
@@ -399,8 +416,10 @@ def _eq6_table(config: KinematicConfig, body: BodyDescription) -> np.ndarray:
 
 
 def _eq6(config: KinematicConfig, body: BodyDescription, walker: WalkerState, current: np.ndarray,
-         previous: np.ndarray, rng: np.random.Generator, turn_rates: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-    """One step of eq. (6) for all DOFs (N, 13) of ``body`` with truncated noise; knees by stance/swing role.
+         previous: np.ndarray, torso_rest: np.ndarray, rng: np.random.Generator,
+         turn_rates: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """One step of eq. (6) for all DOFs (N, 13) of ``body`` with truncated noise; knees by stance/swing role,
+    the torso pitch towards each particle's own rest ``torso_rest`` (N,) rad.
 
     The heading runs eq. (6) on its deviation from the turn (``turn_rates``: omega of this frame and
     of the previous one, rad/s): h_t = h_{t-1} + omega_t dt + alpha (h_{t-1} - h_{t-2} - omega_{t-1} dt)
@@ -413,7 +432,8 @@ def _eq6(config: KinematicConfig, body: BodyDescription, walker: WalkerState, cu
     rate, previous_rate = (np.ascontiguousarray(np.broadcast_to(r, (n,)), float) for r in turn_rates)
     mean, lo, hi = np.empty((n, _D)), np.empty((n, _D)), np.empty((n, _D))
     _eq6_mean_kernel(table, config.dt, dt2, np.ascontiguousarray(current, float),
-                     np.ascontiguousarray(previous, float), stance_leg, psi_hip, rate, previous_rate, mean, lo, hi)
+                     np.ascontiguousarray(previous, float), np.ascontiguousarray(torso_rest, float), stance_leg,
+                     psi_hip, rate, previous_rate, mean, lo, hi)
     z = _standard_truncated_normal(rng, lo, hi)
     new = np.empty((n, _D))
     _eq6_draw_kernel(table, dt2, stance_leg, psi_hip, mean, z, new)
@@ -454,17 +474,21 @@ def initial_kinematics(
     joint_spread: float = 0.0,
     turn_rate_spread: float = 0.0,
     leg_scale_spread: float = 0.0,
+    posture_spread: float = 0.0,
 ) -> KinematicState:
     """N kinematic states near a rest pose: pelvis above ``start_position_xy`` ((2,) or (N, 2), m),
     torso yaw ``heading`` (rad); Gaussian spreads (m, rad, rad; joints truncated to their limits; turn rate rad/s).
 
     ``walker`` has N or 1 entries (broadcast). Zero joint velocities. The swing knee starts at
     min(its rest angle gain x psi_hip, 0.6 rad), bent further where the swing foot would otherwise go
-    below the ground (a foot trailing in double support stays on it); the stance knee at its rest.
+    below the ground (a foot trailing in double support stays on it); the stance knee at its rest. Each
+    particle's posture (the torso pitch's rest) is Table 1's rest plus N(0, ``posture_spread``^2) rad
+    within +- ``POSTURE_LIMIT``, and its torso starts at it.
     """
     body = body or BodyDescription.default()
     params = params or body.walker_params()
-    walker, dofs = _initial_dofs(config, body, walker, heading, n, rng, heading_spread, joint_spread)
+    torso_rest = _initial_posture(config, n, rng, posture_spread)
+    walker, dofs = _initial_dofs(config, body, walker, heading, n, rng, heading_spread, joint_spread, torso_rest)
     leg = np.ascontiguousarray(walker.stance_leg, np.int8)
     beta = np.empty(n)
     point = np.empty((n, 3))
@@ -474,7 +498,7 @@ def initial_kinematics(
                               np.ascontiguousarray(hip_position(params, walker)[1], float))
     _sole_points_kernel(_geometry(body), legs, dofs, scale, leg, beta, True, point)
     return _initial_state(params, walker, dofs, beta, point, start_position_xy, rng, position_spread,
-                          turn_rate_spread, scale)
+                          turn_rate_spread, scale, torso_rest)
 
 
 def _clearance(config: KinematicConfig, walker: WalkerState) -> np.ndarray:
@@ -492,17 +516,26 @@ def _initial_leg_scale(config: KinematicConfig, n: int, rng: np.random.Generator
     return np.clip(np.exp(spread * rng.standard_normal(n)), low, high)
 
 
+def _initial_posture(config: KinematicConfig, n: int, rng: np.random.Generator, spread: float) -> np.ndarray:
+    """(N,) rad rest pitches of the torso: Table 1's, plus N(0, spread^2) within +- POSTURE_LIMIT of it."""
+    rest = config.table["torso_side"].rest
+    if spread <= 0:
+        return np.full(n, rest)
+    return rest + np.clip(spread * rng.standard_normal(n), -POSTURE_LIMIT, POSTURE_LIMIT)
+
+
 def _initial_dofs(config: KinematicConfig, body: BodyDescription, walker: WalkerState, heading: float | np.ndarray,
-                  n: int, rng: np.random.Generator, heading_spread: float, joint_spread: float
-                  ) -> tuple[WalkerState, np.ndarray]:
+                  n: int, rng: np.random.Generator, heading_spread: float, joint_spread: float,
+                  torso_rest: np.ndarray) -> tuple[WalkerState, np.ndarray]:
     """``initial_kinematics``' walker broadcast to n entries and its sampled DOFs (n, 13) for ``body``
-    (the hips at their rest abduction)."""
+    (the hips at their rest abduction, the torso pitch at ``torso_rest`` (N,))."""
     if len(walker) == 1 and n > 1:
         walker = walker.take(np.zeros(n, dtype=np.intp))
     if len(walker) != n:
         raise ValueError(f"initial_kinematics: walker has {len(walker)} entries, expected 1 or {n}")
     p = config.arrays(body)
     dofs = np.zeros((n, _D))
+    dofs[:, 0] = torso_rest
     dofs[:, 2] = np.asarray(heading, float) + heading_spread * rng.standard_normal(n)
     dofs[:, [_LEFT_ABDUCTION, _LEFT_ABDUCTION + 1]] = p["rest"][_LEFT_ABDUCTION]
     swing_knee = np.clip(config.swing_knee_rest_gain * (walker.stance_angle - walker.swing_angle), 0.05, 0.6)
@@ -520,10 +553,10 @@ def _initial_dofs(config: KinematicConfig, body: BodyDescription, walker: Walker
 
 def _initial_state(params: WalkerParams, walker: WalkerState, dofs: np.ndarray, beta: np.ndarray, point: np.ndarray,
                    start_position_xy: np.ndarray, rng: np.random.Generator, position_spread: float,
-                   turn_rate_spread: float, leg_scale: np.ndarray) -> KinematicState:
+                   turn_rate_spread: float, leg_scale: np.ndarray, torso_rest: np.ndarray) -> KinematicState:
     """``initial_kinematics``' states from the DOFs, the stance foot's contact roll ``beta`` (N,) and its sole
-    point relative to the pelvis ``point`` (N, 3) m, and the leg scales (N,): the pelvis above the (spread)
-    start position."""
+    point relative to the pelvis ``point`` (N, 3) m, the leg scales and postures (N,): the pelvis above the
+    (spread) start position."""
     n = dofs.shape[0]
     pelvis_xy = np.broadcast_to(np.asarray(start_position_xy, float).reshape(-1, 2), (n, 2)) \
         + position_spread * rng.standard_normal((n, 2))
@@ -535,7 +568,7 @@ def _initial_state(params: WalkerParams, walker: WalkerState, dofs: np.ndarray, 
         contact_point=contact_point, contact_roll=beta, contact_leg=walker.stance_leg.astype(np.int8),
         plane_origin=_plane_origin(params, walker, contact_point, named["heading"]),
         turn_rate=turn_rate_spread * rng.standard_normal(n) if turn_rate_spread > 0 else np.zeros(n),
-        leg_scale=leg_scale,
+        leg_scale=leg_scale, torso_rest=np.asarray(torso_rest, float).copy(),
     )
 
 
@@ -602,10 +635,15 @@ def _sample_kinematics(
     turn_rate = kin.turn_rate
     if np.any(struck):      # a new step: a new turn rate
         turn_rate = np.where(struck, config.turning.sample(kin.turn_rate, rng), kin.turn_rate)
-    new = _eq6(config, body, walker, current, kin.previous, rng, (turn_rate, kin.turn_rate))
+    new = _eq6(config, body, walker, current, kin.previous, kin.torso_rest, rng, (turn_rate, kin.turn_rate))
     scale = np.ascontiguousarray(kin.leg_scale, float)
     if config.leg_scale_drift > 0:
         scale = np.clip(scale * np.exp(config.leg_scale_drift * rng.standard_normal(n)), *config.leg_scale_range)
+    torso_rest = kin.torso_rest
+    if config.posture_drift > 0:
+        table_rest = config.table["torso_side"].rest
+        torso_rest = np.clip(torso_rest + config.posture_drift * rng.standard_normal(n),
+                             table_rest - POSTURE_LIMIT, table_rest + POSTURE_LIMIT)
     if heading is not None:
         new[:, DOF_NAMES.index("heading")] = heading
     legs = leg_angles(walker)
@@ -630,7 +668,7 @@ def _sample_kinematics(
         heading=named["heading"], torso_lean=named["torso_lean"], hip_abduction=named["hip_abduction"],
         hip_rotation=named["hip_rotation"], knee=named["knee"], ankle=named["ankle"], previous=previous,
         contact_point=contact, contact_roll=beta, contact_leg=stance_leg.copy(),
-        plane_origin=plane_origin, turn_rate=turn_rate, leg_scale=scale,
+        plane_origin=plane_origin, turn_rate=turn_rate, leg_scale=scale, torso_rest=torso_rest.copy(),
     )
     return state, pose
 
@@ -1164,16 +1202,19 @@ def _eq6_row(table: np.ndarray, j: int, swing: int, psi_hip: float) -> tuple[flo
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _eq6_mean_kernel(table: np.ndarray, dt: float, dt2: float, current: np.ndarray, previous: np.ndarray,
-                     stance_leg: np.ndarray, psi_hip: np.ndarray, rate: np.ndarray, previous_rate: np.ndarray,
-                     mean: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+                     torso_rest: np.ndarray, stance_leg: np.ndarray, psi_hip: np.ndarray, rate: np.ndarray,
+                     previous_rate: np.ndarray, mean: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
     """Eq. (6) without its noise for N particles: mean (N, 13) = psi_{t-1} + alpha (psi_{t-1} - psi_{t-2})
-    + dt^2 k (psi_bar - psi_{t-1}) (the heading relative to its turn at rate (N,) rad/s, previously
+    + dt^2 k (psi_bar - psi_{t-1}) (psi_bar of the torso pitch: the particle's ``torso_rest`` (N,); the
+    heading relative to its turn at rate (N,) rad/s, previously
     previous_rate), and the bounds [lo, hi] (N, 13) of eta / sigma that keep psi_t = mean + dt^2 eta
     within the joint limits, mirrored (-hi, -lo) where they lie above 0 (``_standard_truncated_normal``)."""
     for i in range(current.shape[0]):
         swing = 1 - stance_leg[i]
         for j in range(current.shape[1]):
             alpha, stiffness, rest, sigma, lower, upper = _eq6_row(table, j, swing, psi_hip[i])
+            if j == _TORSO_PITCH:
+                rest = torso_rest[i]
             psi, psi_before = current[i, j], previous[i, j]
             if j == _HEADING:
                 psi_before += previous_rate[i] * dt
