@@ -17,7 +17,7 @@ from awalker_tracker.model.kinematics import (
     _initial_dofs,
     _initial_leg_scale,
     _initial_posture,
-    POSTURE_LIMIT,
+    _posture_within_limit,
     _clearance,
     _initial_state,
     _plane_origin,
@@ -328,9 +328,7 @@ def sample_posed_kinematics_reference(
         scale = np.clip(scale * np.exp(config.leg_scale_drift * rng.standard_normal(len(kin))), *config.leg_scale_range)
     torso_rest = kin.torso_rest
     if config.posture_drift > 0:
-        upright = config.table["torso_side"].rest
-        torso_rest = np.clip(torso_rest + config.posture_drift * rng.standard_normal(len(kin)),
-                             upright - POSTURE_LIMIT, upright + POSTURE_LIMIT)
+        torso_rest = _posture_within_limit(config, torso_rest + config.posture_drift * rng.standard_normal(len(kin)))
     if heading is not None:
         new[:, DOF_NAMES.index("heading")] = heading
     legs = leg_angles(walker)

@@ -518,10 +518,16 @@ def _initial_leg_scale(config: KinematicConfig, n: int, rng: np.random.Generator
 
 def _initial_posture(config: KinematicConfig, n: int, rng: np.random.Generator, spread: float) -> np.ndarray:
     """(N,) rad rest pitches of the torso: Table 1's, plus N(0, spread^2) within +- POSTURE_LIMIT of it."""
-    rest = config.table["torso_side"].rest
+    rest = config.table[_DOF_ROWS[_TORSO_PITCH]].rest
     if spread <= 0:
         return np.full(n, rest)
-    return rest + np.clip(spread * rng.standard_normal(n), -POSTURE_LIMIT, POSTURE_LIMIT)
+    return _posture_within_limit(config, rest + spread * rng.standard_normal(n))
+
+
+def _posture_within_limit(config: KinematicConfig, torso_rest: np.ndarray) -> np.ndarray:
+    """Postures (N,) rad clipped to +- POSTURE_LIMIT of Table 1's rest of the torso pitch."""
+    upright = config.table[_DOF_ROWS[_TORSO_PITCH]].rest
+    return np.clip(torso_rest, upright - POSTURE_LIMIT, upright + POSTURE_LIMIT)
 
 
 def _initial_dofs(config: KinematicConfig, body: BodyDescription, walker: WalkerState, heading: float | np.ndarray,
@@ -641,9 +647,7 @@ def _sample_kinematics(
         scale = np.clip(scale * np.exp(config.leg_scale_drift * rng.standard_normal(n)), *config.leg_scale_range)
     torso_rest = kin.torso_rest
     if config.posture_drift > 0:
-        table_rest = config.table["torso_side"].rest
-        torso_rest = np.clip(torso_rest + config.posture_drift * rng.standard_normal(n),
-                             table_rest - POSTURE_LIMIT, table_rest + POSTURE_LIMIT)
+        torso_rest = _posture_within_limit(config, torso_rest + config.posture_drift * rng.standard_normal(n))
     if heading is not None:
         new[:, DOF_NAMES.index("heading")] = heading
     legs = leg_angles(walker)
