@@ -325,8 +325,8 @@ def test_one_camera_does_not_count_a_feet_row_that_jumps_away(seen, reach: bool)
 def test_walkers_straying_in_depth_beyond_the_band_lose_weight(seen, band: float):
     """One camera: walkers whose pelvis lies within ``depth_band_m`` of the feet-row position over the ground
     keep the image's log-likelihood; beyond it they lose 0.5 (excess / sigma)^2 nats, levelling off at
-    ~-log(depth_band_outlier) (a feet row metres from every walker changes no weights). Band 0 (off):
-    no term."""
+    ~-log(depth_band_outlier) (a feet row metres from every walker changes no weights). Not over the first
+    ``depth_band_delay_s`` (0.5 s: 15 frames) of the track. Band 0 (off): no term."""
     from awalker_tracker.inference.tracker import ImageObservation
 
     camera, features, markers = seen
@@ -343,11 +343,19 @@ def test_walkers_straying_in_depth_beyond_the_band_lose_weight(seen, band: float
     moved_markers[:, :, :2] += pelvis[:2] - states.pose.markers[:, PELVIS, None, :2]
     moved_markers[:, :, 1] += offsets[:, None]
     states = replace(states, pose=replace(states.pose, markers=moved_markers))
-    states = model.rejuvenate(0, np.array([0.0, -50, -50, -50, -50]), None, states,
-                              ImageObservation(features=(features,)), rng)
-    loglik = model.log_likelihood(None, states, ImageObservation(features=(features,)))
-    gap = np.linalg.norm(moved_markers[:, PELVIS, :2] - model.monitor.feet_row_position(0), axis=1)
     base = config.likelihood_scale * -7.0                          # the images' tempered log-likelihood
+    first = model.rejuvenate(0, np.zeros(5), None, states, ImageObservation(features=(features,)), rng)
+    assert model.monitor.feet_row_position(0) is not None          # the feet row counts, but the start holds
+    np.testing.assert_allclose(model.log_likelihood(None, first, ImageObservation(features=(features,))), base)
+    for frame in range(1, 14):
+        model.monitor.update(frame, [features], pelvis)
+    for frame in (14, 15):
+        states = model.rejuvenate(frame, np.array([0.0, -50, -50, -50, -50]), None, states,
+                                  ImageObservation(features=(features,)), rng)
+        loglik = model.log_likelihood(None, states, ImageObservation(features=(features,)))
+        if frame == 14:                                             # 0.47 s after the first frame
+            np.testing.assert_allclose(loglik, base)
+    gap = np.linalg.norm(moved_markers[:, PELVIS, :2] - model.monitor.feet_row_position(15), axis=1)
     squared = 0.5 * (np.maximum(gap - band, 0.0) / 0.1) ** 2
     levelled = np.log1p(0.05) - np.logaddexp(-squared, np.log(0.05))
     np.testing.assert_allclose(loglik, base - (levelled if band > 0 else 0.0))

@@ -107,7 +107,7 @@ class TrackOptions:
     auto_start: bool = False        # ignore any start description and find the walking person (also when none exists)
     follow_near: tuple[float, float] | None = None   # automatic start: follow the person first seen near this ground point (m)
     recovery: bool = True           # re-seed fallen walkers and re-acquire a lost track (inference/recovery.py)
-    depth_band_m: float | None = None   # one camera: the feet row's depth band (None: RecoveryConfig's, off); off without recovery
+    depth_band_m: float | None = None   # one camera: the feet row's depth band (None: RecoveryConfig's, 0.3 m); off without recovery
     overlays: bool = True
     # two passes, the second with the leg length fitted to the first one's images (module docstring);
     # None: when no body description is found, so that the body would only be scaled to the seen height

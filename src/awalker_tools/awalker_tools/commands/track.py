@@ -76,8 +76,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "from the images, online\")")
     parser.add_argument("--depth-band", type=float, default=None, metavar="M",
                         help="one camera: walkers whose pelvis lies more than M metres from where the person's feet row "
-                             "puts them lose weight (e.g. 0.3; default: off, RecoveryConfig.depth_band_m; README \"One "
-                             "camera's depth held by the feet row\")")
+                             "puts them lose weight, from half a second in (default: RecoveryConfig.depth_band_m, 0.3; "
+                             "0: off; README \"One camera's depth band on by default\")")
     parser.add_argument("--no-recovery", action="store_true",
                         help="never re-seed fallen walkers, re-acquire a lost track, hold the walkers while the person "
                              "stands still or hold one camera's depth by the feet row (the exact filter of the paper)")

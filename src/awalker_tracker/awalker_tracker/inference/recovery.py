@@ -33,20 +33,20 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   fraction of the particles (the lowest weights) are re-seeded around the detected ground position,
   with the heading and speed of the detections' recent ground track (when it moves), then the image
   likelihood decides. At most once per ``cooldown_s``.
-- **One camera's depth (off by default: ``depth_band_m`` 0; ``awalker track --depth-band 0.3``).** A
+- **One camera's depth (on: ``depth_band_m`` 0.3; ``awalker track --depth-band 0`` turns it off).** A
   single camera sees a step toward or away from it hardly at all, so the depth wanders like a random
   walk (the real walks' pelvis error along the view over the last second of a run: median 0.18 m, 90th
-  percentile 0.56 m). With
-  ``depth_band_m`` > 0, where this frame's feet row counts (above), walkers whose pelvis lies more than
-  ``depth_band_m`` from it over the ground lose up to 0.5 (excess / ``depth_band_sigma_m``)^2 nats
-  (``TrackerModel.depth_band_penalty``), levelling off at ~-log(``depth_band_outlier``) because a
+  percentile 0.56 m). With ``depth_band_m`` > 0, where this frame's feet row counts (above), from
+  ``depth_band_delay_s`` after the first frame tracked on (``depth_band_centre``), walkers whose pelvis
+  lies more than ``depth_band_m`` from it over the ground lose up to 0.5 (excess / ``depth_band_sigma_m``)^2
+  nats (``TrackerModel.depth_band_penalty``), levelling off at ~-log(``depth_band_outlier``) because a
   feet row can be wrong (feet hidden behind something put it metres away while the blob still looks as
-  tall as the body). Measured (README "One camera's depth held by the feet row"): with the feet row's
-  reach and occlusion tests (above), the real walks' one-camera error falls from 122 to 103 mm (median of
-  the walk medians) and 59 of 60 runs end on the person against 56; but the feet row is biased by the
-  look of the feet (0.22 m too near on the dressed renders, their contact shadow; 0.23 m too far on our
-  own body's renders), and on our own mocap render it raises the mean error over tracker seeds 0-9 from
-  a median 124 mm to 190, so it is not on by default yet.
+  tall as the body). The feet row is a map row (4 px at 320x240: ~0.27 m of depth at 5 m) and biased by
+  the look of the feet (~0.2 m too near on the dressed renders, their contact shadow; on our own body's
+  renders it jumps a row or two too far in some frames, where the feet's ratio falls under the blob's
+  threshold), so it only holds the depth within a band, and not over the first half second, when the
+  start is better than any one feet row (a hand start is right to 5 cm; the automatic start is made from
+  the feet rows themselves). Measured in the README ("One camera's depth band on by default").
 - **A person who stops.** The walker only walks (the paper's model has no standing still): with
   ``hold_still``, while the detections' ground track moves slower than ``still_m_s`` over
   ``still_window_s`` (and until it moves faster than ``moving_m_s`` again), each frame's particles
@@ -93,9 +93,10 @@ class RecoveryConfig:
     hold_still: bool = True            # hold the walkers while the person stands still
     still_m_s: float = 0.15            # a ground track slower than this over still_window_s: standing still
     still_window_s: float = 0.3
-    depth_band_m: float = 0.0          # one camera: the pelvis this far from the feet-row position is free ...
+    depth_band_m: float = 0.3          # one camera: the pelvis this far from the feet-row position is free ...
     depth_band_sigma_m: float = 0.1    # ... beyond it each frame costs 0.5 (excess / sigma)^2 nats; band 0: off
     depth_band_outlier: float = 0.05   # ... up to ~-log(this): a feet row may be wrong (feet hidden)
+    depth_band_delay_s: float = 0.5    # ... from this long (s) after the first frame tracked: the start holds before
 
     def __post_init__(self) -> None:
         low, high = self.feet_row_height_ratio
@@ -107,7 +108,8 @@ class RecoveryConfig:
         if min(self.lost_after_s, self.cooldown_s, self.position_spread_m, self.heading_spread_rad,
                self.box_margin, self.track_window_s, self.moving_m_s, self.lost_distance_m,
                self.lost_distance_one_camera_m, self.still_m_s,
-               self.still_window_s, self.depth_band_m, self.reach_m, self.reach_m_s, self.reach_reset_s) < 0:
+               self.still_window_s, self.depth_band_m, self.depth_band_delay_s, self.reach_m, self.reach_m_s,
+               self.reach_reset_s) < 0:
             raise ValueError("RecoveryConfig: times, spreads and margins must be >= 0")
         if not (self.depth_band_sigma_m > 0 and 0 < self.depth_band_outlier < 1):
             raise ValueError(f"RecoveryConfig: depth_band_sigma_m must be > 0 and depth_band_outlier in (0, 1), got "
@@ -153,6 +155,7 @@ class LostTrackMonitor:
         self._gaps: dict[int, float] = {}   # one camera: the pelvis's ground distance from the feet-row position
         self._feet_rows = GroundTrack(dt)   # one camera: the feet-row ground position per frame (None: it does not count)
         self._quiet_until = -1
+        self._first_frame: int | None = None
         self.reacquisitions = 0
 
     def _off_person(self, frame: int, detection: PersonDetection, pelvis: np.ndarray,
@@ -208,6 +211,13 @@ class LostTrackMonitor:
         (a reliable blob as tall as the body; decided by ``update``), else None."""
         return self._feet_rows.positions.get(frame)
 
+    def depth_band_centre(self, frame: int) -> np.ndarray | None:
+        """One camera: the centre (m, world xy) of the depth band at ``frame``: its feet-row position where it
+        counts (``feet_row_position``), from ``depth_band_delay_s`` after the first frame tracked on; else None."""
+        if self._first_frame is None or (frame - self._first_frame) * self.dt < self.config.depth_band_delay_s - 1e-9:
+            return None
+        return self.feet_row_position(frame)
+
     def still(self, frame: int) -> bool:
         """Whether the person stood still at ``frame`` (decided by ``update``; False if not yet)."""
         return self._still.get(frame, False)
@@ -217,6 +227,8 @@ class LostTrackMonitor:
         also decides ``still(frame)``."""
         if frame in self._orders:
             return self._orders[frame]
+        if self._first_frame is None:
+            self._first_frame = frame
         cfg = self.config
         seen = [person_blobs(f, c.name) for f, c in zip(features, self.cameras)]     # once: used twice below
         detection = locate_person(seen, self.cameras, near=pelvis)

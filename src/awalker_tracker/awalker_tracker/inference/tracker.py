@@ -270,7 +270,7 @@ class TrackerModel:
         self.monitor = (LostTrackMonitor(cameras, config.recovery, config.dt, body_height_m=self.body.height)
                         if cameras and (config.recovery.reacquire or config.recovery.hold_still) else None)
         self.reseeded_fallen = 0     # particles re-seeded after a fall, over the run
-        self._feet_row: np.ndarray | None = None   # the frame's one-camera feet-row position (rejuvenate)
+        self._feet_row: np.ndarray | None = None   # the frame's depth-band centre, one camera (rejuvenate)
 
     # -- SMC protocol ---------------------------------------------------------------------
     def initial(self, n: int, rng: np.random.Generator) -> TrackerStates:
@@ -407,7 +407,7 @@ class TrackerModel:
         w /= w.sum()
         pelvis = w @ states.pose.markers[:, MARKER_NAMES.index("pelvis")]
         order = self.monitor.update(frame, obs.features, pelvis)
-        self._feet_row = self.monitor.feet_row_position(frame)
+        self._feet_row = self.monitor.depth_band_centre(frame)
         if parent is not None and self.monitor.still(frame):
             # the person stands still: the frame's walkers are the previous frame's, not moving
             states = replace(parent, speed=np.zeros(len(parent)), reseeded=np.full(len(parent), HELD, np.int8))
@@ -452,7 +452,8 @@ class TrackerModel:
     def depth_band_penalty(self, states: TrackerStates) -> np.ndarray:
         """(N,) nats taken from walkers whose pelvis strays over the ground beyond ``depth_band_m`` from the
         frame's one-camera feet-row position (``inference.recovery``, *One camera's depth*); zeros where
-        the frame has none (several cameras, a blob not as tall as the body, recovery off). The feet row
+        the frame has none (several cameras, a blob not as tall as the body, the first
+        ``depth_band_delay_s`` of the track, recovery off). The feet row
         is an outlier with probability ``depth_band_outlier``: the penalty levels off at about
         -log(outlier) nats, so a feet row far from every walker (hidden feet) changes no weights."""
         r = self.config.recovery
