@@ -214,7 +214,8 @@ class LostTrackMonitor:
     def depth_band_centre(self, frame: int) -> np.ndarray | None:
         """One camera: the centre (m, world xy) of the depth band at ``frame``: its feet-row position where it
         counts (``feet_row_position``), from ``depth_band_delay_s`` after the first frame tracked on; else None."""
-        if self._first_frame is None or (frame - self._first_frame) * self.dt < self.config.depth_band_delay_s - 1e-9:
+        delay = int(round(self.config.depth_band_delay_s / self.dt))
+        if self._first_frame is None or frame - self._first_frame < delay:
             return None
         return self.feet_row_position(frame)
 

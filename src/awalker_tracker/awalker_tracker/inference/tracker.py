@@ -270,7 +270,7 @@ class TrackerModel:
         self.monitor = (LostTrackMonitor(cameras, config.recovery, config.dt, body_height_m=self.body.height)
                         if cameras and (config.recovery.reacquire or config.recovery.hold_still) else None)
         self.reseeded_fallen = 0     # particles re-seeded after a fall, over the run
-        self._feet_row: np.ndarray | None = None   # the frame's depth-band centre, one camera (rejuvenate)
+        self._depth_band_centre: np.ndarray | None = None   # this frame's, one camera (rejuvenate)
 
     # -- SMC protocol ---------------------------------------------------------------------
     def initial(self, n: int, rng: np.random.Generator) -> TrackerStates:
@@ -400,14 +400,14 @@ class TrackerModel:
         (``inference.recovery``): called by the filter with the particles' current log weights, the
         states before the transition (``parent``, None at the first frame) and after it, before the
         likelihood of ``obs`` is computed."""
-        self._feet_row = None
+        self._depth_band_centre = None
         if self.monitor is None or not isinstance(obs, ImageObservation):
             return states
         w = np.exp(log_weights - np.max(log_weights))
         w /= w.sum()
         pelvis = w @ states.pose.markers[:, MARKER_NAMES.index("pelvis")]
         order = self.monitor.update(frame, obs.features, pelvis)
-        self._feet_row = self.monitor.depth_band_centre(frame)
+        self._depth_band_centre = self.monitor.depth_band_centre(frame)
         if parent is not None and self.monitor.still(frame):
             # the person stands still: the frame's walkers are the previous frame's, not moving
             states = replace(parent, speed=np.zeros(len(parent)), reseeded=np.full(len(parent), HELD, np.int8))
@@ -457,9 +457,9 @@ class TrackerModel:
         is an outlier with probability ``depth_band_outlier``: the penalty levels off at about
         -log(outlier) nats, so a feet row far from every walker (hidden feet) changes no weights."""
         r = self.config.recovery
-        if self._feet_row is None or r.depth_band_m <= 0:
+        if self._depth_band_centre is None or r.depth_band_m <= 0:
             return np.zeros(len(states))
-        gap = np.linalg.norm(states.pose.markers[:, MARKER_NAMES.index("pelvis"), :2] - self._feet_row, axis=1)
+        gap = np.linalg.norm(states.pose.markers[:, MARKER_NAMES.index("pelvis"), :2] - self._depth_band_centre, axis=1)
         inlier = -0.5 * (np.maximum(gap - r.depth_band_m, 0.0) / r.depth_band_sigma_m) ** 2
         outlier = np.log(r.depth_band_outlier)
         return np.logaddexp(0.0, outlier) - np.logaddexp(inlier, outlier)
