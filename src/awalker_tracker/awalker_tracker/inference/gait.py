@@ -4,7 +4,8 @@ A step ends at a heel strike: the frame where the stance leg changes to the othe
 walker's own event for the tracker's MAP trajectory, timed within the frame where the walker's
 strike time is given; for marker data without stance labels, the frame a heel comes down after a
 swing: ``stance_from_heels``). Per step: time (s),
-foot, ground position (the striking heel's xy, m); step length = the displacement from the
+foot, ground position (the striking heel's xy, m; for marker data where that heel comes to rest,
+``heel_at_rest``); step length = the displacement from the
 previous strike along the walking direction (the stride from the same foot's previous strike,
 else the step itself); step width = across it; step time, stride time (s), cadence
 (steps/min) and speed (step length / step time, m/s).
@@ -120,10 +121,13 @@ class StepCounter:
 
 
 def steps(frames: np.ndarray, stamps_ns: np.ndarray, markers: np.ndarray, stance_leg: np.ndarray,
-          strike_fraction: np.ndarray | None = None, double_support: float = 0.0) -> list[Step]:
+          strike_fraction: np.ndarray | None = None, double_support: float = 0.0,
+          at_rest: bool = False) -> list[Step]:
     """The steps of a walk: markers (F, 13, 3) in MARKER_NAMES order, stance leg per frame (0/1) and,
     if known, when in the period before each frame the strike happened (0-1; NaN: at the frame);
-    ``double_support`` as for ``StepCounter``."""
+    ``double_support`` as for ``StepCounter``. A step's position is the striking heel's at the strike, or
+    with ``at_rest`` (marker data, strikes from ``stance_from_heels``) where that heel comes to rest
+    (``heel_at_rest``)."""
     stance = np.asarray(stance_leg).astype(int)
     t = (np.asarray(stamps_ns, np.int64) - int(stamps_ns[0])) * 1e-9
     fraction = np.full(len(stance), np.nan) if strike_fraction is None else np.asarray(strike_fraction, float)
@@ -134,9 +138,25 @@ def steps(frames: np.ndarray, stamps_ns: np.ndarray, markers: np.ndarray, stance
             continue
         # the strike happened during the transition from frame f-1 to frame f
         when = t[f - 1] + fraction[f] * (t[f] - t[f - 1]) if np.isfinite(fraction[f]) else t[f]
-        walk.append(counter.add(int(frames[f]), int(stamps_ns[f]), float(when), int(stance[f]),
-                                markers[f, _M[_FOOT[int(stance[f])][0]], :2]))
+        heel = _M[_FOOT[int(stance[f])][0]]
+        where = heel_at_rest(markers[:, heel, :2], t, stance, f) if at_rest else markers[f, heel, :2]
+        walk.append(counter.add(int(frames[f]), int(stamps_ns[f]), float(when), int(stance[f]), where))
     return walk
+
+
+def heel_at_rest(heel_xy: np.ndarray, t: np.ndarray, stance: np.ndarray, strike: int) -> np.ndarray:
+    """Where a heel that struck at frame ``strike`` comes to rest (xy, m): its position at its slowest frame
+    over the ground (central differences) while its foot stands, from the strike to the other foot's next
+    strike. A heel found striking by its height (``stance_from_heels``) may still be sliding in: motion
+    capture's heel skims within ``contact_m`` of the floor for a few frames before it stops (CMU 07_02 at
+    30 Hz: found at 4 m/s, 0.33 m short of where it stops)."""
+    end = strike + 1
+    while end < len(stance) and stance[end] == stance[strike]:
+        end += 1
+    if len(t) < 3:
+        return heel_xy[strike]
+    speed = np.linalg.norm(np.gradient(heel_xy, t, axis=0), axis=1)
+    return heel_xy[strike + int(np.argmin(speed[strike:end]))]
 
 
 def summary(walk: list[Step]) -> dict[str, object]:
