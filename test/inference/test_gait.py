@@ -57,6 +57,9 @@ def test_heel_strikes_and_steps_of_a_known_walk():
     assert summary["step_length_m"] == pytest.approx(0.7) and summary["stride_time_s"] == pytest.approx(1.0)
     assert summary["symmetry_left_over_right"]["step_length_m"] == pytest.approx(1.0)
     assert summary["stance_fraction"] == 0.5 and "impulsive" in summary["stance_note"]
+    assert f"{gait.WALKER_STRIKE_DELAY:g} x the step time" in summary["stance_note"]
+    assert "sides_note" not in summary
+    assert gait.summary(walk, sides_known=False)["sides_note"] == gait.SIDES_NOTE
 
 
 def test_steps_from_markers_lie_where_the_heel_comes_to_rest():

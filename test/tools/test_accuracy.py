@@ -280,6 +280,10 @@ def test_automatic_start_without_empty_frames(tmp_path):
     run = yaml.safe_load((out / "run.yaml").read_text())
     assert "robust fit" in run["features"]["cam0"]["background"]
     assert run["start_source"].startswith("found automatically")
+    # one camera and no stance leg: the gait says that left and right may be swapped, and so does the report
+    from awalker_tracker.inference.gait import SIDES_NOTE
+    assert json.loads((out / "gait.json").read_text())["sides_note"] == SIDES_NOTE
+    assert main(["report", str(out)]) == 0 and "Left and right" in (out / "report.html").read_text()
     # the automatic start's backlog of posteriors reaches the pose publisher whole, in both passes
     for info in (run, yaml.safe_load((out / "first_pass" / "run.yaml").read_text())):
         assert info["recorded"]["/awalker/joint_states"] == info["recorded"]["/awalker/posterior"] == info["posteriors"]

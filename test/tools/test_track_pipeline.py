@@ -3,6 +3,7 @@ publisher on one executor, the features nodes in a thread) and the nodes split a
 (replay in a subprocess)."""
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -98,6 +99,8 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     assert main(["report", str(out)]) == 0
     page = (out / "report.html").read_text()
     assert "<h2>Gait</h2>" in page and "Tracking quality" in page and "Against ground truth" in page
+    # one camera, but the start names the standing foot: left and right are known
+    assert "sides_note" not in json.loads((out / "gait.json").read_text()) and "Left and right" not in page
     assert page.count("data:image/png;base64,") >= 3 and page.count("<tr>") >= len(steps) + 2
     assert main(["report", str(tmp_path)]) == 2
     assert "no summary.csv, gait.csv, gait.json" in capsys.readouterr().err

@@ -317,9 +317,10 @@ def track_steps(track: PoseTrack, stance_leg: np.ndarray | None = None,
                       gait.WALKER_STRIKE_DELAY)
 
 
-def write_gait(out: Path, track: PoseTrack, stance_leg: np.ndarray, strike_fraction: np.ndarray | None = None) -> list:
-    """gait.csv (one row per step, ``GAIT_COLUMNS``) and gait.json (``inference.gait.summary``); returns
-    the steps (``plot_gait_file`` draws them)."""
+def write_gait(out: Path, track: PoseTrack, stance_leg: np.ndarray, strike_fraction: np.ndarray | None = None,
+               sides_known: bool = True) -> list:
+    """gait.csv (one row per step, ``GAIT_COLUMNS``) and gait.json (``inference.gait.summary``; ``sides_known``
+    False: with its note that left and right may be swapped); returns the steps (``plot_gait_file`` draws them)."""
     import json
 
     from awalker_tracker.inference import gait
@@ -330,7 +331,7 @@ def write_gait(out: Path, track: PoseTrack, stance_leg: np.ndarray, strike_fract
         writer.writeheader()
         for row in gait.as_rows(walk):
             writer.writerow({k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in row.items()})
-    (out / "gait.json").write_text(json.dumps(gait.summary(walk), indent=1))
+    (out / "gait.json").write_text(json.dumps(gait.summary(walk, sides_known), indent=1))
     return walk
 
 

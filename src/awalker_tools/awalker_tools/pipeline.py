@@ -440,7 +440,10 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
                                  "description with --start")
             raise InputError(f"{bag}: no frame was tracked (frames received: {result.frames}; "
                              f"start frame {tracker.start.frame}); check that the bag has images for every camera")
-        track, walk = write_outputs(out, tracker.tracker.map_trajectory(), tracker.summaries)
+        # one camera cannot tell the near leg from the far one: unless the start named the standing foot, say
+        # that left and right may be swapped
+        sides_known = len(cameras) > 1 or (tracker.start is not None and tracker.start.stance_leg is not None)
+        track, walk = write_outputs(out, tracker.tracker.map_trajectory(), tracker.summaries, sides_known)
     finally:
         if feature_thread is not None:
             feature_thread.stop()
@@ -475,10 +478,12 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
     return result
 
 
-def write_outputs(out: Path, trajectory: Any, summaries: list[Any]) -> tuple[evaluation.PoseTrack, list]:
+def write_outputs(out: Path, trajectory: Any, summaries: list[Any],
+                  sides_known: bool = True) -> tuple[evaluation.PoseTrack, list]:
     """poses.csv (MAP trajectory), summary.csv (per-frame posterior summaries) and the gait analytics of
-    the MAP trajectory: gait.csv (one row per step) and gait.json (summary). Returns the MAP pose track
-    and its steps, for the footprint picture (``evaluation.plot_gait_file``)."""
+    the MAP trajectory: gait.csv (one row per step) and gait.json (summary; ``sides_known`` False: with the
+    note that left and right may be swapped). Returns the MAP pose track and its steps, for the footprint
+    picture (``evaluation.plot_gait_file``)."""
     track = evaluation.PoseTrack(trajectory.frames, trajectory.stamps_ns, tuple(trajectory.marker_names),
                                  trajectory.markers)
     evaluation.write_poses_csv(out / "poses.csv", track)
@@ -493,7 +498,7 @@ def write_outputs(out: Path, trajectory: Any, summaries: list[Any]) -> tuple[eva
              "strike_fraction": f"{map_strike.get(s.stamp_ns, float('nan')):.4f}"}
             for s in summaries]
     evaluation.write_summary_csv(out / "summary.csv", rows)
-    return track, evaluation.write_gait(out, track, trajectory.stance_leg, trajectory.strike_fraction)
+    return track, evaluation.write_gait(out, track, trajectory.stance_leg, trajectory.strike_fraction, sides_known)
 
 
 def write_overlays(bag: Path, out: Path, camera: Any, body: BodyDescription, fps: float | None = None) -> Path | None:

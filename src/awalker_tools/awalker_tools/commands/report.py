@@ -64,6 +64,8 @@ def build_report(run_dir: Path) -> Path:
         "symmetry L/R length": _fmt(sym.get("step_length_m")), "symmetry L/R time": _fmt(sym.get("step_time_s")),
     }], ["steps", "step length (m)", "step width (m)", "step time (s)", "cadence (steps/min)", "speed (m/s)",
          "symmetry L/R length", "symmetry L/R time"]))
+    if "sides_note" in gait_summary:
+        parts.append(f"<p><strong>Left and right:</strong> {html.escape(gait_summary['sides_note'])}.</p>")
     parts.append(f"<p>{html.escape(gait_summary['stance_note'])}.</p>")
     step_rows = [{k: (_fmt(float(v), 3) if k not in ("index", "frame", "foot", "stamp_ns") else v)
                   for k, v in s.items()} for s in steps]

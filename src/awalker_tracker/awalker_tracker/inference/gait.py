@@ -159,8 +159,17 @@ def heel_at_rest(heel_xy: np.ndarray, t: np.ndarray, stance: np.ndarray, strike:
     return heel_xy[strike + int(np.argmin(speed[strike:end]))]
 
 
-def summary(walk: list[Step]) -> dict[str, object]:
-    """Medians over steps, left/right symmetry (left / right medians) and the stance/swing note."""
+#: gait.json's ``sides_note`` when which foot is which was not observed (``summary(sides_known=False)``).
+SIDES_NOTE = ("one camera and no stance leg in the start: which foot is the left one was chosen by the filter "
+              "from weak evidence (seen from one side the near and the far leg look alike), so the feet may be "
+              "named the other way round: the left/right columns and the symmetry swapped (real-walks benchmark, "
+              "one camera, automatic start: 8 of 60 runs); name the standing foot in a start description "
+              "(stance_leg) or add a camera to be sure")
+
+
+def summary(walk: list[Step], sides_known: bool = True) -> dict[str, object]:
+    """Medians over steps, left/right symmetry (left / right medians) and the stance/swing note; with
+    ``sides_known`` False (one camera, no stance leg given) also ``sides_note``: left and right may be swapped."""
     def median(key: str, foot: str | None = None) -> float | None:
         values = [getattr(s, key) for s in walk if (foot is None or s.foot == foot) and np.isfinite(getattr(s, key))]
         return float(np.median(values)) if values else None
@@ -177,8 +186,10 @@ def summary(walk: list[Step]) -> dict[str, object]:
     out["double_support_fraction"] = 0.0
     out["stance_note"] = ("impulsive toe-off: each foot stands from its heel strike to the other foot's next one, "
                           "so stance is half the stride and there is no double support (people: ~60 % and ~20 %); "
-                          "heel strikes are reported a person's double support (0.2 x the step time) before "
-                          "the walker's")
+                          f"the tracker dates each heel strike {WALKER_STRIKE_DELAY:g} x the step time before its "
+                          "walker's instant support transfer, where a person's heel comes down")
+    if not sides_known:
+        out["sides_note"] = SIDES_NOTE
     return out
 
 
