@@ -132,31 +132,32 @@ def steps(frames: np.ndarray, stamps_ns: np.ndarray, markers: np.ndarray, stance
     t = (np.asarray(stamps_ns, np.int64) - int(stamps_ns[0])) * 1e-9
     fraction = np.full(len(stance), np.nan) if strike_fraction is None else np.asarray(strike_fraction, float)
     counter = StepCounter(double_support)
+    heels = markers[:, [_M[_FOOT[0][0]], _M[_FOOT[1][0]]], :2]          # (F, 2 feet, xy)
+    # over-the-ground speed of each heel (central differences), once for all strikes
+    heel_speed = np.linalg.norm(np.gradient(heels, t, axis=0), axis=2) if at_rest and len(t) >= 2 else None
     walk = []
     for f in range(1, len(stance)):
         if stance[f] == stance[f - 1]:
             continue
         # the strike happened during the transition from frame f-1 to frame f
         when = t[f - 1] + fraction[f] * (t[f] - t[f - 1]) if np.isfinite(fraction[f]) else t[f]
-        heel = _M[_FOOT[int(stance[f])][0]]
-        where = heel_at_rest(markers[:, heel, :2], t, stance, f) if at_rest else markers[f, heel, :2]
-        walk.append(counter.add(int(frames[f]), int(stamps_ns[f]), float(when), int(stance[f]), where))
+        foot = int(stance[f])
+        where = (heels[f, foot] if heel_speed is None else
+                 heel_at_rest(heels[:, foot], heel_speed[:, foot], stance, f))
+        walk.append(counter.add(int(frames[f]), int(stamps_ns[f]), float(when), foot, where))
     return walk
 
 
-def heel_at_rest(heel_xy: np.ndarray, t: np.ndarray, stance: np.ndarray, strike: int) -> np.ndarray:
-    """Where a heel that struck at frame ``strike`` comes to rest (xy, m): its position at its slowest frame
-    over the ground (central differences) while its foot stands, from the strike to the other foot's next
-    strike. A heel found striking by its height (``stance_from_heels``) may still be sliding in: motion
+def heel_at_rest(heel_xy: np.ndarray, heel_speed: np.ndarray, stance: np.ndarray, strike: int) -> np.ndarray:
+    """Where a heel that struck at frame ``strike`` comes to rest (xy, m): its position (F, 2) at its slowest
+    frame (``heel_speed`` (F,), m/s over the ground) while its foot stands, from the strike to the other foot's
+    next strike. A heel found striking by its height (``stance_from_heels``) may still be sliding in: motion
     capture's heel skims within ``contact_m`` of the floor for a few frames before it stops (CMU 07_02 at
     30 Hz: found at 4 m/s, 0.33 m short of where it stops)."""
     end = strike + 1
     while end < len(stance) and stance[end] == stance[strike]:
         end += 1
-    if len(t) < 3:
-        return heel_xy[strike]
-    speed = np.linalg.norm(np.gradient(heel_xy, t, axis=0), axis=1)
-    return heel_xy[strike + int(np.argmin(speed[strike:end]))]
+    return heel_xy[strike + int(np.argmin(heel_speed[strike:end]))]
 
 
 #: gait.json's ``sides_note`` when which foot is which was not observed (``summary(sides_known=False)``).
