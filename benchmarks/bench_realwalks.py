@@ -33,6 +33,10 @@ scored from the frame the tracker started at; the hand-started ones from the fir
 
 --carry backpack|shoulder-bag (issue 10 §4, unmodelled foreground): the same walks with the person carrying
 a bag the tracker's body does not have (`synth --carry`; the sequences and runs get the bag's name).
+
+--likelihood-scale S, --lookahead T: `awalker track`'s tempering exponent and look-ahead for the tracked runs
+(dead reckoning keeps 0 and the default); runs other than the defaults are named ..._lsS / ..._laT, so they sit
+beside the default runs of the same --out and reuse its sequences.
 """
 from __future__ import annotations
 
@@ -143,6 +147,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="awalker track --leg-scale-spread (the particles' leg lengths; runs named ..._legsS_sN)")
     parser.add_argument("--fit-body", action="store_true",
                         help="awalker track --fit-body: fit the leg length to the images, then track again (runs named ..._fit_sN)")
+    parser.add_argument("--likelihood-scale", type=float, default=TrackOptions.likelihood_scale,
+                        help="awalker track --likelihood-scale for the tracked runs (runs named ..._lsS_sN unless the default)")
+    parser.add_argument("--lookahead", type=int, default=TrackOptions.lookahead,
+                        help="awalker track --lookahead (tau) for the tracked runs (runs named ..._laT_sN unless the default)")
     parser.add_argument("--carry", choices=CARRIED, default="none",
                         help="the person carries a backpack or a shoulder bag (synth --carry): unmodelled foreground")
     args = parser.parse_args(argv)
@@ -152,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
         "particles": args.particles, "size": list(args.size), "rate": args.rate, "seeds": args.seeds,
         "background_frames": 0 if args.hands_off else args.background_frames, "hands_off": args.hands_off,
         "carry": args.carry, "leg_scale_spread": args.leg_scale_spread, "fit_body": args.fit_body,
-        "cpus": os.cpu_count()}, "runs": {}, "summary": {}}
+        "likelihood_scale": args.likelihood_scale, "lookahead": args.lookahead, "cpus": os.cpu_count()}, "runs": {}, "summary": {}}
     jobs = [(w, v, s) for w in args.walks for v in args.variants for s in args.settings]
     for k, (walk, variant, setting) in enumerate(jobs):
         name = f"{walk} {variant} {setting}"
@@ -165,12 +173,17 @@ def main(argv: list[str] | None = None) -> int:
         for mode, seed, images in modes:
             legs = f"_legs{args.leg_scale_spread:g}" if images and args.leg_scale_spread > 0 else ""
             legs += "_fit" if images and args.fit_body else ""
+            if images and args.likelihood_scale != TrackOptions.likelihood_scale:
+                legs += f"_ls{args.likelihood_scale:g}"
+            if images and args.lookahead != TrackOptions.lookahead:
+                legs += f"_la{args.lookahead}"
             run_name = f"{walk}_{variant}_{setting}_{mode}{suffix(args.hands_off, args.carry)}{legs}_s{seed}"
             run_dir = args.out / "runs" / run_name
             if not (run_dir / "eval.json").exists():
                 with contextlib.redirect_stdout(sys.stderr):
                     run_tracking(TrackOptions(bag=bag, out=run_dir, particles=args.particles, seed=seed,
-                                              likelihood_scale=0.1 if images else 0.0, recovery=images,
+                                              likelihood_scale=args.likelihood_scale if images else 0.0,
+                                              recovery=images, lookahead=args.lookahead if images else TrackOptions.lookahead,
                                               leg_scale_spread=args.leg_scale_spread if images else 0.0,
                                               auto_start=args.hands_off, overlays=False, quiet=True,
                                               fit_body=True if images and args.fit_body else None))
