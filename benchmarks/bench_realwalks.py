@@ -34,6 +34,10 @@ scored from the frame the tracker started at; the hand-started ones from the fir
 --carry backpack|shoulder-bag (issue 10 §4, unmodelled foreground): the same walks with the person carrying
 a bag the tracker's body does not have (`synth --carry`; the sequences and runs get the bag's name).
 
+--true-body (a diagnosis, not what a user has): track with the drawn person's own segment sizes
+(``ground_truth_body.yaml`` beside the sequence) instead of the tape's; runs named ..._truebody_sN. Sequences
+synthesised before synth wrote that file must be made again (delete their directory under OUT/sequences).
+
 --likelihood-scale S, --lookahead T: `awalker track`'s tempering exponent and look-ahead for the tracked runs
 (dead reckoning keeps 0 and the default); runs other than the defaults are named ..._lsS / ..._laT, so they sit
 beside the default runs of the same --out and reuse its sequences.
@@ -151,6 +155,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="awalker track --likelihood-scale for the tracked runs (runs named ..._lsS_sN unless the default)")
     parser.add_argument("--lookahead", type=int, default=TrackOptions.lookahead,
                         help="awalker track --lookahead (tau) for the tracked runs (runs named ..._laT_sN unless the default)")
+    parser.add_argument("--true-body", action="store_true",
+                        help="track with the person's own sizes (ground_truth_body.yaml), not the tape's (runs named ..._truebody_sN)")
     parser.add_argument("--carry", choices=CARRIED, default="none",
                         help="the person carries a backpack or a shoulder bag (synth --carry): unmodelled foreground")
     args = parser.parse_args(argv)
@@ -159,20 +165,27 @@ def main(argv: list[str] | None = None) -> int:
     report: dict = {"benchmark": "realwalks", "settings": {
         "particles": args.particles, "size": list(args.size), "rate": args.rate, "seeds": args.seeds,
         "background_frames": 0 if args.hands_off else args.background_frames, "hands_off": args.hands_off,
-        "carry": args.carry, "leg_scale_spread": args.leg_scale_spread, "fit_body": args.fit_body,
+        "carry": args.carry, "leg_scale_spread": args.leg_scale_spread, "fit_body": args.fit_body, "true_body": args.true_body,
         "likelihood_scale": args.likelihood_scale, "lookahead": args.lookahead, "cpus": os.cpu_count()}, "runs": {}, "summary": {}}
+    if args.true_body and args.hands_off:
+        parser.error("--true-body replaces the body description, which --hands-off runs do not have")
     jobs = [(w, v, s) for w in args.walks for v in args.variants for s in args.settings]
     for k, (walk, variant, setting) in enumerate(jobs):
         name = f"{walk} {variant} {setting}"
         started = time.monotonic()
         bag = sequence(args.out / "sequences", walk, variant, SETTINGS[setting], tuple(args.size), args.rate,
                        args.background_frames, args.hands_off, args.carry)
+        own_body = bag.parent / "ground_truth_body.yaml"
+        if args.true_body and not own_body.is_file():
+            log(f"error: {own_body} missing (the sequence predates it): delete {bag.parent} to synthesise it again")
+            return 2
         modes = [("tracker", seed, True) for seed in args.seeds]
         if not (args.no_dead_reckoning or args.hands_off):    # dead reckoning needs a start description
             modes += [("dead_reckoning", seed, False) for seed in args.seeds]
         for mode, seed, images in modes:
             legs = f"_legs{args.leg_scale_spread:g}" if images and args.leg_scale_spread > 0 else ""
             legs += "_fit" if images and args.fit_body else ""
+            legs += "_truebody" if images and args.true_body else ""
             if images and args.likelihood_scale != TrackOptions.likelihood_scale:
                 legs += f"_ls{args.likelihood_scale:g}"
             if images and args.lookahead != TrackOptions.lookahead:
@@ -182,6 +195,7 @@ def main(argv: list[str] | None = None) -> int:
             if not (run_dir / "eval.json").exists():
                 with contextlib.redirect_stdout(sys.stderr):
                     run_tracking(TrackOptions(bag=bag, out=run_dir, particles=args.particles, seed=seed,
+                                              body=own_body if images and args.true_body else None,
                                               likelihood_scale=args.likelihood_scale if images else 0.0,
                                               recovery=images, lookahead=args.lookahead if images else TrackOptions.lookahead,
                                               leg_scale_spread=args.leg_scale_spread if images else 0.0,

@@ -320,6 +320,10 @@ def test_user_start_and_tape_measure_differ_from_the_truth_a_little(tmp_path):
     body_user = BodyDescription.from_yaml(tmp_path / "user" / "body.yaml")
     ratio = body_user.upper_leg_length / body_exact.upper_leg_length
     assert ratio != 1.0 and abs(ratio - 1) <= 0.061
+    # the person's own sizes are written beside the truth, tape or not: what body.yaml holds without the tape
+    own = BodyDescription.from_yaml(tmp_path / "user" / "ground_truth_body.yaml")
+    assert own.to_yaml_text() == body_exact.to_yaml_text() != body_user.to_yaml_text()
+    assert (tmp_path / "exact" / "ground_truth_body.yaml").read_text() == body_exact.to_yaml_text()
 
 
 def test_no_descriptions_is_a_users_own_video(tmp_path):

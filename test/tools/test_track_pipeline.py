@@ -346,6 +346,9 @@ def test_track_fit_body_option_reaches_the_pipeline(tmp_path: Path, monkeypatch)
         assert seen[-1].fit_body is expected
     # --depth-band reaches the pipeline too (None: the tracker node's default, RecoveryConfig's)
     assert seen[-1].depth_band_m is None
+    # without --particles the run gets the one default (awalker_tools.TRACK_PARTICLES), as TrackOptions has it
+    from awalker_tools import TRACK_PARTICLES
+    assert seen[-1].particles == TRACK_PARTICLES == pipeline.TrackOptions(Path("b"), Path("o")).particles
     assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--depth-band", "0"]) == 0
     assert seen[-1].depth_band_m == 0.0
 

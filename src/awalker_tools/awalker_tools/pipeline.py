@@ -39,7 +39,7 @@ from awalker_tracker.errors import InputError
 from awalker_tracker.inference.tracker import StartDescription
 from awalker_tracker.model.body import BodyDescription
 
-from awalker_tools import evaluation
+from awalker_tools import TRACK_PARTICLES, evaluation
 
 START_FILE, BODY_FILE, CALIBRATION_FILE, RUN_FILE = "start.yaml", "body.yaml", "calibration.yaml", "run.yaml"
 PROGRESS_PERIOD_S = 2.0
@@ -98,7 +98,7 @@ class TrackOptions:
     out: Path
     start: Path | None = None
     body: Path | None = None
-    particles: int = 5000
+    particles: int = TRACK_PARTICLES
     lookahead: int = 3
     trust: float = 0.9
     seed: int = 0

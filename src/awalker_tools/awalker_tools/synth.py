@@ -12,7 +12,8 @@ Outputs in ``out_dir``: ``<name>.bag`` (bagio format, ground truth included),
 ``calibration.yaml``, ``body.yaml``, ``start.yaml`` (the paper's coarse hand
 initialisation: first frame with the person, pelvis ground position, heading, speed, step
 length, stance leg), ``ground_truth.csv`` (``frame,stamp_ns,marker,x,y,z``; frame counts
-from 0 at the first bag frame) and ``overlay_<cam>.png`` (the ground truth drawn over the
+from 0 at the first bag frame), ``ground_truth_body.yaml`` (the drawn person's own sizes: ``body.yaml``
+before ``tape_measure``; for a diagnosis, not for tracking) and ``overlay_<cam>.png`` (the ground truth drawn over the
 middle frame with the person, to look at).
 """
 from __future__ import annotations
@@ -574,9 +575,11 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
             if progress and (frame % 20 == 0 or frame == total - 1):
                 print(f"synth: frame {frame + 1}/{total}", file=sys.stderr, flush=True)
     (out / "ground_truth.csv").write_text("\n".join(csv_lines) + "\n")
+    (out / "ground_truth_body.yaml").write_text(motion.body.to_yaml_text())
     descriptions = {"body": out / "body.yaml", "start": out / "start.yaml"} if config.descriptions else {}
     if other is not None:
         (out / "second_person.csv").write_text("\n".join(other_lines) + "\n")
         descriptions["second person's truth"] = out / "second_person.csv"
     return {"bag": bag_path, "calibration": out / "calibration.yaml", **descriptions, "ground_truth": out / "ground_truth.csv",
+            "ground_truth_body": out / "ground_truth_body.yaml",
             **{f"overlay {name}": path for name, path in overlays.items()}}

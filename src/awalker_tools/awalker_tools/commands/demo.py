@@ -7,6 +7,8 @@ from pathlib import Path
 
 from awalker_tracker.errors import InputError
 
+from awalker_tools import TRACK_PARTICLES
+
 REPO_ROOT = Path(__file__).resolve().parents[4]
 
 
@@ -46,6 +48,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "output there), then `awalker eval` against its ground truth.")
     parser.add_argument("--bag", help="bag to track (default: the sample bag in bags/)")
     parser.add_argument("--out", default="demo_out", help="output directory (default demo_out)")
-    parser.add_argument("--particles", type=int, default=5000, help="number of particles (default 5000, as the paper)")
+    parser.add_argument("--particles", type=int, default=TRACK_PARTICLES,
+                        help=f"number of particles (default {TRACK_PARTICLES}, as awalker track)")
     parser.add_argument("--seed", type=int, default=0, help="random seed")
     parser.set_defaults(func=run)
