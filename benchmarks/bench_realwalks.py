@@ -92,6 +92,11 @@ def sequence(root: Path, walk: str, variant: str, cameras: int, size: tuple[int,
     return bag
 
 
+#: Marker groups whose mean offsets (along the way the person faces, to their left, up) are reported.
+OFFSET_GROUPS = {"pelvis": ("pelvis",), "thorax": ("thorax",), "hips": ("left_hip", "right_hip"),
+                 "knees": ("left_knee", "right_knee"), "ankles": ("left_ankle", "right_ankle")}
+
+
 def score(result: dict, variant: str, rate: float) -> dict:
     """The reported figures of one run."""
     from awalker_tools.synth import VARIANTS
@@ -109,6 +114,10 @@ def score(result: dict, variant: str, rate: float) -> dict:
                   "heel_strike_bias_s": gait.get("timing_bias_s_median"),
                   "step_length_error_m": gait.get("step_length_error_m_median"),
                   "speed_error_m_s": gait.get("speed_error_m_s")})
+    bias = result["bias"]        # constant offsets in the person's frame (evaluation.marker_bias)
+    entry["absolute_without_offsets_mm"] = round(bias["absolute_median_without_offsets_mm"], 1)
+    entry["offsets_mm"] = {group: {axis: round(float(np.mean([bias["per_marker_mm"][m][axis] for m in markers])), 1)
+                                   for axis in ("along", "left", "up")} for group, markers in OFFSET_GROUPS.items()}
     turn = VARIANTS[variant][1]
     if turn is not None:
         after = int(round((turn[1] + turn[2] + 1.0) * rate))       # frames after the person appears
@@ -203,6 +212,8 @@ def main(argv: list[str] | None = None) -> int:
                                               fit_body=True if images and args.fit_body else None))
                 evaluate_run(run_dir)
             result = json.loads((run_dir / "eval.json").read_text())
+            if "bias" not in result:        # scored before eval reported the offsets
+                result = evaluate_run(run_dir)
             entry = score(result, variant, args.rate)
             if args.hands_off:
                 entry.update(hands_off_figures(args.out / "runs", run_dir, f"{walk}_{variant}_{setting}", seed, args.rate))
@@ -215,6 +226,10 @@ def main(argv: list[str] | None = None) -> int:
         if "heading_1s_after_turn_deg" in tracked[0]:
             values = [r["heading_1s_after_turn_deg"] for r in tracked]
             summary["heading_1s_after_turn_deg"] = {"median": float(np.median(values)), "worst": float(np.max(values))}
+        summary["absolute_without_offsets_mm"] = {"median": float(np.median([r["absolute_without_offsets_mm"] for r in tracked])),
+                                                  "worst": float(np.max([r["absolute_without_offsets_mm"] for r in tracked]))}
+        summary["offsets_mm_median"] = {group: {axis: float(np.median([r["offsets_mm"][group][axis] for r in tracked]))
+                                                for axis in ("along", "left", "up")} for group in OFFSET_GROUPS}
         summary["runs_ended_on_person"] = f"{sum(r['ended_on_person'] for r in tracked)}/{len(tracked)}"
         summary["reacquisitions"] = [r["recovery"].get("reacquisitions", 0) for r in tracked]
         summary["swap_fraction_median"] = float(np.median([r["swap_fraction"] for r in tracked]))
@@ -237,6 +252,7 @@ def main(argv: list[str] | None = None) -> int:
         log(f"[{k + 1}/{len(jobs)}] {name}: absolute {summary['absolute_median_mm']['median']:.0f} "
             f"(worst {summary['absolute_median_mm']['worst']:.0f}), relative "
             f"{summary['relative_median_mm']['median']:.0f} (worst {summary['relative_median_mm']['worst']:.0f}) mm"
+            + f", without constant offsets {summary['absolute_without_offsets_mm']['median']:.0f}"
             + (f", heading 1 s after the turn {summary['heading_1s_after_turn_deg']['median']:.0f} deg"
                if "heading_1s_after_turn_deg" in summary else "")
             + f", on the person at the end {summary['runs_ended_on_person']}"
@@ -247,8 +263,24 @@ def main(argv: list[str] | None = None) -> int:
             + (f", dead reckoning {summary['dead_reckoning_absolute_median_mm']:.0f} mm (median of seeds)"
                if "dead_reckoning_absolute_median_mm" in summary else "")
             + f" ({time.monotonic() - started:.0f} s)")
+    report["overall"] = overall(report["summary"])
     print(json.dumps(report, indent=1))
     return 0
+
+
+def overall(summaries: dict[str, dict]) -> dict:
+    """Per setting (the last part of a sequence's name): the median of the walk medians, absolute and without
+    the constant offsets, and the median over walks of each marker group's median offset (mm)."""
+    by_setting: dict[str, list[dict]] = {}
+    for name, summary in summaries.items():
+        by_setting.setdefault(name.rsplit(" ", 1)[-1], []).append(summary)
+    return {setting: {
+        "walks": len(items),
+        "absolute_median_mm": float(np.median([s["absolute_median_mm"]["median"] for s in items])),
+        "absolute_without_offsets_mm": float(np.median([s["absolute_without_offsets_mm"]["median"] for s in items])),
+        "offsets_mm": {group: {axis: float(np.median([s["offsets_mm_median"][group][axis] for s in items]))
+                               for axis in ("along", "left", "up")} for group in OFFSET_GROUPS}}
+        for setting, items in by_setting.items()}
 
 
 if __name__ == "__main__":

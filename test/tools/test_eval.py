@@ -252,3 +252,34 @@ def test_gait_is_compared_over_the_frames_the_estimate_covers():
     shift = gait.WALKER_STRIKE_DELAY * 0.5
     assert result["timing_error_s_median"] == pytest.approx(shift, abs=1e-9)
     assert result["timing_bias_s_median"] == pytest.approx(-shift, abs=1e-9)      # reported early
+
+
+def turned(track: PoseTrack, angle: float) -> PoseTrack:
+    """The whole track turned by ``angle`` (rad) about the vertical through the origin."""
+    c, s = np.cos(angle), np.sin(angle)
+    markers = track.markers.copy()
+    markers[..., :2] = track.markers[..., :2] @ np.array([[c, s], [-s, c]])
+    return PoseTrack(track.frames, track.stamps_ns, track.marker_names, markers)
+
+
+def test_marker_bias_in_the_persons_frame_and_the_error_without_it():
+    truth = walking_truth()
+    # upper body 30 mm high and 20 mm behind the person (who walks and faces +x)
+    est = shifted(truth, ["pelvis", "thorax", "left_hip", "right_hip"], np.array([-0.020, 0.0, 0.030]))
+    bias = evaluation.marker_bias(est, truth)
+    assert bias["per_marker_mm"]["pelvis"] == {"along": -20.0, "left": 0.0, "up": 30.0}
+    assert bias["per_marker_mm"]["left_knee"] == {"along": 0.0, "left": 0.0, "up": 0.0}
+    assert bias["absolute_median_without_offsets_mm"] == pytest.approx(0.0, abs=1e-9)
+    # the same walk turned to face +y: an offset towards -x is now to the person's left
+    truth_y = turned(truth, np.pi / 2)
+    assert np.allclose(evaluation.facing(truth_y, np.arange(FRAMES)), np.pi / 2)
+    est_y = shifted(truth_y, ["left_ankle"], np.array([-0.040, 0.0, 0.0]))
+    assert evaluation.marker_bias(est_y, truth_y)["per_marker_mm"]["left_ankle"] == {"along": 0.0, "left": 40.0, "up": 0.0}
+    # an error that changes sign from frame to frame has no offset: nothing to take out
+    markers = truth.markers.copy()
+    markers[:, NAMES.index("right_knee"), 2] += np.where(np.arange(FRAMES) % 2 == 0, 0.016, -0.016)
+    wobble = PoseTrack(truth.frames, truth.stamps_ns, NAMES, markers)
+    result = evaluation.evaluate(wobble, truth)
+    assert result["bias"]["per_marker_mm"]["right_knee"]["up"] == pytest.approx(0.0)
+    assert result["bias"]["absolute_median_without_offsets_mm"] == pytest.approx(result["absolute_mm"]["median"])
+    assert "mean offsets (mm, along/left/up): pelvis +0/+0/+0" in evaluation.format_table(result)

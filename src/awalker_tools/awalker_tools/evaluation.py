@@ -15,6 +15,8 @@ Metrics:
   consecutive frames; ground penetration (mm below z = 0) and float (mm of the lowest foot
   marker above the ground), computed for estimate and truth alike (the truth's values show
   the marker offset of the body model);
+- constant offsets (``marker_bias``): each marker's mean error along the way the person faces, to their
+  left and up, and the absolute error without them;
 - walk quality (``walk_quality``): facing-direction error, left/right leg swaps, frames fallen or
   off the person, and the state at the last frame (did the track end on the person, upright?).
 """
@@ -177,6 +179,28 @@ def marker_errors(estimate: PoseTrack, truth: PoseTrack,
             "per_marker_mm": dict(zip(markers, per_marker.tolist()))}
 
 
+def marker_bias(estimate: PoseTrack, truth: PoseTrack, markers: Sequence[str] = EVAL_MARKERS) -> dict[str, object]:
+    """Where the error is a constant offset: per marker the mean error (mm) in the person's frame, ``along``
+    the way the truth faces (``facing``), to its ``left`` and ``up``, and the absolute error (median over
+    frames, mm, as ``marker_errors``) with each marker's mean offset taken out in that frame at every frame.
+    The difference between that and the absolute error is what the constant offsets (a body riding high, a
+    pelvis lagging behind) cost; the rest varies from frame to frame."""
+    est_rows, true_rows = align_tracks(estimate, truth)
+    error = _select(estimate, markers, est_rows, "estimate") - _select(truth, markers, true_rows, "ground truth")
+    heading = facing(truth, true_rows)
+    forward = np.stack([np.cos(heading), np.sin(heading)], axis=1)                # (F, 2)
+    left = np.stack([-forward[:, 1], forward[:, 0]], axis=1)
+    # (F, M, 3): along, left, up
+    local = np.stack([np.einsum("fmk,fk->fm", error[..., :2], forward),
+                      np.einsum("fmk,fk->fm", error[..., :2], left), error[..., 2]], axis=2)
+    bias = np.nanmean(local, axis=0)                                               # (M, 3)
+    rest = local - bias[None]
+    without = 1000.0 * np.median(np.nanmean(np.linalg.norm(rest, axis=2), axis=1))
+    return {"per_marker_mm": {name: {"along": round(1000.0 * float(b[0]), 1), "left": round(1000.0 * float(b[1]), 1),
+                                     "up": round(1000.0 * float(b[2]), 1)} for name, b in zip(markers, bias)},
+            "absolute_median_without_offsets_mm": float(without)}
+
+
 def statistics(values: np.ndarray) -> dict[str, float]:
     """Median, mean and standard deviation over frames."""
     values = np.asarray(values, float)
@@ -267,6 +291,7 @@ def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarra
         "absolute_mm": statistics(errors["absolute_mm"]),
         "relative_mm": statistics(errors["relative_mm"]),
         "per_marker_absolute_mm": errors["per_marker_mm"],
+        "bias": marker_bias(estimate, truth),
         "estimate_feet": foot_plausibility(estimate, stance_left=stance_left, replaced=replaced),
         "truth_feet": foot_plausibility(truth),
         "walk": walk_quality(estimate, truth),
@@ -439,6 +464,14 @@ def format_table(result: dict[str, object], label: str = "") -> str:
         f"foot skate {feet['skate_mm']['mean']:.1f} mm mean ({feet['skate_mm']['max']:.1f} max), "
         f"penetration {feet['penetration_mm']['max']:.1f} mm max, float {feet['float_mm']['mean']:.1f} mm mean",
     ]
+    if "bias" in result:
+        bias = result["bias"]["per_marker_mm"]
+        pairs = (("pelvis", ("pelvis",)), ("thorax", ("thorax",)), ("hips", ("left_hip", "right_hip")),
+                 ("knees", ("left_knee", "right_knee")), ("ankles", ("left_ankle", "right_ankle")))
+        parts = [f"{label} {'/'.join(format(np.mean([bias[n][axis] for n in names]), '+.0f') for axis in ('along', 'left', 'up'))}"
+                 for label, names in pairs if all(n in bias for n in names)]
+        lines.append(f"mean offsets (mm, along/left/up): {', '.join(parts)}; absolute median without them "
+                     f"{result['bias']['absolute_median_without_offsets_mm']:.1f} mm")
     if "walk" in result:
         walk, frames = result["walk"], a["frames"]
         end = walk["end"]
