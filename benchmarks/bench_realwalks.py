@@ -58,6 +58,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 MOCAP_DIR = REPO_ROOT / "test" / "data" / "mocap"
 sys.path.insert(0, str(REPO_ROOT / "benchmarks"))
 
+from awalker_tools.evaluation import OFFSET_AXES, OFFSET_GROUPS, group_offsets  # noqa: E402
 from awalker_tools.person_render import CARRIED  # noqa: E402
 from bench_accuracy import evaluate_run  # noqa: E402  (one `awalker eval` wrapper for both benchmarks)
 
@@ -92,11 +93,6 @@ def sequence(root: Path, walk: str, variant: str, cameras: int, size: tuple[int,
     return bag
 
 
-#: Marker groups whose mean offsets (along the way the person faces, to their left, up) are reported.
-OFFSET_GROUPS = {"pelvis": ("pelvis",), "thorax": ("thorax",), "hips": ("left_hip", "right_hip"),
-                 "knees": ("left_knee", "right_knee"), "ankles": ("left_ankle", "right_ankle")}
-
-
 def score(result: dict, variant: str, rate: float) -> dict:
     """The reported figures of one run."""
     from awalker_tools.synth import VARIANTS
@@ -116,8 +112,8 @@ def score(result: dict, variant: str, rate: float) -> dict:
                   "speed_error_m_s": gait.get("speed_error_m_s")})
     bias = result["bias"]        # constant offsets in the person's frame (evaluation.marker_bias)
     entry["absolute_without_offsets_mm"] = round(bias["absolute_median_without_offsets_mm"], 1)
-    entry["offsets_mm"] = {group: {axis: round(float(np.mean([bias["per_marker_mm"][m][axis] for m in markers])), 1)
-                                   for axis in ("along", "left", "up")} for group, markers in OFFSET_GROUPS.items()}
+    entry["offsets_mm"] = {group: {axis: round(v, 1) for axis, v in offset.items()}
+                           for group, offset in group_offsets(bias).items()}
     turn = VARIANTS[variant][1]
     if turn is not None:
         after = int(round((turn[1] + turn[2] + 1.0) * rate))       # frames after the person appears
@@ -229,7 +225,7 @@ def main(argv: list[str] | None = None) -> int:
         summary["absolute_without_offsets_mm"] = {"median": float(np.median([r["absolute_without_offsets_mm"] for r in tracked])),
                                                   "worst": float(np.max([r["absolute_without_offsets_mm"] for r in tracked]))}
         summary["offsets_mm_median"] = {group: {axis: float(np.median([r["offsets_mm"][group][axis] for r in tracked]))
-                                                for axis in ("along", "left", "up")} for group in OFFSET_GROUPS}
+                                                for axis in OFFSET_AXES} for group in OFFSET_GROUPS}
         summary["runs_ended_on_person"] = f"{sum(r['ended_on_person'] for r in tracked)}/{len(tracked)}"
         summary["reacquisitions"] = [r["recovery"].get("reacquisitions", 0) for r in tracked]
         summary["swap_fraction_median"] = float(np.median([r["swap_fraction"] for r in tracked]))
@@ -279,7 +275,7 @@ def overall(summaries: dict[str, dict]) -> dict:
         "absolute_median_mm": float(np.median([s["absolute_median_mm"]["median"] for s in items])),
         "absolute_without_offsets_mm": float(np.median([s["absolute_without_offsets_mm"]["median"] for s in items])),
         "offsets_mm": {group: {axis: float(np.median([s["offsets_mm_median"][group][axis] for s in items]))
-                               for axis in ("along", "left", "up")} for group in OFFSET_GROUPS}}
+                               for axis in OFFSET_AXES} for group in OFFSET_GROUPS}}
         for setting, items in by_setting.items()}
 
 

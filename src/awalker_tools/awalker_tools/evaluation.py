@@ -179,6 +179,19 @@ def marker_errors(estimate: PoseTrack, truth: PoseTrack,
             "per_marker_mm": dict(zip(markers, per_marker.tolist()))}
 
 
+#: The marker groups whose constant offsets are reported together (``group_offsets``), and the offsets' axes.
+OFFSET_GROUPS = {"pelvis": ("pelvis",), "thorax": ("thorax",), "hips": ("left_hip", "right_hip"),
+                 "knees": ("left_knee", "right_knee"), "ankles": ("left_ankle", "right_ankle")}
+OFFSET_AXES = ("along", "left", "up")
+
+
+def group_offsets(bias: dict[str, object]) -> dict[str, dict[str, float]]:
+    """Per ``OFFSET_GROUPS`` group present in a ``marker_bias`` result: its markers' mean offset (mm) per axis."""
+    per_marker = bias["per_marker_mm"]
+    return {group: {axis: float(np.mean([per_marker[m][axis] for m in markers])) for axis in OFFSET_AXES}
+            for group, markers in OFFSET_GROUPS.items() if all(m in per_marker for m in markers)}
+
+
 def marker_bias(estimate: PoseTrack, truth: PoseTrack, markers: Sequence[str] = EVAL_MARKERS) -> dict[str, object]:
     """Where the error is a constant offset: per marker the mean error (mm) in the person's frame, ``along``
     the way the truth faces (``facing``), to its ``left`` and ``up``, and the absolute error (median over
@@ -196,8 +209,8 @@ def marker_bias(estimate: PoseTrack, truth: PoseTrack, markers: Sequence[str] = 
     bias = np.nanmean(local, axis=0)                                               # (M, 3)
     rest = local - bias[None]
     without = 1000.0 * np.median(np.nanmean(np.linalg.norm(rest, axis=2), axis=1))
-    return {"per_marker_mm": {name: {"along": round(1000.0 * float(b[0]), 1), "left": round(1000.0 * float(b[1]), 1),
-                                     "up": round(1000.0 * float(b[2]), 1)} for name, b in zip(markers, bias)},
+    return {"per_marker_mm": {name: {axis: round(1000.0 * float(v), 1) for axis, v in zip(OFFSET_AXES, b)}
+                              for name, b in zip(markers, bias)},
             "absolute_median_without_offsets_mm": float(without)}
 
 
@@ -465,11 +478,8 @@ def format_table(result: dict[str, object], label: str = "") -> str:
         f"penetration {feet['penetration_mm']['max']:.1f} mm max, float {feet['float_mm']['mean']:.1f} mm mean",
     ]
     if "bias" in result:
-        bias = result["bias"]["per_marker_mm"]
-        pairs = (("pelvis", ("pelvis",)), ("thorax", ("thorax",)), ("hips", ("left_hip", "right_hip")),
-                 ("knees", ("left_knee", "right_knee")), ("ankles", ("left_ankle", "right_ankle")))
-        parts = [f"{label} {'/'.join(format(np.mean([bias[n][axis] for n in names]), '+.0f') for axis in ('along', 'left', 'up'))}"
-                 for label, names in pairs if all(n in bias for n in names)]
+        parts = [f"{group} {'/'.join(format(offset[axis], '+.0f') for axis in OFFSET_AXES)}"
+                 for group, offset in group_offsets(result["bias"]).items()]
         lines.append(f"mean offsets (mm, along/left/up): {', '.join(parts)}; absolute median without them "
                      f"{result['bias']['absolute_median_without_offsets_mm']:.1f} mm")
     if "walk" in result:
