@@ -132,3 +132,37 @@ def test_tracker_node_checks_leg_scale_spread(ros_context):
         assert node.leg_scale_spread == 0.04
     finally:
         node.destroy_node()
+
+
+@pytest.mark.parametrize("fitted_frame", [1, 3])
+def test_a_start_without_stance_leg_takes_the_fitted_one_at_its_frame(ros_context, tracker_files, fitted_frame):
+    """``fitted_start``: a start naming no stance leg takes the fitted start's leg when both start at the same
+    frame (and writes it to start_output); fitted at another frame, its leg is not used (both sampled)."""
+    from dataclasses import replace
+
+    from rclpy.parameter import Parameter
+
+    from awalker_tracker.inference.tracker import StartDescription
+    from awalker_tracker.model.walker import RIGHT
+    from awalker_tracker.nodes.tracker import TrackerNode
+
+    given = StartDescription(1, (0.0, 0.0), 0.0, 1.3, 0.7, None)
+    (tracker_files / "start.yaml").write_text(given.to_yaml_text())
+    (tracker_files / "fitted.yaml").write_text(replace(given, frame=fitted_frame, stance_leg=RIGHT).to_yaml_text())
+    node = TrackerNode(context=ros_context, parameter_overrides=[
+        Parameter("cameras", value=["cam0", "cam1"]),
+        Parameter("calibration", value=str(tracker_files / "calibration.yaml")),
+        Parameter("start_description", value=str(tracker_files / "start.yaml")),
+        Parameter("fitted_start", value=str(tracker_files / "fitted.yaml")),
+        Parameter("start_output", value=str(tracker_files / "used.yaml")),
+        Parameter("body_description", value=str(tracker_files / "body.yaml")),
+        Parameter("num_particles", value=50), Parameter("frame_rate", value=30.0)])
+    try:
+        assert node._make_tracker()
+        used = node.tracker.model.start.stance_leg
+    finally:
+        node.destroy_node()
+    if fitted_frame == given.frame:
+        assert used == RIGHT and StartDescription.from_yaml(tracker_files / "used.yaml").stance_leg == RIGHT
+    else:
+        assert used is None and not (tracker_files / "used.yaml").exists()

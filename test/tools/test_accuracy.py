@@ -303,7 +303,11 @@ def test_automatic_start_without_empty_frames(tmp_path):
     found = yaml.safe_load((out / "start.yaml").read_text())["start"]
     # measured (synthesis seed 1, tracker seed 0): background from frames 0-19, walk found at frame 34, the
     # track started at frame 26
-    assert found["frame"] <= 20 + 30 and found["stance_leg"] == "unknown"
+    assert found["frame"] <= 20 + 30
+    # the start named no stance leg: the first pass weighed both, and the run stood on the one it chose
+    assert found["stance_leg"] == run["body_fit"]["stance_leg"] and "fitted to the first pass's images" in \
+        run["start_source"]
+    assert yaml.safe_load((out / "first_pass" / "start.yaml").read_text())["start"]["stance_leg"] == "unknown"
     truth = evaluation.read_poses_csv(seq / "ground_truth.csv")
     row = int(np.flatnonzero(truth.frames == found["frame"])[0])
     pelvis = truth.markers[row, truth.marker_names.index("pelvis"), :2]

@@ -419,3 +419,41 @@ def test_start_and_body_files_act_like_the_bag_topics(synth_bag: Path, tmp_path:
                                            "foreground_labels": "start pose"}
     poses = {k: evaluation.read_poses_csv(tmp_path / k / "poses.csv") for k in runs}
     assert np.array_equal(poses["topics"].markers, poses["files"].markers)
+
+
+def test_a_start_without_stance_leg_has_it_fitted_in_a_first_pass(synth_bag: Path, tmp_path: Path):
+    """A start description with `stance_leg: unknown` and a body given: a first pass, the two legs weighed by
+    the evidence (the body kept as given), and the run again with the leg chosen; the gait still says that one
+    camera's sides are not known. (Which leg the evidence picks is tested in test_bodyfit: six 160x120
+    frames weigh the legs within a nat or two.)"""
+    from dataclasses import replace
+
+    from awalker_tracker.inference.gait import SIDES_NOTE
+    from awalker_tracker.inference.tracker import StartDescription
+    from awalker_tracker.model.walker import LEG_NAMES
+
+    named = StartDescription.from_yaml(synth_bag.parent / "start.yaml")
+    unknown = tmp_path / "start_unknown.yaml"
+    unknown.write_text(replace(named, stance_leg=None).to_yaml_text())
+    out = tmp_path / "run"
+    assert main(["track", str(synth_bag), "--out", str(out), "--particles", "100", "--no-overlay",
+                 "--start", str(unknown)]) == 0
+    run = yaml.safe_load((out / "run.yaml").read_text())
+    fit = run["body_fit"]
+    assert fit["leg_factor"] == 1.0 and "log_evidence" not in fit            # the body as given: no leg fit
+    assert run["body_source"] == "/awalker/body_description"                  # the bag's, not first_pass/
+    fitted = StartDescription.from_yaml(out / "first_pass" / "start_fitted.yaml")
+    assert fitted == replace(named, stance_leg=fitted.stance_leg) and fit["start_written"].endswith("start_fitted.yaml")
+    assert fitted.stance_leg is not None and fit["stance_leg"] == LEG_NAMES[fitted.stance_leg]
+    evidence = fit["stance_log_evidence"]
+    assert set(evidence) == {"left", "right"} and evidence[fit["stance_leg"]] == max(evidence.values())
+    # the run took it: its start.yaml names the leg, run.yaml says where it came from
+    assert StartDescription.from_yaml(out / "start.yaml").stance_leg == fitted.stance_leg
+    assert "fitted to the first pass's images" in run["start_source"]
+    assert json.loads((out / "gait.json").read_text())["sides_note"] == SIDES_NOTE
+    # --no-fit-body: one pass, both legs sampled
+    plain = tmp_path / "plain"
+    assert main(["track", str(synth_bag), "--out", str(plain), "--particles", "100", "--no-overlay",
+                 "--start", str(unknown), "--no-fit-body"]) == 0
+    assert not (plain / "first_pass").exists() and "body_fit" not in yaml.safe_load((plain / "run.yaml").read_text())
+    assert StartDescription.from_yaml(plain / "start.yaml").stance_leg is None

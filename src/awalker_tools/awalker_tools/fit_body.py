@@ -1,15 +1,19 @@
-"""Fit the leg length of a tracking run's body to its images (issue 12 §3; `awalker fitbody DIR`, and
-`awalker track`'s second pass).
+"""Fit the leg length of a tracking run's body, and the stance leg its start left open, to its images
+(issue 12 §1, §3; `awalker fitbody DIR`, and `awalker track`'s second pass).
 
 Reads the output directory of a tracking run (the image features it recorded in result.bag, its
 calibration.yaml, start.yaml, body.yaml and run.yaml), runs the filter once per candidate leg length
 over the first frames from the start (``inference.bodyfit``) and writes DIR/body_fitted.yaml, to track
-again with ``awalker track BAG --body DIR/body_fitted.yaml``.
+again with ``awalker track BAG --body DIR/body_fitted.yaml``. When the start names no stance leg (found
+automatically, or ``stance_leg: unknown``), it then weighs the two legs with the fitted body the same way
+and writes DIR/start_fitted.yaml, the start with the leg chosen (``awalker track`` hands it to its second
+pass's tracker: ``TrackOptions.fitted_start``).
 """
 from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +21,7 @@ import numpy as np
 from awalker_tracker.errors import InputError, parse_yaml
 
 FITTED_FILE = "body_fitted.yaml"
+FITTED_START_FILE = "start_fitted.yaml"
 # Candidate leg scales by where the run's body came from (run.yaml body_source): a body given (a tape
 # measure: the real-walks benchmark's legs 6 % long) or one scaled to the seen height (legs 6-9 % short).
 GIVEN_BODY_FACTORS = (0.91, 0.94, 0.97, 1.0, 1.03)
@@ -67,16 +72,18 @@ def _yaml_file(path: Path) -> dict:
 
 def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **settings: int) -> dict:
     """Fit the leg length of the tracking run in ``run_dir`` (module docstring), write
-    ``run_dir/body_fitted.yaml`` and return a summary (factor, leg lengths, evidence, the file written).
-    ``leg_factors``: the candidates; None: by the body's source (``GIVEN_BODY_FACTORS`` or
-    ``HEIGHT_SCALED_FACTORS``). ``settings``: the other ``BodyFitConfig`` fields (frames, particles,
-    seed). Progress goes to stderr."""
+    ``run_dir/body_fitted.yaml`` and return a summary (factor, leg lengths, evidence, the file written; with
+    the stance leg fitted, the leg, each leg's evidence and ``start_written``). ``leg_factors``: the
+    candidates; None: by the body's source (``GIVEN_BODY_FACTORS`` or ``HEIGHT_SCALED_FACTORS``); ``(1.0,)``:
+    the body as it is (only the stance leg is weighed). ``settings``: the other ``BodyFitConfig`` fields
+    (frames, particles, seed, stance_repeats). Progress goes to stderr."""
     from awalker_tracker.inference.autostart import AUTO_SPREAD
-    from awalker_tracker.inference.bodyfit import BodyFitConfig, fit_leg_length
+    from awalker_tracker.inference.bodyfit import BodyFitConfig, fit_leg_length, fit_stance_leg, legs_scaled
     from awalker_tracker.inference.recovery import RecoveryConfig
     from awalker_tracker.inference.smc import SMCConfig
     from awalker_tracker.inference.tracker import ImageObservation, StartDescription, TrackerConfig, image_likelihood
     from awalker_tracker.model.body import BodyDescription
+    from awalker_tracker.model.walker import LEG_NAMES
     from awalker_tracker.vision.camera import load_calibration
     from awalker_tracker.vision.likelihood import LikelihoodConfig
 
@@ -111,14 +118,33 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
         recovery=RecoveryConfig(reseed_fallen=recovery, reacquire=recovery, hold_still=recovery))
     likelihood = LikelihoodConfig(head_top_weight=1.0)
     observations = [ImageObservation(features=f) for f in features[first:]]
-    print(f"awalker fitbody: {len(fit_config.leg_factors)} leg lengths x {min(fit_config.frames, len(observations))} "
-          f"frames from frame {first}, {fit_config.particles} particles each", file=sys.stderr)
-    fit = fit_leg_length(body, start, lambda b: image_likelihood(b, cameras, likelihood), observations, config,
-                         fit_config, cameras=cameras, progress=lambda m: print(f"  {m}", file=sys.stderr))
+    frames = min(fit_config.frames, len(observations))
+    likelihood_for = lambda b: image_likelihood(b, cameras, likelihood)   # noqa: E731
+    report = lambda m: print(f"  {m}", file=sys.stderr)                   # noqa: E731
+    if tuple(fit_config.leg_factors) == (1.0,):
+        summary = {"leg_factor": 1.0, "leg_length_m": round(body.leg_length, 4)}
+        fitted_body = body
+    else:
+        print(f"awalker fitbody: {len(fit_config.leg_factors)} leg lengths x {frames} frames from frame {first}, "
+              f"{fit_config.particles} particles each", file=sys.stderr)
+        fit = fit_leg_length(body, start, likelihood_for, observations, config, fit_config, cameras=cameras,
+                             progress=report)
+        fitted_body = legs_scaled(body, fit.factor)
+        summary = {"leg_factor": fit.factor, "leg_length_m": round(fitted_body.leg_length, 4),
+                   "log_evidence": {f"{k:.2f}": round(v, 2) for k, v in fit.log_evidence.items()}}
     out = run_dir / FITTED_FILE
-    out.write_text(fit.body.to_yaml_text())
-    return {"leg_factor": fit.factor, "leg_length_m": round(fit.body.leg_length, 4),
-            "given_leg_length_m": round(body.leg_length, 4), "frames": fit.frames,
-            "log_evidence": {f"{k:.2f}": round(v, 2) for k, v in fit.log_evidence.items()},
-            "written": str(out)}
+    out.write_text(fitted_body.to_yaml_text())
+    summary.update({"given_leg_length_m": round(body.leg_length, 4), "frames": frames, "written": str(out)})
+    if start.stance_leg is None:
+        print(f"awalker fitbody: the start names no stance leg; both legs x {frames} frames from frame {first}, "
+              f"{fit_config.stance_repeats} filters of {fit_config.particles} particles each", file=sys.stderr)
+        stance = fit_stance_leg(fitted_body, start, likelihood_for, observations, config, fit_config,
+                                cameras=cameras, progress=report)
+        fitted_start = replace(start, stance_leg=stance.leg)
+        start_out = run_dir / FITTED_START_FILE
+        start_out.write_text(fitted_start.to_yaml_text())
+        summary.update({"stance_leg": LEG_NAMES[stance.leg],
+                        "stance_log_evidence": {LEG_NAMES[k]: round(v, 2) for k, v in stance.log_evidence.items()},
+                        "start_written": str(start_out)})
+    return summary
 

@@ -17,6 +17,9 @@ With no body description (the tracker scales one to the person's height seen in 
 ``TrackOptions.fit_body``, it tracks twice: a first pass into ``first_pass/``, the leg length fitted to
 the image features that pass recorded (``awalker_tools.fit_body``, issue 12 §3), and the run again
 with the fitted body, whose outputs are the ones above (run.yaml's ``body_fit`` says what the fit chose).
+A start that names no stance leg (found automatically, or ``stance_leg: unknown``) also takes the first
+pass, and its leg is weighed there (``inference.bodyfit.fit_stance_leg``) and handed to the second pass's
+tracker (``TrackOptions.fitted_start``); the body, when given, is kept as it is.
 The first pass stops once it has filtered the frames the fit uses (``BodyFitConfig.frames`` from the
 start), with few particles (``FIRST_PASS_PARTICLES``: its own track is not used), so a long bag is tracked
 about once, not twice.
@@ -38,6 +41,7 @@ import yaml
 from awalker_tracker.errors import InputError
 from awalker_tracker.inference.tracker import StartDescription
 from awalker_tracker.model.body import BodyDescription
+from awalker_tracker.model.walker import LEG_NAMES
 
 from awalker_tools import TRACK_PARTICLES, evaluation
 
@@ -112,6 +116,9 @@ class TrackOptions:
     # two passes, the second with the leg length fitted to the first one's images (module docstring);
     # None: when no body description is found, so that the body would only be scaled to the seen height
     fit_body: bool | None = None
+    # a start fitted to these images (`awalker fitbody`'s start_fitted.yaml): a start that names no stance leg
+    # takes its leg (the tracker node's fitted_start); set by run_tracking for its second pass
+    fitted_start: Path | None = None
     storage: str = "mcap"
     quiet: bool = False
     # False: the pipeline's DDS participants see nothing outside this process (another publisher of
@@ -238,30 +245,36 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     bag, out = Path(options.bag), Path(options.out)
     if not bag.exists():
         raise InputError(f"{bag}: no such bag (expected a rosbag2 directory, .mcap or .db3)")
-    fit = options.fit_body
-    if fit is None:
+    fit_legs, fit_stance = bool(options.fit_body), False
+    if options.fit_body is not False:
         with SequenceReader(bag) as reader:
             try:
-                fit = resolve_descriptions(bag, reader, options.start, options.body, options.auto_start)[2] is None
+                start, _, body, _ = resolve_descriptions(bag, reader, options.start, options.body, options.auto_start)
             except InputError:
-                fit = False          # the run itself reports what is missing
-    if not fit:
+                return _track_once(options)          # which reports what is missing
+        fit_legs = fit_legs or body is None
+        fit_stance = start is None or start.stance_leg is None
+    if not (fit_legs or fit_stance):
         return _track_once(options)
     _new_result_bag(out)         # before the first pass, not after it
     started = time.monotonic()
     first_dir = out / FIRST_PASS_DIR
     fit_frames = FIT_FRAMES or BodyFitConfig().frames
+    fitting = " and ".join((["the body's leg length"] if fit_legs else []) + (["the stance leg"] if fit_stance else []))
     _progress(options, f"awalker track: first pass into {first_dir} (its first {fit_frames} tracked frames), to fit "
-                       "the body's leg length")
+                       f"{fitting}")
     _track_once(replace(options, out=first_dir, overlays=False, stop_after_frames=fit_frames,
                         particles=FIRST_PASS_PARTICLES))
-    _progress(options, f"awalker track: fitting the leg length to the images of {first_dir}")
+    _progress(options, f"awalker track: fitting {fitting} to the images of {first_dir}")
     # the fit's own particle count (BodyFitConfig: 5000; fewer pick less reliably), whatever the run's
-    fitted = fit_run_dir(first_dir, seed=options.seed, frames=fit_frames)
-    _progress(options, f"awalker track: legs x {fitted['leg_factor']:.2f} (leg length {fitted['leg_length_m']} m); "
-                       "tracking again with them")
+    fitted = fit_run_dir(first_dir, None if fit_legs else (1.0,), seed=options.seed, frames=fit_frames)
+    chosen = ([f"legs x {fitted['leg_factor']:.2f} (leg length {fitted['leg_length_m']} m)"] if fit_legs else []) + (
+        [f"stance leg {fitted['stance_leg']} at the start"] if "stance_leg" in fitted else [])
+    _progress(options, f"awalker track: {', '.join(chosen)}; tracking again")
     fitted["seconds_first_pass_and_fit"] = round(time.monotonic() - started, 3)
-    return _track_once(replace(options, body=Path(fitted["written"])), body_fit=fitted)
+    second = replace(options, body=Path(fitted["written"]) if fit_legs else options.body,
+                     fitted_start=Path(fitted["start_written"]) if "start_written" in fitted else None)
+    return _track_once(second, body_fit=fitted)
 
 
 def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackResult:
@@ -333,6 +346,7 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
             Parameter("cameras", value=names), Parameter("calibration", value=str(out / CALIBRATION_FILE)),
             Parameter("start_description", value=str(out / START_FILE) if start is not None else ""),
             Parameter("auto_start", value=start is None), Parameter("start_output", value=str(out / START_FILE)),
+            Parameter("fitted_start", value=str(options.fitted_start or "")),
             *([Parameter("follow_near", value=[float(v) for v in options.follow_near])] if options.follow_near else []),
             Parameter("body_description", value=str(out / BODY_FILE) if body is not None else ""),
             Parameter("estimate_body", value=body is None), Parameter("body_output", value=str(out / BODY_FILE)),
@@ -433,6 +447,10 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
             body_src = f"scaled to the person's height seen in the images (written to {out / BODY_FILE})"
         if tracker.start is not None and tracker.start_found_automatically:
             start_src = f"found automatically at frame {tracker.start.frame} (written to {out / START_FILE})"
+        if options.fitted_start is not None and tracker.start is not None and tracker.start.stance_leg is not None \
+                and (start is None or start.stance_leg is None):
+            start_src += (f"; stance leg {LEG_NAMES[tracker.start.stance_leg]} fitted to the first pass's images "
+                          f"({options.fitted_start})")
         if tracker.tracker is None or not tracker.summaries:
             if tracker.start is None:
                 raise InputError(f"{bag}: no walking person found in {result.frames} frames (automatic start: "
@@ -441,8 +459,8 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
             raise InputError(f"{bag}: no frame was tracked (frames received: {result.frames}; "
                              f"start frame {tracker.start.frame}); check that the bag has images for every camera")
         # one camera cannot tell the near leg from the far one: unless the start named the standing foot, say
-        # that left and right may be swapped
-        sides_known = len(cameras) > 1 or (tracker.start is not None and tracker.start.stance_leg is not None)
+        # that left and right may be swapped (a leg fitted to the images, fitted_start, is evidence, not knowledge)
+        sides_known = len(cameras) > 1 or (start is not None and start.stance_leg is not None)
         track, walk = write_outputs(out, tracker.tracker.map_trajectory(), tracker.summaries, sides_known)
     finally:
         if feature_thread is not None:

@@ -1,7 +1,9 @@
-"""`awalker fitbody DIR`: fit the leg length of a tracking run's body to its images (issue 12 §3).
+"""`awalker fitbody DIR`: fit the leg length of a tracking run's body to its images, and the stance leg its
+start left open (issue 12 §1, §3).
 
 Reads the output directory of `awalker track` and writes DIR/body_fitted.yaml (``awalker_tools.fit_body``),
-to track again with ``awalker track BAG --body DIR/body_fitted.yaml``.
+to track again with ``awalker track BAG --body DIR/body_fitted.yaml``, and, when the run's start named no
+stance leg, DIR/start_fitted.yaml.
 """
 from __future__ import annotations
 
@@ -25,7 +27,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Runs the filter on the image features a tracking run recorded, once per candidate leg "
                     "length (thigh and shank scaled), over the first frames from its start, and keeps the one "
                     "the images support best (the filter's evidence). Writes DIR/body_fitted.yaml; track again "
-                    "with --body DIR/body_fitted.yaml.")
+                    "with --body DIR/body_fitted.yaml. When the run's start named no stance leg (found "
+                    "automatically, or 'unknown'), it weighs the two legs the same way and writes "
+                    "DIR/start_fitted.yaml.")
     parser.add_argument("dir", help="output directory of `awalker track`")
     parser.add_argument("--factors", type=float, nargs="+",
                         help="candidate scales of thigh and shank (default 0.91 0.94 0.97 1.0 1.03 for a body "

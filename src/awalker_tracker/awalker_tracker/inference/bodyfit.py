@@ -1,4 +1,4 @@
-"""Leg length from the images: the filter's evidence over a few candidate leg lengths (issue 12 §3).
+"""Leg length and stance leg from the images: the filter's evidence over a few candidates (issue 12 §1, §3).
 
 A tape measure's leg length is easily a few per cent off, and a body scaled to the seen height takes
 its leg length from average proportions. The leg length sets how high the walker carries the pelvis
@@ -20,6 +20,15 @@ relative 51 against 56; one camera 130 against 118 (better on 6, worse on 5: dep
 53 against 58. Hands off (the body scaled to the seen height, candidates 0.97-1.12): one camera 147 against
 191 (relative 60 against 72), two cameras 84 against 84 (relative 53 against 60). Our own renders: the
 drawn length kept in 11 of 12 runs.
+
+``fit_stance_leg`` compares, the same way, the two stance legs a start that does not name one leaves open
+(the automatic start; a start description with ``stance_leg: unknown``): one filter per leg, each drawing
+its phase as a start naming that leg does, and keeps the leg with the higher evidence. One camera sees a
+walk from the side and, with both legs dressed alike, tells them apart only by small differences summed
+over many frames; a single filter over both legs settles on one in its first frames and keeps it. The evidence is a Monte Carlo estimate whose spread from seed to seed is
+of the size of the difference it weighs (one camera, 5000 particles, 60 frames: +-20 nats), so each leg's
+evidence is averaged over ``stance_repeats`` filters of their own seeds (log of the mean of exp).
+Measured on the real-walks benchmark (README "One camera's stance leg from the evidence").
 """
 from __future__ import annotations
 
@@ -28,11 +37,13 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.special import logsumexp
 
 from awalker_tracker.blocks import thread_count
 from awalker_tracker.inference.smc import ParticleFilter
 from awalker_tracker.inference.tracker import StartDescription, TrackerConfig, TrackerModel
 from awalker_tracker.model.body import BodyDescription
+from awalker_tracker.model.walker import LEFT, LEG_NAMES, RIGHT
 
 
 @dataclass(frozen=True)
@@ -43,12 +54,13 @@ class BodyFitConfig:
     frames: int = 60                 # frames of evidence from the start frame (2 s at 30 Hz)
     particles: int = 5000            # per candidate (2500 picked less reliably: README)
     seed: int = 0
+    stance_repeats: int = 2          # filters (seeds seed, seed + 1, ...) per stance leg (module docstring)
 
     def __post_init__(self) -> None:
         if not self.leg_factors or min(self.leg_factors) <= 0.5 or max(self.leg_factors) >= 1.5:
             raise ValueError(f"BodyFitConfig: leg factors must lie in (0.5, 1.5): {self.leg_factors}")
-        if self.frames < 2 or self.particles < 10:
-            raise ValueError(f"BodyFitConfig: frames >= 2 and particles >= 10 needed: {self}")
+        if self.frames < 2 or self.particles < 10 or self.stance_repeats < 1:
+            raise ValueError(f"BodyFitConfig: frames >= 2, particles >= 10 and stance_repeats >= 1 needed: {self}")
 
 
 @dataclass(frozen=True)
@@ -67,6 +79,54 @@ def legs_scaled(body: BodyDescription, factor: float) -> BodyDescription:
                    lower_leg_length=body.lower_leg_length * factor)
 
 
+@dataclass(frozen=True)
+class StanceFit:
+    """The stance leg kept (``leg``: LEFT or RIGHT at the start frame) and each leg's log evidence (nats)."""
+
+    leg: int
+    log_evidence: dict[int, float]
+    frames: int
+
+
+def _used_observations(observations: Sequence[object], config: BodyFitConfig) -> list[object]:
+    if not observations:
+        raise ValueError("body fit: no observations from the start frame on")
+    return list(observations[: config.frames])
+
+
+def _log_evidence(candidates: dict[object, tuple[BodyDescription, StartDescription, int]],
+                  likelihood_for: Callable[[BodyDescription], object], used: list[object],
+                  tracker_config: TrackerConfig, config: BodyFitConfig, cameras: Sequence[object] | None,
+                  progress: Callable[[object, float, int], None] | None) -> dict[object, float]:
+    """log p(z_1:T) (nats) of each candidate (key -> its body, start and filter seed), in the candidates'
+    order. The candidates are independent filters with their own random streams: they run on as many threads
+    as there are cores (the kernels release the GIL; one candidate's numpy and Python overlap another's
+    kernels), each the same bit for bit as alone. Measured (2026-11-26, 6 candidates x 60 frames x 5000
+    particles, a real walk's first pass): two cameras 19.0 -> 13.6 s, one camera 14.7 -> 12.7 s."""
+
+    def evidence(key: object) -> tuple[float, int]:
+        body, start, seed = candidates[key]
+        smc = replace(tracker_config.smc, num_particles=config.particles, seed=seed)
+        run_config = replace(tracker_config, smc=smc)
+        model = TrackerModel(body, start, likelihood_for(body), run_config,
+                             cameras=list(cameras) if cameras is not None else None)
+        pf = ParticleFilter(model, smc)
+        log_evidence = [step.log_evidence for obs in used for step in pf.push(obs)]   # (the steps are not kept)
+        log_evidence += [step.log_evidence for step in pf.finish()]
+        return float(np.sum(log_evidence)), len(log_evidence)
+
+    result: dict[object, float] = {}
+    with ThreadPoolExecutor(max_workers=max(1, min(thread_count(), len(candidates))),
+                            thread_name_prefix="awalker-bodyfit") as pool:
+        futures = {pool.submit(evidence, key): key for key in candidates}
+        for future in as_completed(futures):
+            key = futures[future]
+            result[key], count = future.result()
+            if progress is not None:
+                progress(key, result[key], count)
+    return {key: result[key] for key in candidates}
+
+
 def fit_leg_length(body: BodyDescription, start: StartDescription, likelihood_for: Callable[[BodyDescription], object],
                    observations: Sequence[object], tracker_config: TrackerConfig,
                    config: BodyFitConfig = BodyFitConfig(), cameras: Sequence[object] | None = None,
@@ -74,39 +134,43 @@ def fit_leg_length(body: BodyDescription, start: StartDescription, likelihood_fo
     """Fit the leg length of ``body`` (module docstring). ``observations``: one per frame from the start
     frame on (the first ``config.frames`` are used); ``likelihood_for(body)``: the likelihood function for
     a candidate body; ``tracker_config``: the run's (its particle count and seed are replaced by the fit's)."""
-    if not observations:
-        raise ValueError("fit_leg_length: no observations from the start frame on")
-    used = list(observations[: config.frames])
-    smc = replace(tracker_config.smc, num_particles=config.particles, seed=config.seed)
-    run_config = replace(tracker_config, smc=smc)
+    used = _used_observations(observations, config)
 
-    def candidate_evidence(factor: float) -> tuple[float, int]:
-        """log p(z_1:T) (nats) and the frames it sums, for the legs x ``factor``."""
-        candidate = legs_scaled(body, factor)
-        model = TrackerModel(candidate, start, likelihood_for(candidate), run_config,
-                             cameras=list(cameras) if cameras is not None else None)
-        pf = ParticleFilter(model, smc)
-        log_evidence = [step.log_evidence for obs in used for step in pf.push(obs)]   # (the steps are not kept)
-        log_evidence += [step.log_evidence for step in pf.finish()]
-        return float(np.sum(log_evidence)), len(log_evidence)
+    def report(factor: object, evidence: float, count: int) -> None:
+        if progress is not None:
+            progress(f"legs x{factor:.2f} (leg length {legs_scaled(body, factor).leg_length:.3f} m): log "
+                     f"evidence {evidence:.1f} over {count} frames")
 
-    # The candidates are independent filters with their own random streams: run them on as many threads as
-    # there are cores (the kernels release the GIL; one candidate's numpy and Python overlap another's
-    # kernels), each the same bit for bit as alone. Measured (2026-11-26, 6 candidates x 60 frames x 5000
-    # particles, a real walk's first pass): two cameras 19.0 -> 13.6 s, one camera 14.7 -> 12.7 s.
-    evidence: dict[float, float] = {}
-    with ThreadPoolExecutor(max_workers=max(1, min(thread_count(), len(config.leg_factors))),
-                            thread_name_prefix="awalker-bodyfit") as pool:
-        futures = {pool.submit(candidate_evidence, factor): factor for factor in config.leg_factors}
-        for future in as_completed(futures):
-            factor = futures[future]
-            evidence[factor], count = future.result()
-            if progress is not None:
-                progress(f"legs x{factor:.2f} (leg length {legs_scaled(body, factor).leg_length:.3f} m): log "
-                         f"evidence {evidence[factor]:.1f} over {count} frames")
-    evidence = {factor: evidence[factor] for factor in config.leg_factors}
+    evidence = _log_evidence({factor: (legs_scaled(body, factor), start, config.seed) for factor in config.leg_factors},
+                             likelihood_for, used, tracker_config, config, cameras, report)
     finite = {f: e for f, e in evidence.items() if np.isfinite(e)}
     if not finite:
         raise ValueError("fit_leg_length: every candidate lost the person (evidence -inf)")
     best = max(finite, key=finite.get)
     return BodyFit(best, legs_scaled(body, best), evidence, len(used))
+
+
+def fit_stance_leg(body: BodyDescription, start: StartDescription, likelihood_for: Callable[[BodyDescription], object],
+                   observations: Sequence[object], tracker_config: TrackerConfig,
+                   config: BodyFitConfig = BodyFitConfig(), cameras: Sequence[object] | None = None,
+                   progress: Callable[[str], None] | None = None) -> StanceFit:
+    """The stance leg at ``start``'s frame with the higher evidence (module docstring), each leg's evidence
+    the log of the mean of exp over ``config.stance_repeats`` filters (seeds ``config.seed`` on). Arguments
+    as for ``fit_leg_length``; ``start.stance_leg`` is replaced by each leg in turn."""
+    used = _used_observations(observations, config)
+
+    def report(key: object, evidence: float, count: int) -> None:
+        if progress is not None:
+            leg, repeat = key
+            progress(f"stance leg {LEG_NAMES[leg]} (filter {repeat + 1} of {config.stance_repeats}): log evidence "
+                     f"{evidence:.1f} over {count} frames")
+
+    candidates = {(leg, repeat): (body, replace(start, stance_leg=leg), config.seed + repeat)
+                  for leg in (LEFT, RIGHT) for repeat in range(config.stance_repeats)}
+    evidence = _log_evidence(candidates, likelihood_for, used, tracker_config, config, cameras, report)
+    per_leg = {leg: float(logsumexp([evidence[(leg, r)] for r in range(config.stance_repeats)])
+                          - np.log(config.stance_repeats)) for leg in (LEFT, RIGHT)}
+    finite = {leg: e for leg, e in per_leg.items() if np.isfinite(e)}
+    if not finite:
+        raise ValueError("fit_stance_leg: both stance legs lost the person (evidence -inf)")
+    return StanceFit(max(finite, key=finite.get), per_leg, len(used))

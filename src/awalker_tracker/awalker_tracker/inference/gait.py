@@ -161,11 +161,11 @@ def heel_at_rest(heel_xy: np.ndarray, heel_speed: np.ndarray, stance: np.ndarray
 
 
 #: gait.json's ``sides_note`` when which foot is which was not observed (``summary(sides_known=False)``).
-SIDES_NOTE = ("one camera and no stance leg in the start: which foot is the left one was chosen by the filter "
-              "from weak evidence (seen from one side the near and the far leg look alike), so the feet may be "
-              "named the other way round: the left/right columns and the symmetry swapped (real-walks benchmark, "
-              "one camera, automatic start, tracker seeds 0-9: 19 of 120 runs); name the standing foot in a "
-              "start description (stance_leg) or add a camera to be sure")
+SIDES_NOTE = ("one camera and no stance leg in the start: which foot is the left one was chosen from weak "
+              "evidence (seen from one side the near and the far leg look alike; `awalker track` weighs the two "
+              "in its first pass), so the feet may be named the other way round: the left/right columns and the "
+              "symmetry swapped (real-walks benchmark, one camera, automatic start, tracker seeds 0-4: 6 of 60 "
+              "runs); name the standing foot in a start description (stance_leg) or add a camera to be sure")
 
 
 def summary(walk: list[Step], sides_known: bool = True) -> dict[str, object]:

@@ -31,7 +31,7 @@ from awalker_tracker.inference.recovery import (
     HELD, REACQUIRED, RESEEDED_FALLEN, LostTrackMonitor, RecoveryConfig, put_rows)
 from awalker_tracker.inference.smc import AncestryHistory, FilterStep, ParticleFilter, SMCConfig
 from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription, BodyPoseBatch
-from awalker_tracker.model.walker import LEFT, RIGHT, WalkerParams, WalkerState
+from awalker_tracker.model.walker import LEFT, LEG_NAMES, RIGHT, WalkerParams, WalkerState
 
 if TYPE_CHECKING:
     from awalker_tracker.vision.likelihood import LikelihoodConfig
@@ -97,7 +97,7 @@ class StartDescription:
         if leg not in ("left", "right", "unknown"):
             raise InputError(f"{where}: start.stance_leg must be 'left', 'right' or 'unknown', "
                              f"got {s['stance_leg']!r}")
-        return cls(frame, position, heading, speed, step_length, {"left": LEFT, "right": RIGHT}.get(leg))
+        return cls(frame, position, heading, speed, step_length, {name: side for side, name in LEG_NAMES.items()}.get(leg))
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> "StartDescription":
@@ -112,7 +112,7 @@ class StartDescription:
                  "speed": float(self.speed)}
         if self.step_length is not None:
             start["step_length"] = float(self.step_length)
-        start["stance_leg"] = {LEFT: "left", RIGHT: "right"}.get(self.stance_leg, "unknown")
+        start["stance_leg"] = LEG_NAMES.get(self.stance_leg, "unknown")
         return yaml.safe_dump({"start": start}, sort_keys=False)
 
 

@@ -99,6 +99,7 @@ class WalkerParams:
 
 LEFT = 0
 RIGHT = 1
+LEG_NAMES = {LEFT: "left", RIGHT: "right"}   # as start descriptions and logs name them
 
 
 @dataclass

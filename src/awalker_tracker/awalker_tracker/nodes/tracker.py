@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -41,6 +41,7 @@ from awalker_tracker.inference.sync import StampSynchronizer
 from awalker_tracker.inference.tracker import (
     ImageObservation, StartDescription, Tracker, TrackerConfig, TrackerModel, image_likelihood)
 from awalker_tracker.model.body import BodyDescription
+from awalker_tracker.model.walker import LEG_NAMES
 from awalker_tracker.nodes.convert import POSTERIOR_DEPTH, camera_from_msgs, header, stamp_to_ns, summary_to_msg
 from awalker_tracker.nodes.features import features_from_msg
 from awalker_tracker.nodes.spin import run_node
@@ -97,6 +98,10 @@ class TrackerNode(Node):
                          "follow the one first seen near this world ground point [x, y] (m); unset: the first seen")
         self.start_output = str(declare("start_output", "", "write the start description used (given or found) "
                                         "to this YAML file; empty: do not"))
+        fitted_start = str(declare("fitted_start", "", "a start description fitted to these images before, its "
+                                   "stance leg chosen (`awalker fitbody`, awalker track's first pass): a start that "
+                                   "names no stance leg (found automatically, or 'unknown') takes its leg when it "
+                                   "starts at the same frame; empty: none"))
         self.estimate_body = bool(declare("estimate_body", False, "no body description: with the automatic start, "
                                           "scale the default body to the person's height seen in the images"))
         self.body_output = str(declare("body_output", "", "write an estimated body description to this YAML file"))
@@ -149,6 +154,8 @@ class TrackerNode(Node):
         self._dirty = False   # frames pushed since the last flush
 
         self.start = StartDescription.from_yaml(start_path) if start_path and not self.auto_start else None
+        self.fitted_start = StartDescription.from_yaml(fitted_start) if fitted_start else None
+        self._fitted_start_path = fitted_start
         self.start_found_automatically = False
         self._seen: deque = deque()               # frames the start finder saw (automatic start)
         self._finder: Any = None
@@ -313,6 +320,22 @@ class TrackerNode(Node):
                                       "nothing tracked")
         return False
 
+    def _take_fitted_stance_leg(self) -> None:
+        """A start naming no stance leg takes the fitted start's (``fitted_start``) when both start at the
+        same frame; otherwise a warning, and both legs are sampled."""
+        fitted, start = self.fitted_start, self.start
+        if fitted is None or fitted.stance_leg is None or start.stance_leg is not None:
+            return
+        if fitted.frame != start.frame:
+            self.get_logger().warning(
+                f"fitted_start {self._fitted_start_path}: fitted at frame {fitted.frame}, but the start is at frame "
+                f"{start.frame}; its stance leg is not used (both legs sampled)")
+            return
+        self.start = replace(start, stance_leg=fitted.stance_leg)
+        self.get_logger().info(f"stance leg at frame {start.frame}: {LEG_NAMES[fitted.stance_leg]}, from the fitted "
+                               f"start {self._fitted_start_path}")
+        self._write_start()
+
     def _write_start(self) -> None:
         if self.start_output and self.start is not None:
             from pathlib import Path
@@ -333,6 +356,7 @@ class TrackerNode(Node):
                     from pathlib import Path
 
                     Path(self.body_output).write_text(self.body.to_yaml_text())
+        self._take_fitted_stance_leg()
         body = self.body or BodyDescription.default()
         cameras = [self.cameras[c] for c in self.camera_names]
         config = TrackerConfig(smc=self.smc_config, dt=dt, likelihood_scale=self.likelihood_scale,
