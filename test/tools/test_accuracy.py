@@ -284,6 +284,9 @@ def test_automatic_start_without_empty_frames(tmp_path):
     from awalker_tracker.inference.gait import SIDES_NOTE
     assert json.loads((out / "gait.json").read_text())["sides_note"] == SIDES_NOTE
     assert main(["report", str(out)]) == 0 and "Left and right" in (out / "report.html").read_text()
+    # and how it started: the automatic start, the scaled body's fitted legs, the stance leg weighed
+    page = (out / "report.html").read_text()
+    assert "found automatically" in page and "leg length fitted" in page and "stance leg at the start" in page
     # the automatic start's backlog of posteriors reaches the pose publisher whole, in both passes
     for info in (run, yaml.safe_load((out / "first_pass" / "run.yaml").read_text())):
         assert info["recorded"]["/awalker/joint_states"] == info["recorded"]["/awalker/posterior"] == info["posteriors"]

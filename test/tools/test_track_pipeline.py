@@ -101,9 +101,18 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     assert "<h2>Gait</h2>" in page and "Tracking quality" in page and "Against ground truth" in page
     # one camera, but the start names the standing foot: left and right are known
     assert "sides_note" not in json.loads((out / "gait.json").read_text()) and "Left and right" not in page
-    assert page.count("data:image/png;base64,") >= 3 and page.count("<tr>") >= len(steps) + 2
+    assert page.count("data:image/png;base64,") >= 3 and page.count("<tr>") >= len(steps) + 3
+    # how it started: the bag's start and body, nothing fitted
+    assert "How it started" in page and "/awalker/start_description" in page and "stance leg at the start" not in page
     assert main(["report", str(tmp_path)]) == 2
     assert "no summary.csv, gait.csv, gait.json" in capsys.readouterr().err
+    broken = tmp_path / "broken_run_yaml"
+    broken.mkdir()
+    for name in ("summary.csv", "gait.csv", "gait.json"):
+        (broken / name).write_text((out / name).read_text())
+    (broken / "run.yaml").write_text("- not\n- a mapping\n")
+    assert main(["report", str(broken)]) == 2
+    assert "run.yaml: expected a YAML mapping" in capsys.readouterr().err
     # the leg length fitted to the features the run recorded (issue 12 §3)
     assert main(["fitbody", str(out), "--particles", "100", "--frames", "6", "--factors", "0.9", "1.0", "1.1"]) == 0
     fitted = yaml.safe_load(capsys.readouterr().out)["fitbody"]

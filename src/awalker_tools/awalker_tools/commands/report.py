@@ -2,8 +2,9 @@
 
 The page (DIR/report.html, self-contained: pictures embedded) holds the gait table (per step and
 the medians, left/right symmetry), the footprints picture, speed and stance-leg probability over
-time, the tracking quality (effective sample size, re-sampling, recovery events) and, when
-`awalker eval` was run, the errors against ground truth and the gait comparison.
+time, the tracking quality (effective sample size, re-sampling, recovery events), how the run started
+(run.yaml: where the start and the body came from, what the first pass fitted) and, when `awalker eval`
+was run, the errors against ground truth and the gait comparison.
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from awalker_tracker.errors import InputError
+from awalker_tracker.errors import InputError, parse_yaml
 
 from awalker_tools import evaluation, plots
 
@@ -36,6 +37,27 @@ def _table(rows: list[dict[str, object]], columns: list[str]) -> str:
 
 def _fmt(value: object, digits: int = 2) -> str:
     return f"{value:.{digits}f}" if isinstance(value, (int, float)) and np.isfinite(value) else "-"
+
+
+def _start_section(run_yaml: Path) -> list[str]:
+    """How the run started (run.yaml): the start's and the body's sources and what the first pass fitted."""
+    if not run_yaml.is_file():
+        return []
+    info = parse_yaml(run_yaml.read_text(), str(run_yaml))
+    if not isinstance(info, dict):
+        raise InputError(f"{run_yaml}: expected a YAML mapping (the run.yaml `awalker track` writes)")
+    row = {"start": info.get("start_source", "-"), "body": info.get("body_source", "-")}
+    columns = ["start", "body"]
+    fit = info.get("body_fit") or {}
+    if "log_evidence" in fit:
+        row["leg length fitted (m)"] = f"{fit['leg_length_m']} (x{fit['leg_factor']:.2f})"
+        columns.append("leg length fitted (m)")
+    if "stance_leg" in fit:
+        evidence = fit["stance_log_evidence"]
+        row["stance leg at the start, weighed (log evidence, nats)"] = (
+            f"{fit['stance_leg']} ({', '.join(f'{leg} {value:.1f}' for leg, value in evidence.items())})")
+        columns.append("stance leg at the start, weighed (log evidence, nats)")
+    return ["<h2>How it started</h2>", _table([row], columns)]
 
 
 def build_report(run_dir: Path) -> Path:
@@ -88,6 +110,7 @@ def build_report(run_dir: Path) -> Path:
             int(np.sum((summary["stance_left_probability"] > 0.2) & (summary["stance_left_probability"] < 0.8))),
     }], ["frames", "N_eff median", "N_eff min", "resampled frames", "re-acquisitions", "fallen walkers re-seeded",
          "frames standing still (walkers held)", "frames with an uncertain stance leg (0.2-0.8)"]))
+    parts += _start_section(run_dir / "run.yaml")
     if (run_dir / "eval.json").is_file():
         result = json.loads((run_dir / "eval.json").read_text())
         parts.append("<h2>Against ground truth</h2>")
