@@ -28,7 +28,10 @@ walk from the side and, with both legs dressed alike, tells them apart only by s
 over many frames; a single filter over both legs settles on one in its first frames and keeps it. The evidence is a Monte Carlo estimate whose spread from seed to seed is
 of the size of the difference it weighs (one camera, 5000 particles, 60 frames: +-20 nats), so each leg's
 evidence is averaged over ``stance_repeats`` filters of their own seeds (log of the mean of exp).
-Measured on the real-walks benchmark (README "One camera's stance leg from the evidence").
+Measured on the real-walks benchmark, one camera, hands off, 15000 particles, tracker seeds 0-4 (README "One
+camera's stance leg from the evidence"): the legs named the other way round in 6 of 60 runs against 15 when
+the filter chose, 89.4 mm median of the walk medians against 100.2; two cameras 0 of 60 against 1, 68.0 mm
+against 66.6 (per run a median -3.0 mm, within seed noise).
 """
 from __future__ import annotations
 
