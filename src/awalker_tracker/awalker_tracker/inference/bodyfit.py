@@ -25,9 +25,10 @@ drawn length kept in 11 of 12 runs.
 (the automatic start; a start description with ``stance_leg: unknown``): one filter per leg, each drawing
 its phase as a start naming that leg does, and keeps the leg with the higher evidence. One camera sees a
 walk from the side and, with both legs dressed alike, tells them apart only by small differences summed
-over many frames; a single filter over both legs settles on one in its first frames and keeps it. The evidence is a Monte Carlo estimate whose spread from seed to seed is
-of the size of the difference it weighs (one camera, 5000 particles, 60 frames: +-20 nats), so each leg's
-evidence is averaged over ``stance_repeats`` filters of their own seeds (log of the mean of exp).
+over many frames; a single filter over both legs settles on one in its first frames and keeps it. The
+evidence is a Monte Carlo estimate whose spread from seed to seed is of the size of the difference it
+weighs (one camera, 5000 particles, 60 frames: +-20 nats), so each leg's evidence is averaged over
+``stance_repeats`` filters of their own seeds (log of the mean of exp).
 Measured on the real-walks benchmark, one camera, hands off, 15000 particles, tracker seeds 0-4 (README "One
 camera's stance leg from the evidence"): the legs named the other way round in 6 of 60 runs against 15 when
 the filter chose, 89.4 mm median of the walk medians against 100.2; two cameras 0 of 60 against 1, 68.0 mm
@@ -130,6 +131,14 @@ def _log_evidence(candidates: dict[object, tuple[BodyDescription, StartDescripti
     return {key: result[key] for key in candidates}
 
 
+def _best(evidence: dict[object, float], lost: str) -> object:
+    """The candidate with the highest finite evidence; ValueError(``lost``) when none is finite."""
+    finite = {key: e for key, e in evidence.items() if np.isfinite(e)}
+    if not finite:
+        raise ValueError(lost)
+    return max(finite, key=finite.get)
+
+
 def fit_leg_length(body: BodyDescription, start: StartDescription, likelihood_for: Callable[[BodyDescription], object],
                    observations: Sequence[object], tracker_config: TrackerConfig,
                    config: BodyFitConfig = BodyFitConfig(), cameras: Sequence[object] | None = None,
@@ -146,10 +155,7 @@ def fit_leg_length(body: BodyDescription, start: StartDescription, likelihood_fo
 
     evidence = _log_evidence({factor: (legs_scaled(body, factor), start, config.seed) for factor in config.leg_factors},
                              likelihood_for, used, tracker_config, config, cameras, report)
-    finite = {f: e for f, e in evidence.items() if np.isfinite(e)}
-    if not finite:
-        raise ValueError("fit_leg_length: every candidate lost the person (evidence -inf)")
-    best = max(finite, key=finite.get)
+    best = _best(evidence, "fit_leg_length: every candidate lost the person (evidence -inf)")
     return BodyFit(best, legs_scaled(body, best), evidence, len(used))
 
 
@@ -173,7 +179,5 @@ def fit_stance_leg(body: BodyDescription, start: StartDescription, likelihood_fo
     evidence = _log_evidence(candidates, likelihood_for, used, tracker_config, config, cameras, report)
     per_leg = {leg: float(logsumexp([evidence[(leg, r)] for r in range(config.stance_repeats)])
                           - np.log(config.stance_repeats)) for leg in (LEFT, RIGHT)}
-    finite = {leg: e for leg, e in per_leg.items() if np.isfinite(e)}
-    if not finite:
-        raise ValueError("fit_stance_leg: both stance legs lost the person (evidence -inf)")
-    return StanceFit(max(finite, key=finite.get), per_leg, len(used))
+    return StanceFit(_best(per_leg, "fit_stance_leg: both stance legs lost the person (evidence -inf)"), per_leg,
+                     len(used))
