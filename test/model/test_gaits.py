@@ -223,3 +223,45 @@ def test_covers_and_lookup_agree_on_unconverged_cells(table: gaits.GaitTable) ->
     np.testing.assert_allclose(holed.lookup(*outside), table.lookup(*outside))
     # broadcasting: speeds (S,) against step lengths (K, 1)
     assert holed.covers(table.speeds, table.step_lengths[:, None]).shape == (table.step_lengths.size, table.speeds.size)
+
+
+def _reference_lookup(table: gaits.GaitTable, speed: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """Straightforward bilinear look-up over the converged corners (the oracle of the compiled one): (4, M)."""
+    out = np.empty((4, speed.size))
+    for q, (v, s) in enumerate(zip(speed, step)):
+        v, s = np.clip(v, table.speeds[0], table.speeds[-1]), np.clip(s, table.step_lengths[0], table.step_lengths[-1])
+        i = min(np.searchsorted(table.speeds, v, side="right") - 1, table.speeds.size - 2)
+        j = min(np.searchsorted(table.step_lengths, s, side="right") - 1, table.step_lengths.size - 2)
+        tv = (v - table.speeds[i]) / (table.speeds[i + 1] - table.speeds[i])
+        ts = (s - table.step_lengths[j]) / (table.step_lengths[j + 1] - table.step_lengths[j])
+        total, acc = 0.0, np.zeros(4)
+        for ci, cj, w in ((i, j, (1 - tv) * (1 - ts)), (i + 1, j, tv * (1 - ts)), (i, j + 1, (1 - tv) * ts),
+                          (i + 1, j + 1, tv * ts)):
+            if table.converged[ci, cj]:
+                total += w
+                acc += w * np.array([table.stance_rate[ci, cj], table.swing_rate[ci, cj], table.stiffness[ci, cj],
+                                     table.toe_off_impulse[ci, cj]])
+        out[:, q] = acc / total
+    return out
+
+
+def test_compiled_lookups_agree_with_a_reference_on_random_queries(table: gaits.GaitTable) -> None:
+    rng = np.random.default_rng(7)
+    speed = np.concatenate([rng.uniform(0.2, 2.4, 300), table.speeds])        # beyond the grid and on its points
+    step = np.concatenate([rng.uniform(0.3, 1.4, 300), rng.choice(table.step_lengths, table.speeds.size)])
+    np.testing.assert_allclose(np.array(table.lookup(speed, step)), _reference_lookup(table, speed, step),
+                               rtol=1e-12, atol=1e-12)
+    # gait_for_stiffness: kappa along the speed axis at each step length, crossed where it meets the asked kappa
+    kappa = rng.uniform(table.stiffness.min() - 0.3, table.stiffness.max() + 0.3, 300)
+    step = step[:300]
+    found, stance_rate, swing_rate, iota = table.gait_for_stiffness(kappa, step)
+    along = np.stack([_reference_lookup(table, np.full(step.size, v), step)[2] for v in table.speeds], axis=1)
+    below = np.clip((along < kappa[:, None]).sum(1) - 1, 0, table.speeds.size - 2)
+    rows = np.arange(kappa.size)
+    fraction = np.clip((kappa - along[rows, below]) / (along[rows, below + 1] - along[rows, below]), 0, 1)
+    expected = table.speeds[below] + fraction * np.diff(table.speeds)[below]
+    np.testing.assert_allclose(found, expected, rtol=1e-12)
+    np.testing.assert_allclose(np.array([stance_rate, swing_rate, iota]),
+                               _reference_lookup(table, expected, step)[[0, 1, 3]], rtol=1e-12, atol=1e-12)
+    inside = (kappa > along[:, 0]) & (kappa < along[:, -1])
+    np.testing.assert_allclose(table.lookup(found, step)[2][inside], kappa[inside], rtol=1e-9)   # it inverts

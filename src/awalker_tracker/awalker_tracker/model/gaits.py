@@ -35,6 +35,7 @@ from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from ..errors import InputError
@@ -330,25 +331,31 @@ class GaitTable:
     @functools.cached_property
     def _lookup_values(self) -> np.ndarray:
         """(4, S, L) stance rate, swing rate, kappa, iota with 0 where not converged (weights are 0 there)."""
-        return np.nan_to_num(np.stack([self.stance_rate, self.swing_rate, self.stiffness, self.toe_off_impulse]))
+        return np.ascontiguousarray(np.nan_to_num(np.stack([self.stance_rate, self.swing_rate, self.stiffness,
+                                                            self.toe_off_impulse])), float)
 
-    def _corners(self, speed: np.ndarray | float, step_length: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, list]:
-        """Clamped (speed, step length) and the four grid corners (i, j, bilinear weight, 0 where not converged)."""
-        v = np.clip(np.asarray(speed, float), self.speeds[0], self.speeds[-1])
-        s = np.clip(np.asarray(step_length, float), self.step_lengths[0], self.step_lengths[-1])
-        i = np.clip(np.searchsorted(self.speeds, v, side="right") - 1, 0, self.speeds.size - 2)
-        j = np.clip(np.searchsorted(self.step_lengths, s, side="right") - 1, 0, self.step_lengths.size - 2)
-        tv = (v - self.speeds[i]) / (self.speeds[i + 1] - self.speeds[i])
-        ts = (s - self.step_lengths[j]) / (self.step_lengths[j + 1] - self.step_lengths[j])
-        corners = [(i, j, (1 - tv) * (1 - ts)), (i + 1, j, tv * (1 - ts)), (i, j + 1, (1 - tv) * ts),
-                   (i + 1, j + 1, tv * ts)]
-        return v, s, [(ci, cj, np.where(self.converged[ci, cj], w, 0.0)) for ci, cj, w in corners]
+    @functools.cached_property
+    def _grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """What the compiled look-ups take: speeds, step lengths, ``_lookup_values``, converged."""
+        return (np.ascontiguousarray(self.speeds, float), np.ascontiguousarray(self.step_lengths, float),
+                self._lookup_values, np.ascontiguousarray(self.converged, np.bool_))
+
+    def _interpolated(self, speed: np.ndarray | float, step_length: np.ndarray | float
+                      ) -> tuple[tuple[int, ...], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The broadcast shape, the flat queries (speed, step length) and the bilinear interpolation at them:
+        values (4, M) and the converged corners' weight sums (M,)."""
+        shape = np.broadcast_shapes(np.shape(speed), np.shape(step_length))
+        v = np.broadcast_to(np.asarray(speed, float), shape).ravel()
+        s = np.broadcast_to(np.asarray(step_length, float), shape).ravel()
+        out, weight = np.empty((4, v.size)), np.empty(v.size)
+        _lookup_kernel(*self._grid, v, s, out, weight)
+        return shape, v, s, out, weight
 
     def covers(self, speed: np.ndarray | float, step_length: np.ndarray | float,
                min_weight: float = 1e-12) -> np.ndarray:
         """True where :meth:`lookup` has converged corners carrying more than ``min_weight`` (broadcast shape)."""
-        _, _, corners = self._corners(speed, step_length)
-        return sum(w for _, _, w in corners) > min_weight
+        shape, _, _, _, weight = self._interpolated(speed, step_length)
+        return (weight > min_weight).reshape(shape)
 
     def lookup(self, speed: np.ndarray | float, step_length: np.ndarray | float
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -356,19 +363,15 @@ class GaitTable:
 
         Speed and step length broadcast against each other. Only converged grid cells are used;
         queries are clamped to the grid. Raises InputError when the enclosing cell has no converged
-        corner.
+        corner. (Compiled: ``_lookup_kernel``.)
         """
-        v, s, corners = self._corners(speed, step_length)
-        shape = np.broadcast_shapes(np.shape(v), np.shape(s))
-        weight_sum = np.zeros(shape)
-        outputs = np.zeros((4,) + shape)
-        for ci, cj, w in corners:
-            weight_sum = weight_sum + w
-            outputs += w * self._lookup_values[:, ci, cj]
-        if np.any(weight_sum <= 1e-12):
-            raise InputError(f"gait table: no converged gait near speed {np.ravel(v)[0]:.3f} m/s, "
-                             f"step length {np.ravel(s)[0]:.3f} m")
-        return tuple(outputs / weight_sum)  # type: ignore[return-value]
+        shape, v, s, out, weight = self._interpolated(speed, step_length)
+        missing = np.flatnonzero(weight <= _MIN_CORNER_WEIGHT)
+        if missing.size:
+            raise _no_gait_error(self, v[missing[0]], s[missing[0]])
+        if shape == ():
+            return out[0, 0], out[1, 0], out[2, 0], out[3, 0]
+        return out[0].reshape(shape), out[1].reshape(shape), out[2].reshape(shape), out[3].reshape(shape)
 
     def gait_for_stiffness(self, stiffness: np.ndarray | float, step_length: np.ndarray | float
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -376,18 +379,17 @@ class GaitTable:
 
         Returns (speed m/s, stance_rate, swing_rate, toe_off_impulse) of that gait: at each step
         length the table's kappa rises with speed (checked in test_gaits.py), so the speed is found
-        by inverting kappa along the speed axis; queries are clamped to the grid.
+        by inverting kappa along the speed axis; queries are clamped to the grid. (Compiled:
+        ``_stiffness_kernel``, called at every heel strike of every particle.)
         """
         kappa = np.asarray(stiffness, float)
-        step = np.broadcast_to(np.asarray(step_length, float), kappa.shape)
-        along_speed = self.lookup(self.speeds, step[..., None])[2]   # (..., S): kappa at each grid speed
-        below = np.clip((along_speed < kappa[..., None]).sum(-1) - 1, 0, self.speeds.size - 2)
-        low = np.take_along_axis(along_speed, below[..., None], -1)[..., 0]
-        high = np.take_along_axis(along_speed, below[..., None] + 1, -1)[..., 0]
-        fraction = np.clip((kappa - low) / (high - low), 0.0, 1.0)
-        speed = self.speeds[below] + fraction * (self.speeds[below + 1] - self.speeds[below])
-        stance_rate, swing_rate, _, iota = self.lookup(speed, step)
-        return speed, stance_rate, swing_rate, iota
+        step = np.broadcast_to(np.asarray(step_length, float), kappa.shape).ravel()
+        out = np.empty((4, kappa.size))
+        failed = _stiffness_kernel(*self._grid, kappa.ravel(), step, out)
+        if failed >= 0:
+            raise _no_gait_error(self, out[0, failed], step[failed])
+        return (out[0].reshape(kappa.shape), out[1].reshape(kappa.shape), out[2].reshape(kappa.shape),
+                out[3].reshape(kappa.shape))
 
     def converged_points(self) -> dict[str, np.ndarray]:
         """Flattened arrays of the converged grid points (for fits and plots)."""
@@ -591,6 +593,92 @@ def solve_grid(
         converged=grid(lambda s: s.converged).astype(bool),
         reason=tuple(tuple(solutions[(i, j)].reason for j in range(shape[1])) for i in range(shape[0])),
     )
+
+
+# ---- compiled table look-ups (numba, serial) ----------------------------------------------
+# weight (sum of the converged corners' bilinear weights) at or below which a query has no gait
+_MIN_CORNER_WEIGHT = 1e-12
+
+
+def _no_gait_error(table: GaitTable, speed: float, step_length: float) -> InputError:
+    speed = min(max(float(speed), table.speeds[0]), table.speeds[-1])
+    step_length = min(max(float(step_length), table.step_lengths[0]), table.step_lengths[-1])
+    return InputError(f"gait table: no converged gait near speed {speed:.3f} m/s, step length {step_length:.3f} m")
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _cell(grid: np.ndarray, x: float) -> tuple[int, float]:
+    """The interval [grid[i], grid[i + 1]] of ``grid`` (ascending, >= 2 points) that holds x clamped to the
+    grid (the last one for its top end) and x's fraction along it (NaN for a NaN x)."""
+    if not x == x:
+        return 0, np.nan
+    last = grid.size - 1
+    x = min(max(x, grid[0]), grid[last])
+    i = 0
+    while i < last - 1 and grid[i + 1] <= x:
+        i += 1
+    return i, (x - grid[i]) / (grid[i + 1] - grid[i])
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _bilinear(speeds: np.ndarray, step_lengths: np.ndarray, values: np.ndarray, converged: np.ndarray,
+              speed: float, step_length: float, out: np.ndarray, q: int) -> float:
+    """Bilinear interpolation of ``values`` (4, S, L) at (speed m/s, step length m) over the converged corners
+    of the enclosing cell into out[:, q]; returns the sum of those corners' weights (<= 1e-12: no gait)."""
+    i, tv = _cell(speeds, speed)
+    j, ts = _cell(step_lengths, step_length)
+    w00, w10, w01, w11 = (1 - tv) * (1 - ts), tv * (1 - ts), (1 - tv) * ts, tv * ts
+    w00 = w00 if converged[i, j] else 0.0
+    w10 = w10 if converged[i + 1, j] else 0.0
+    w01 = w01 if converged[i, j + 1] else 0.0
+    w11 = w11 if converged[i + 1, j + 1] else 0.0
+    total = 0.0 + w00 + w10 + w01 + w11
+    for k in range(4):
+        out[k, q] = (((0.0 + w00 * values[k, i, j]) + w10 * values[k, i + 1, j]) + w01 * values[k, i, j + 1]
+                     + w11 * values[k, i + 1, j + 1]) / total
+    return total
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _lookup_kernel(speeds: np.ndarray, step_lengths: np.ndarray, values: np.ndarray, converged: np.ndarray,
+                   speed: np.ndarray, step_length: np.ndarray, out: np.ndarray, weight: np.ndarray) -> None:
+    """``GaitTable.lookup`` of M queries (speed, step_length (M,)): values (4, M), corner weight sums (M,)."""
+    for q in range(speed.size):
+        weight[q] = _bilinear(speeds, step_lengths, values, converged, speed[q], step_length[q], out, q)
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _stiffness_kernel(speeds: np.ndarray, step_lengths: np.ndarray, values: np.ndarray, converged: np.ndarray,
+                      stiffness: np.ndarray, step_length: np.ndarray, out: np.ndarray) -> int:
+    """``GaitTable.gait_for_stiffness`` of M queries (kappa, step length (M,)) into out (4, M): speed,
+    stance rate, swing rate, iota. Per query, kappa at every grid speed (linear in speed between grid
+    points at this step length), the grid interval where it crosses the asked kappa (the end intervals
+    beyond the grid's kappa), the speed there, and the table at that speed. Returns the first query
+    whose look-up has no converged gait (its clamped speed in out[0]), or -1."""
+    n_speeds = speeds.size
+    along = np.empty(n_speeds)              # kappa at each grid speed
+    scratch = np.empty((4, 1))
+    for q in range(stiffness.size):
+        kappa, step = stiffness[q], step_length[q]
+        below = -1
+        for k in range(n_speeds):
+            if _bilinear(speeds, step_lengths, values, converged, speeds[k], step, scratch, 0) <= _MIN_CORNER_WEIGHT:
+                out[0, q] = speeds[k]
+                return q
+            along[k] = scratch[2, 0]
+            if along[k] < kappa:
+                below += 1
+        below = min(max(below, 0), n_speeds - 2)
+        low, high = along[below], along[below + 1]
+        fraction = (kappa - low) / (high - low)
+        if fraction == fraction:            # NaN stays NaN (the caller floors the toe-off)
+            fraction = min(max(fraction, 0.0), 1.0)
+        speed = speeds[below] + fraction * (speeds[below + 1] - speeds[below])
+        if _bilinear(speeds, step_lengths, values, converged, speed, step, scratch, 0) <= _MIN_CORNER_WEIGHT:
+            out[0, q] = speed
+            return q
+        out[0, q], out[1, q], out[2, q], out[3, q] = speed, scratch[0, 0], scratch[1, 0], scratch[3, 0]
+    return -1
 
 
 def gait_initial_state(
