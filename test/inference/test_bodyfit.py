@@ -2,6 +2,8 @@
 model simulated (for the leg length with a body whose legs differ from the one given)."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -20,6 +22,22 @@ def test_legs_scaled_changes_thigh_and_shank_only():
     assert longer.leg_length - body.leg_length == pytest.approx(0.05 * (body.upper_leg_length + body.lower_leg_length))
     assert (longer.torso_length, longer.ankle_height, longer.hip_width) == (body.torso_length, body.ankle_height,
                                                                             body.hip_width)
+
+
+def test_legs_scaled_keeping_the_height_takes_it_from_torso_and_head():
+    body = BodyDescription.default()
+    longer = legs_scaled(body, 1.06, keep_height=True)
+    assert longer.height == pytest.approx(body.height)
+    assert longer.leg_length == pytest.approx(legs_scaled(body, 1.06).leg_length)
+    lost = body.torso_length + body.head_length - (longer.torso_length + longer.head_length)
+    assert lost == pytest.approx(longer.leg_length - body.leg_length)
+    assert longer.torso_length / longer.head_length == pytest.approx(body.torso_length / body.head_length)
+    assert (longer.ankle_height, longer.hip_width, longer.foot_length) == (body.ankle_height, body.hip_width,
+                                                                           body.foot_length)
+    assert legs_scaled(body, 0.94, keep_height=True).torso_length > body.torso_length
+    short_trunk = replace(body, torso_length=0.30, head_length=0.20)
+    with pytest.raises(ValueError, match="torso and head"):      # more than half of torso and head gone to the legs
+        legs_scaled(short_trunk, 1.4, keep_height=True)
 
 
 def test_the_evidence_finds_the_walkers_leg_length():

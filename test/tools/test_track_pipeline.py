@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from awalker_tools import evaluation
+from awalker_tools import evaluation, fit_body
 from awalker_tools.cli import main
 from awalker_tracker.inference.recovery import RecoveryConfig
 from awalker_tracker.model.body import BodyDescription
@@ -56,7 +56,7 @@ def read_result_bag(path: Path) -> dict[str, list]:
     return out
 
 
-def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
+def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys, monkeypatch):
     from awalker_tools.bagio import SequenceReader
 
     out = tmp_path / "run"
@@ -113,6 +113,14 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     (broken / "run.yaml").write_text("- not\n- a mapping\n")
     assert main(["report", str(broken)]) == 2
     assert "run.yaml: expected a YAML mapping" in capsys.readouterr().err
+    # a fitted body that kept the seen height says so
+    (broken / "run.yaml").write_text(yaml.safe_dump({"body_source": "scaled to the person's height seen in the images",
+                                                     "body_fit": {"leg_length_m": 0.86, "leg_factor": 1.06,
+                                                                  "log_evidence": {"1.06": 12.0},
+                                                                  "height_kept": True}}))
+    assert main(["report", str(broken)]) == 0
+    assert "0.86 (x1.06, the seen height kept)" in (broken / "report.html").read_text()
+    capsys.readouterr()
     # the leg length fitted to the features the run recorded (issue 12 §3)
     assert main(["fitbody", str(out), "--particles", "100", "--frames", "6", "--factors", "0.9", "1.0", "1.1"]) == 0
     fitted = yaml.safe_load(capsys.readouterr().out)["fitbody"]
@@ -124,6 +132,24 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys):
     evidence = fitted["log_evidence"]
     assert len(evidence) == 3 and len(set(evidence.values())) == 3
     assert evidence[f"{fitted['leg_factor']:.2f}"] == max(evidence.values())
+    assert fitted["height_kept"] is False
+    # a body scaled to the height the images showed: with one camera (a height made from the estimated depth)
+    # the candidates still add to it; from KEEP_HEIGHT_CAMERAS cameras on they keep it, torso and head giving way
+    run_yaml = out / "run.yaml"
+    run_yaml.write_text(yaml.safe_dump({**yaml.safe_load(run_yaml.read_text()),
+                                        "body_source": "scaled to the person's height seen in the images"}))
+    fitbody = ["fitbody", str(out), "--particles", "100", "--frames", "6", "--factors", "0.9", "1.1"]
+    assert main(fitbody) == 0
+    fitted = yaml.safe_load(capsys.readouterr().out)["fitbody"]
+    got = BodyDescription.from_yaml(out / "body_fitted.yaml")
+    assert fitted["height_kept"] is False and got.torso_length == given.torso_length
+    monkeypatch.setattr(fit_body, "KEEP_HEIGHT_CAMERAS", 1)
+    assert main(fitbody) == 0
+    fitted = yaml.safe_load(capsys.readouterr().out)["fitbody"]
+    got = BodyDescription.from_yaml(out / "body_fitted.yaml")
+    assert fitted["height_kept"] is True and got.height == pytest.approx(given.height)
+    assert got.upper_leg_length == pytest.approx(fitted["leg_factor"] * given.upper_leg_length)
+    assert (got.torso_length < given.torso_length) == (fitted["leg_factor"] > 1.0)
 
 
 def test_track_fit_body_tracks_again_with_the_fitted_legs(synth_bag: Path, tmp_path: Path):

@@ -4,9 +4,10 @@
 Reads the output directory of a tracking run (the image features it recorded in result.bag, its
 calibration.yaml, start.yaml, body.yaml and run.yaml), runs the filter once per candidate leg length
 over the first frames from the start (``inference.bodyfit``) and writes DIR/body_fitted.yaml, to track
-again with ``awalker track BAG --body DIR/body_fitted.yaml``. When the start names no stance leg (found
-automatically, or ``stance_leg: unknown``), it then weighs the two legs with the fitted body the same way
-and writes DIR/start_fitted.yaml, the start with the leg chosen (``awalker track`` hands it to its second
+again with ``awalker track BAG --body DIR/body_fitted.yaml``. A body scaled to the height seen in the
+images keeps that height in the fit when two or more cameras saw it (``KEEP_HEIGHT_CAMERAS``). When the start
+names no stance leg (found automatically, or ``stance_leg: unknown``), it then weighs the two legs with the
+fitted body the same way and writes DIR/start_fitted.yaml, the start with the leg chosen (``awalker track`` hands it to its second
 pass's tracker: ``TrackOptions.fitted_start``).
 """
 from __future__ import annotations
@@ -26,6 +27,9 @@ FITTED_START_FILE = "start_fitted.yaml"
 # measure: the real-walks benchmark's legs 6 % long) or one scaled to the seen height (legs 6-9 % short).
 GIVEN_BODY_FACTORS = (0.91, 0.94, 0.97, 1.0, 1.03)
 HEIGHT_SCALED_FACTORS = (0.97, 1.0, 1.03, 1.06, 1.09, 1.12)
+# Cameras from which a body scaled to the seen height keeps that height in the leg fit (its torso and head give
+# what the legs gain): several cameras measure the height; one camera makes it from the depth it estimates.
+KEEP_HEIGHT_CAMERAS = 2
 
 
 def _features(run_dir: Path, camera_names: list[str]) -> tuple[list[int], list[tuple]]:
@@ -78,7 +82,7 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
     the body as it is (only the stance leg is weighed). ``settings``: the other ``BodyFitConfig`` fields
     (frames, particles, seed, stance_repeats). Progress goes to stderr."""
     from awalker_tracker.inference.autostart import AUTO_SPREAD
-    from awalker_tracker.inference.bodyfit import BodyFitConfig, fit_leg_length, fit_stance_leg, legs_scaled
+    from awalker_tracker.inference.bodyfit import BodyFitConfig, fit_leg_length, fit_stance_leg
     from awalker_tracker.inference.recovery import RecoveryConfig
     from awalker_tracker.inference.smc import SMCConfig
     from awalker_tracker.inference.tracker import ImageObservation, StartDescription, TrackerConfig, image_likelihood
@@ -90,16 +94,17 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
     if not run_dir.is_dir():
         raise InputError(f"{run_dir}: not a directory (expected the --out DIR of `awalker track`)")
     info = _yaml_file(run_dir / "run.yaml")
-    if leg_factors is None:
-        scaled = str(info.get("body_source", "")).startswith("scaled to the person's height")
-        leg_factors = HEIGHT_SCALED_FACTORS if scaled else GIVEN_BODY_FACTORS
-    try:
-        fit_config = BodyFitConfig(leg_factors=tuple(leg_factors), **settings)
-    except ValueError as exc:
-        raise InputError(f"fitbody options: {exc}") from None
     for name in ("calibration.yaml", "start.yaml", "body.yaml"):
         _required(run_dir / name)
     cameras = load_calibration(run_dir / "calibration.yaml")
+    scaled = str(info.get("body_source", "")).startswith("scaled to the person's height")
+    if leg_factors is None:
+        leg_factors = HEIGHT_SCALED_FACTORS if scaled else GIVEN_BODY_FACTORS
+    try:
+        fit_config = BodyFitConfig(leg_factors=tuple(leg_factors),
+                                   keep_height=scaled and len(cameras) >= KEEP_HEIGHT_CAMERAS, **settings)
+    except ValueError as exc:
+        raise InputError(f"fitbody options: {exc}") from None
     start = StartDescription.from_yaml(run_dir / "start.yaml")
     body = BodyDescription.from_yaml(run_dir / "body.yaml")
     stamps, features = _features(run_dir, [c.name for c in cameras])
@@ -129,8 +134,9 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
               f"{fit_config.particles} particles each", file=sys.stderr)
         fit = fit_leg_length(body, start, likelihood_for, observations, config, fit_config, cameras=cameras,
                              progress=report)
-        fitted_body = legs_scaled(body, fit.factor)
+        fitted_body = fit.body
         summary = {"leg_factor": fit.factor, "leg_length_m": round(fitted_body.leg_length, 4),
+                   "height_kept": fit_config.keep_height,
                    "log_evidence": {f"{k:.2f}": round(v, 2) for k, v in fit.log_evidence.items()}}
     out = run_dir / FITTED_FILE
     out.write_text(fitted_body.to_yaml_text())

@@ -50,7 +50,8 @@ def _start_section(run_yaml: Path) -> list[str]:
     columns = ["start", "body"]
     fit = info.get("body_fit") or {}
     if "log_evidence" in fit:
-        row["leg length fitted (m)"] = f"{fit['leg_length_m']} (x{fit['leg_factor']:.2f})"
+        row["leg length fitted (m)"] = (f"{fit['leg_length_m']} (x{fit['leg_factor']:.2f}"
+                                        + (", the seen height kept" if fit.get("height_kept") else "") + ")")
         columns.append("leg length fitted (m)")
     if "stance_leg" in fit:
         evidence = fit["stance_log_evidence"]
