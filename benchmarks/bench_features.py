@@ -1,7 +1,9 @@
 """Features node throughput at 640x480: (1) the per-frame stages in one loop (Image message ->
 RGB, appearance maps, grid flow, ImageFeatures message) with the time per stage; (2) the real
 FeatureNode in an rclpy executor, fed Image messages one at a time (next image when the
-previous frame's features arrive: DDS, callbacks and (de)serialisation included); (3) the
+previous frame's features arrive: DDS, callbacks and (de)serialisation included); (2b) the same node
+spinning in a thread of its own, fed by a camera stand-in that keeps two images ahead of the features it got
+back (what the node sustains when the camera does not wait for it; the round trip's hand-offs overlap); (3) the
 flow's median endpoint error on the walker against the rendered motion. Prints JSON.
 
     .venv/bin/python benchmarks/bench_features.py [--frames 90] [--opencv-threads 1]
@@ -63,12 +65,12 @@ def flow_endpoint_error(cam, poses, frames) -> dict:
             "p90_epe_px": float(np.percentile(errors, 90)), "median_true_motion_px": float(np.median(speeds))}
 
 
-def node_throughput(msgs: list, frames: int) -> dict:
-    """Frames/s of FeatureNode in a private context, one image in flight at a time."""
+def _node_and_camera(domain_id: int, depth: int):
+    """A FeatureNode for camera "cam" (5 background-only frames) and a stand-in node publishing its images and
+    taking its features, in a private context: (context, node, probe, image publisher, received features)."""
     import rclpy
     from awalker_msgs.msg import ImageFeatures
     from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.parameter import Parameter
     from rclpy.qos import QoSProfile
@@ -78,35 +80,94 @@ def node_throughput(msgs: list, frames: int) -> dict:
     from awalker_tracker.nodes.features import FeatureNode
 
     context = Context()
-    rclpy.init(context=context, domain_id=97, signal_handler_options=SignalHandlerOptions.NO)
+    rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
     node = FeatureNode(context=context, parameter_overrides=[Parameter("camera_name", value="cam"),
                                                              Parameter("background_frames", value=5)])
     probe = Node("bench_probe", context=context)
     received: list = []
-    probe.create_subscription(ImageFeatures, "/cam/features", received.append, QoSProfile(depth=10))
-    pub = probe.create_publisher(Image, "/cam/image_raw", QoSProfile(depth=10))
+    probe.create_subscription(ImageFeatures, "/cam/features", received.append, QoSProfile(depth=depth))
+    return context, node, probe, probe.create_publisher(Image, "/cam/image_raw", QoSProfile(depth=depth)), received
+
+
+def _matched(executor, probe, pub) -> None:
+    """Spin until the image and features topics have matched both ways (10 s at most)."""
+    deadline = time.monotonic() + 10
+    while (pub.get_subscription_count() == 0 or probe.count_publishers("/cam/features") == 0) \
+            and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.05)
+
+
+def _publish(pub, msgs: list, k: int) -> None:
+    """Image k of the cycle ``msgs``, stamped at 30 Hz."""
+    msg = msgs[k % len(msgs)]
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 1 + k // 30, (k % 30) * 33_333_333
+    pub.publish(msg)
+
+
+def node_throughput(msgs: list, frames: int) -> dict:
+    """Frames/s of FeatureNode in a private context, one image in flight at a time."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    context, node, probe, pub, received = _node_and_camera(97, 10)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     executor.add_node(probe)
     try:
-        deadline = time.monotonic() + 10
-        while (pub.get_subscription_count() == 0 or probe.count_publishers("/cam/features") == 0) \
-                and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.05)
+        _matched(executor, probe, pub)
+        deadline = time.monotonic() + 70
         started = None
         for k in range(frames + 5):
             if k == 5:
                 started = time.perf_counter()
-            msg = msgs[k % len(msgs)]
-            msg.header.stamp.sec, msg.header.stamp.nanosec = 1 + k // 30, (k % 30) * 33_333_333
-            pub.publish(msg)
-            while len(received) < k + 1 and time.monotonic() < deadline + 60:
+            _publish(pub, msgs, k)
+            while len(received) < k + 1 and time.monotonic() < deadline:
                 executor.spin_once(timeout_sec=0.1)
         elapsed = time.perf_counter() - started
         return {"frames": frames, "frames_per_s": frames / elapsed, "received": len(received) - 5,
                 "ms_in_image_callback": 1e3 * node.stats.seconds / max(node.stats.frames, 1)}
     finally:
         executor.shutdown()
+        node.destroy_node()
+        probe.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def node_streaming(msgs: list, frames: int, in_flight: int = 2) -> dict:
+    """Frames/s of FeatureNode spinning in a thread of its own (as a node in its own process would), fed by a
+    camera stand-in in this thread that keeps ``in_flight`` images published ahead of the features it has
+    received (a camera does not wait for the node): what the node sustains, apart from the round trip."""
+    import threading
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    context, node, probe, pub, received = _node_and_camera(98, frames + 10)
+    node_executor, probe_executor = SingleThreadedExecutor(context=context), SingleThreadedExecutor(context=context)
+    node_executor.add_node(node)
+    probe_executor.add_node(probe)
+    spinner = threading.Thread(target=node_executor.spin, daemon=True)
+    spinner.start()
+    try:
+        _matched(probe_executor, probe, pub)
+        total, warm = frames + 5, 5        # the first 5 (background-only) one at a time, as above
+        sent, started = 0, None
+        deadline = time.monotonic() + 120
+        while len(received) < total and time.monotonic() < deadline:
+            while sent < total and sent < len(received) + (1 if sent < warm else in_flight):
+                _publish(pub, msgs, sent)
+                sent += 1
+            probe_executor.spin_once(timeout_sec=0.1)
+            if started is None and len(received) >= warm:
+                started = time.perf_counter()
+        elapsed = time.perf_counter() - started
+        return {"frames": len(received) - warm, "in_flight": in_flight,
+                "frames_per_s": (len(received) - warm) / elapsed,
+                "ms_in_image_callback": 1e3 * node.stats.seconds / max(node.stats.frames, 1)}
+    finally:
+        node_executor.shutdown()
+        probe_executor.shutdown()
+        spinner.join(timeout=5)
         node.destroy_node()
         probe.destroy_node()
         rclpy.try_shutdown(context=context)
@@ -173,6 +234,7 @@ def main() -> None:
         "ms_per_frame": {k: 1e3 * v / args.frames for k, v in stages.items()},
         "extract_split_ms": {"appearance_maps": 1e3 * appearance, "grid_flow": 1e3 * flow_ms},
         "node_in_executor": node_throughput(background_msgs + msgs, args.frames),
+        "node_streaming": node_streaming(background_msgs + msgs, args.frames),
         "flow_accuracy": flow_endpoint_error(cam, poses, frames),
     }, indent=2))
 

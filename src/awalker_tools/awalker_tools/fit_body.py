@@ -7,8 +7,8 @@ over the first frames from the start (``inference.bodyfit``) and writes DIR/body
 again with ``awalker track BAG --body DIR/body_fitted.yaml``. A body scaled to the height seen in the
 images keeps that height in the fit when two or more cameras saw it (``KEEP_HEIGHT_CAMERAS``). When the start
 names no stance leg (found automatically, or ``stance_leg: unknown``), it then weighs the two legs with the
-fitted body the same way and writes DIR/start_fitted.yaml, the start with the leg chosen (``awalker track`` hands it to its second
-pass's tracker: ``TrackOptions.fitted_start``).
+fitted body the same way and writes DIR/start_fitted.yaml, the start with the leg chosen (``awalker track``
+hands it to its second pass's tracker: ``TrackOptions.fitted_start``).
 """
 from __future__ import annotations
 
