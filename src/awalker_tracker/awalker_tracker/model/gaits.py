@@ -329,16 +329,12 @@ class GaitTable:
 
     # ---- queries -----------------------------------------------------------------------
     @functools.cached_property
-    def _lookup_values(self) -> np.ndarray:
-        """(4, S, L) stance rate, swing rate, kappa, iota with 0 where not converged (weights are 0 there)."""
-        return np.ascontiguousarray(np.nan_to_num(np.stack([self.stance_rate, self.swing_rate, self.stiffness,
-                                                            self.toe_off_impulse])), float)
-
-    @functools.cached_property
     def _grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """What the compiled look-ups take: speeds, step lengths, ``_lookup_values``, converged."""
+        """What the compiled look-ups take: speeds (S,), step lengths (L,), the values (4, S, L) stance rate,
+        swing rate, kappa, iota with 0 where not converged (their weights are 0 there), converged (S, L)."""
+        values = np.nan_to_num(np.stack([self.stance_rate, self.swing_rate, self.stiffness, self.toe_off_impulse]))
         return (np.ascontiguousarray(self.speeds, float), np.ascontiguousarray(self.step_lengths, float),
-                self._lookup_values, np.ascontiguousarray(self.converged, np.bool_))
+                np.ascontiguousarray(values, float), np.ascontiguousarray(self.converged, np.bool_))
 
     def _interpolated(self, speed: np.ndarray | float, step_length: np.ndarray | float
                       ) -> tuple[tuple[int, ...], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -632,6 +628,7 @@ def _bilinear(speeds: np.ndarray, step_lengths: np.ndarray, values: np.ndarray, 
     w10 = w10 if converged[i + 1, j] else 0.0
     w01 = w01 if converged[i, j + 1] else 0.0
     w11 = w11 if converged[i + 1, j + 1] else 0.0
+    # summed corner by corner from 0, in this order: the same rounding as the numpy code this replaced
     total = 0.0 + w00 + w10 + w01 + w11
     for k in range(4):
         out[k, q] = (((0.0 + w00 * values[k, i, j]) + w10 * values[k, i + 1, j]) + w01 * values[k, i, j + 1]
