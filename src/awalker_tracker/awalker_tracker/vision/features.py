@@ -28,14 +28,22 @@ Illumination: each frame's global per-channel gain relative to the first frame
 and comparing (``compensate_gain``), so slow or sudden lighting changes do not turn the whole
 background into foreground.
 Occlusion mask (255 / True = occluded): its pixels get ratio 0, cells it touches are invalid.
+
+Two cores: a frame's flow is estimated on a worker thread of the extractor while the calling thread learns
+and computes the maps (OpenCV's DIS and the compiled kernels release the interpreter lock; the two share no
+data, so the features are the same as one after the other). One thread (``blocks.thread_count``, e.g.
+``AWALKER_THREADS=1``) runs them one after the other.
 """
 from __future__ import annotations
 
+import os
 import sys
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from awalker_tracker.blocks import thread_count
 from awalker_tracker.model.body import PART_CLASSES, BodyDescription
 from awalker_tracker.vision.background import (
     BackgroundModel,
@@ -142,6 +150,8 @@ class FeatureExtractor:
         self._refits: list[int] = []           # frame counts after which the robust background is refitted
         self._flow = GridFlow(config.flow)
         self._prev_grey: np.ndarray | None = None
+        self._flow_thread: ThreadPoolExecutor | None = None
+        self._flow_thread_pid = 0       # the process that started it (a forked child starts its own)
 
     @property
     def ready(self) -> bool:
@@ -160,6 +170,19 @@ class FeatureExtractor:
             return labels
         d = self.config.downsample
         return labels[d // 2 :: d, d // 2 :: d][: shape[0], : shape[1]]
+
+    def _start_flow(self, grey: np.ndarray) -> Future | FlowGrid:
+        """This frame's flow from the previous grey image: on the extractor's worker thread when the
+        process may use two threads or more (a future), else computed here."""
+        height, width = grey.shape
+        if self._prev_grey is None or self._prev_grey.shape != grey.shape:
+            return FlowGrid.empty(height, width, self.config.flow.cell_size)
+        if thread_count() < 2:
+            return self._flow.estimate(self._prev_grey, grey)
+        if self._flow_thread is None or self._flow_thread_pid != os.getpid():
+            self._flow_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="awalker-flow")
+            self._flow_thread_pid = os.getpid()
+        return self._flow_thread.submit(self._flow.estimate, self._prev_grey, grey)
 
     def _log(self, text: str) -> None:
         if self.verbose:
@@ -181,8 +204,22 @@ class FeatureExtractor:
             raise ValueError(f"expected an (H, W, 3) RGB image, got shape {image.shape}")
         height, width = image.shape[:2]
         grey = to_grey(image)
+        pending = self._start_flow(grey)
+        try:
+            llr = self._maps(image, class_labels, fill_with_bands)
+        finally:
+            flow = pending.result() if isinstance(pending, Future) else pending
+        self._prev_grey = grey
+        self.frame_index += 1
+        return occluded(FrameFeatures(self.classes, llr, cfg.downsample, width, height, flow), occlusion_mask)
+
+    def _maps(self, image: np.ndarray, class_labels: np.ndarray | None, fill_with_bands: bool) -> np.ndarray:
+        """The log-likelihood-ratio maps (C, h, w) float32 of a frame, after learning what this frame teaches
+        the background and foreground models (module doc)."""
+        cfg = self.config
         m = measurements(image, cfg.downsample)
         if self.background is not None and self.background.shape != m.shape[:2]:
+            height, width = image.shape[:2]
             raise ValueError(f"frame size {width}x{height} differs from the first frames'")
         if cfg.compensate_gain:
             # Lighting: measurements are expressed in the illumination of the first frame seen.
@@ -232,11 +269,4 @@ class FeatureExtractor:
                 self.background = self.background.adapt(m, cfg.adapt_rate)
         else:
             llr = np.zeros((len(self.classes),) + m.shape[:2], np.float32)
-        # ---- flow ------------------------------------------------------------------------
-        if self._prev_grey is None or self._prev_grey.shape != grey.shape:
-            flow = FlowGrid.empty(height, width, cfg.flow.cell_size)
-        else:
-            flow = self._flow.estimate(self._prev_grey, grey)
-        self._prev_grey = grey
-        self.frame_index += 1
-        return occluded(FrameFeatures(self.classes, llr, cfg.downsample, width, height, flow), occlusion_mask)
+        return llr
