@@ -150,8 +150,15 @@ def align_tracks(estimate: PoseTrack, truth: PoseTrack) -> tuple[np.ndarray, np.
     """Rows of ``estimate`` and ``truth`` with equal stamps (frames whose stamps match)."""
     common, est_rows, true_rows = np.intersect1d(estimate.stamps_ns, truth.stamps_ns, return_indices=True)
     if common.size == 0:
+        hint = ""
+        if estimate.stamps_ns.size and truth.stamps_ns.size:
+            offset_s = (truth.stamps_ns[0] - estimate.stamps_ns[0]) * 1e-9
+            hint = (f"; the truth starts {offset_s:+.3f} s from the estimate: a bag made by `awalker convert "
+                    f"--fps` counts from --start-time (default 0), so convert it with the truth's first stamp "
+                    f"as --start-time")
         raise InputError("estimate and ground truth share no frame stamps "
-                         f"(estimate {estimate.stamps_ns[:3].tolist()}..., truth {truth.stamps_ns[:3].tolist()}...)")
+                         f"(estimate {estimate.stamps_ns[:3].tolist()}..., truth {truth.stamps_ns[:3].tolist()}...)"
+                         + hint)
     return est_rows, true_rows
 
 
