@@ -101,6 +101,42 @@ def test_the_evidence_finds_the_stance_leg_a_start_leaves_open(true_leg: int):
     assert fit.log_evidence[true_leg] > fit.log_evidence[other] + 200
 
 
+@pytest.mark.parametrize("scripted, max_repeats, rounds, leg", [
+    # 2 nats apart after two filters per leg, 9.1 after four, 9.1 after six: three rounds, capped; right
+    ({LEFT: [100, 103, 90, 95, 80, 85], RIGHT: [101, 99, 110, 112, 100, 100]}, 6, [2, 2, 2], RIGHT),
+    # the same capped at five filters per leg: the last round runs one
+    ({LEFT: [100, 103, 90, 95, 80], RIGHT: [101, 99, 110, 112, 100]}, 5, [2, 2, 1], RIGHT),
+    # 30 nats apart at once: one round
+    ({LEFT: [130, 131], RIGHT: [101, 99]}, 6, [2], LEFT),
+    # 2 nats apart, then 15.4 after four filters: two rounds, and the pooled evidence decides
+    ({LEFT: [100, 103, 116, 117], RIGHT: [101, 99, 100, 101]}, 6, [2, 2], LEFT),
+])
+def test_tied_legs_are_weighed_again_with_more_filters(monkeypatch, scripted, max_repeats, rounds, leg):
+    from awalker_tracker.inference import bodyfit
+
+    calls: list[dict] = []
+
+    def scripted_evidence(candidates, *args):
+        calls.append(candidates)
+        return {key: float(scripted[key[0]][key[1]]) for key in candidates}
+
+    monkeypatch.setattr(bodyfit, "_log_evidence", scripted_evidence)
+    config = BodyFitConfig(frames=5, seed=3, stance_repeats=2, stance_tie_nats=10.0, stance_max_repeats=max_repeats)
+    start = StartDescription(0, (0.0, 0.0), 0.0, 1.3, 0.7, None)
+    messages: list[str] = []
+    fit = fit_stance_leg(BodyDescription.default(), start, lambda b: marker_likelihood(), [None] * 5, TrackerConfig(),
+                         config, progress=messages.append)
+    assert [len(c) // 2 for c in calls] == rounds and fit.filters == sum(rounds) and fit.leg == leg
+    done = 0
+    for size, candidates in zip(rounds, calls):      # each round the next filters of both legs, their own seeds
+        assert sorted(candidates) == [(k, r) for k in (LEFT, RIGHT) for r in range(done, done + size)]
+        assert all(seed == 3 + r and s.stance_leg == k for (k, r), (_, s, seed) in candidates.items())
+        done += size
+    pooled = {k: np.log(np.mean(np.exp(np.array(scripted[k][:done], float)))) for k in (LEFT, RIGHT)}
+    assert fit.log_evidence == pytest.approx(pooled)
+    assert sum("more filters per leg" in m for m in messages) == len(rounds) - 1
+
+
 def test_bad_fit_settings_and_inputs():
     with pytest.raises(ValueError, match="leg factors"):
         BodyFitConfig(leg_factors=(0.4, 1.0))
@@ -108,6 +144,10 @@ def test_bad_fit_settings_and_inputs():
         BodyFitConfig(frames=1)
     with pytest.raises(ValueError, match="stance_repeats"):
         BodyFitConfig(stance_repeats=0)
+    with pytest.raises(ValueError, match="stance_max_repeats"):
+        BodyFitConfig(stance_repeats=3, stance_max_repeats=2)
+    with pytest.raises(ValueError, match="stance_tie_nats"):
+        BodyFitConfig(stance_tie_nats=-1.0)
     with pytest.raises(ValueError, match="no observations"):
         fit_leg_length(BodyDescription.default(), StartDescription(), lambda body: marker_likelihood(), [],
                        TrackerConfig())

@@ -482,6 +482,9 @@ def test_a_start_without_stance_leg_has_it_fitted_in_a_first_pass(synth_bag: Pat
     assert fitted.stance_leg is not None and fit["stance_leg"] == LEG_NAMES[fitted.stance_leg]
     evidence = fit["stance_log_evidence"]
     assert set(evidence) == {"left", "right"} and evidence[fit["stance_leg"]] == max(evidence.values())
+    # legs within stance_tie_nats were weighed again, up to stance_max_repeats filters each
+    filters, margin = fit["stance_filters_per_leg"], abs(evidence["left"] - evidence["right"])
+    assert filters in (2, 4, 6) and (filters == 6 or margin >= 10.0)
     # the run took it: its start.yaml names the leg, run.yaml says where it came from
     assert StartDescription.from_yaml(out / "start.yaml").stance_leg == fitted.stance_leg
     assert "fitted to the first pass's images" in run["start_source"]

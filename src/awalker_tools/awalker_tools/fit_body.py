@@ -80,7 +80,7 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
     the stance leg fitted, the leg, each leg's evidence and ``start_written``). ``leg_factors``: the
     candidates; None: by the body's source (``GIVEN_BODY_FACTORS`` or ``HEIGHT_SCALED_FACTORS``); ``(1.0,)``:
     the body as it is (only the stance leg is weighed). ``settings``: the other ``BodyFitConfig`` fields
-    (frames, particles, seed, stance_repeats). Progress goes to stderr."""
+    (frames, particles, seed, stance_repeats, stance_max_repeats). Progress goes to stderr."""
     from awalker_tracker.inference.autostart import AUTO_SPREAD
     from awalker_tracker.inference.bodyfit import BodyFitConfig, fit_leg_length, fit_stance_leg
     from awalker_tracker.inference.recovery import RecoveryConfig
@@ -143,7 +143,9 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
     summary.update({"given_leg_length_m": round(body.leg_length, 4), "frames": frames, "written": str(out)})
     if start.stance_leg is None:
         print(f"awalker fitbody: the start names no stance leg; both legs x {frames} frames from frame {first}, "
-              f"{fit_config.stance_repeats} filters of {fit_config.particles} particles each", file=sys.stderr)
+              f"{fit_config.stance_repeats} filters of {fit_config.particles} particles each (up to "
+              f"{fit_config.stance_max_repeats} while the legs lie within {fit_config.stance_tie_nats:g} nats)",
+              file=sys.stderr)
         stance = fit_stance_leg(fitted_body, start, likelihood_for, observations, config, fit_config,
                                 cameras=cameras, progress=report)
         fitted_start = replace(start, stance_leg=stance.leg)
@@ -151,6 +153,7 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
         start_out.write_text(fitted_start.to_yaml_text())
         summary.update({"stance_leg": LEG_NAMES[stance.leg],
                         "stance_log_evidence": {LEG_NAMES[k]: round(v, 2) for k, v in stance.log_evidence.items()},
+                        "stance_filters_per_leg": stance.filters,
                         "start_written": str(start_out)})
     return summary
 
