@@ -463,6 +463,7 @@ def test_a_start_without_stance_leg_has_it_fitted_in_a_first_pass(synth_bag: Pat
     frames weigh the legs within a nat or two.)"""
     from dataclasses import replace
 
+    from awalker_tools.commands.report import build_report
     from awalker_tracker.inference.gait import SIDES_NOTE
     from awalker_tracker.inference.tracker import StartDescription
     from awalker_tracker.model.walker import LEG_NAMES
@@ -485,6 +486,8 @@ def test_a_start_without_stance_leg_has_it_fitted_in_a_first_pass(synth_bag: Pat
     # legs within stance_tie_nats were weighed again, up to stance_max_repeats filters each
     filters, margin = fit["stance_filters_per_leg"], abs(evidence["left"] - evidence["right"])
     assert filters in (2, 4, 6) and (filters == 6 or margin >= 10.0)
+    assert "stance leg at the start, weighed" in (page := build_report(out).read_text())
+    assert f"{fit['stance_leg']} (left {evidence['left']:.1f}, right {evidence['right']:.1f}; {filters} filters per leg)" in page
     # the run took it: its start.yaml names the leg, run.yaml says where it came from
     assert StartDescription.from_yaml(out / "start.yaml").stance_leg == fitted.stance_leg
     assert "fitted to the first pass's images" in run["start_source"]

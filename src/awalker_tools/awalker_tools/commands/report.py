@@ -55,8 +55,10 @@ def _start_section(run_yaml: Path) -> list[str]:
         columns.append("leg length fitted (m)")
     if "stance_leg" in fit:
         evidence = fit["stance_log_evidence"]
+        filters = fit.get("stance_filters_per_leg")
         row["stance leg at the start, weighed (log evidence, nats)"] = (
-            f"{fit['stance_leg']} ({', '.join(f'{leg} {value:.1f}' for leg, value in evidence.items())})")
+            f"{fit['stance_leg']} ({', '.join(f'{leg} {value:.1f}' for leg, value in evidence.items())}"
+            + (f"; {filters} filters per leg" if filters else "") + ")")
         columns.append("stance leg at the start, weighed (log evidence, nats)")
     return ["<h2>How it started</h2>", _table([row], columns)]
 
