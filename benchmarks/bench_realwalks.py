@@ -38,9 +38,9 @@ a bag the tracker's body does not have (`synth --carry`; the sequences and runs 
 (``ground_truth_body.yaml`` beside the sequence) instead of the tape's; runs named ..._truebody_sN. Sequences
 synthesised before synth wrote that file must be made again (delete their directory under OUT/sequences).
 
---likelihood-scale S, --lookahead T: `awalker track`'s tempering exponent and look-ahead for the tracked runs
-(dead reckoning keeps 0 and the default); runs other than the defaults are named ..._lsS / ..._laT, so they sit
-beside the default runs of the same --out and reuse its sequences.
+--likelihood-scale S, --lookahead T, --pelvis-ceiling F: `awalker track`'s tempering exponent, look-ahead and
+pelvis ceiling for the tracked runs (dead reckoning keeps 0 and the defaults); runs other than the defaults are
+named ..._lsS / ..._laT / ..._pcF, so they sit beside the default runs of the same --out and reuse its sequences.
 """
 from __future__ import annotations
 
@@ -160,6 +160,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="awalker track --likelihood-scale for the tracked runs (runs named ..._lsS_sN unless the default)")
     parser.add_argument("--lookahead", type=int, default=TrackOptions.lookahead,
                         help="awalker track --lookahead (tau) for the tracked runs (runs named ..._laT_sN unless the default)")
+    parser.add_argument("--pelvis-ceiling", type=float, default=TrackOptions.pelvis_ceiling,
+                        help="awalker track --pelvis-ceiling for the tracked runs (runs named ..._pcF_sN unless the default)")
     parser.add_argument("--true-body", action="store_true",
                         help="track with the person's own sizes (ground_truth_body.yaml), not the tape's (runs named ..._truebody_sN)")
     parser.add_argument("--carry", choices=CARRIED, default="none",
@@ -171,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
         "particles": args.particles, "size": list(args.size), "rate": args.rate, "seeds": args.seeds,
         "background_frames": 0 if args.hands_off else args.background_frames, "hands_off": args.hands_off,
         "carry": args.carry, "leg_scale_spread": args.leg_scale_spread, "fit_body": args.fit_body, "true_body": args.true_body,
-        "likelihood_scale": args.likelihood_scale, "lookahead": args.lookahead, "cpus": os.cpu_count()}, "runs": {}, "summary": {}}
+        "likelihood_scale": args.likelihood_scale, "lookahead": args.lookahead, "pelvis_ceiling": args.pelvis_ceiling, "cpus": os.cpu_count()}, "runs": {}, "summary": {}}
     if args.true_body and args.hands_off:
         parser.error("--true-body replaces the body description, which --hands-off runs do not have")
     jobs = [(w, v, s) for w in args.walks for v in args.variants for s in args.settings]
@@ -195,6 +197,8 @@ def main(argv: list[str] | None = None) -> int:
                 legs += f"_ls{args.likelihood_scale:g}"
             if images and args.lookahead != TrackOptions.lookahead:
                 legs += f"_la{args.lookahead}"
+            if images and args.pelvis_ceiling != TrackOptions.pelvis_ceiling:
+                legs += f"_pc{args.pelvis_ceiling:g}"
             run_name = f"{walk}_{variant}_{setting}_{mode}{suffix(args.hands_off, args.carry)}{legs}_s{seed}"
             run_dir = args.out / "runs" / run_name
             if not (run_dir / "eval.json").exists():
@@ -204,6 +208,7 @@ def main(argv: list[str] | None = None) -> int:
                                               likelihood_scale=args.likelihood_scale if images else 0.0,
                                               recovery=images, lookahead=args.lookahead if images else TrackOptions.lookahead,
                                               leg_scale_spread=args.leg_scale_spread if images else 0.0,
+                                              pelvis_ceiling=args.pelvis_ceiling if images else TrackOptions.pelvis_ceiling,
                                               auto_start=args.hands_off, overlays=False, quiet=True,
                                               fit_body=True if images and args.fit_body else None))
                 evaluate_run(run_dir)

@@ -163,6 +163,12 @@ def test_initial_particles_spread_around_the_start():
     assert two.kin_config.posture_drift == config.posture_drift > 0
     with pytest.raises(ValueError, match="posture_spread"):
         TrackerConfig(posture_spread=0.5)
+    # the pelvis ceiling reaches the kinematics (off by default)
+    assert two.kin_config.pelvis_ceiling == 1.0
+    ceiled = TrackerModel(body, start, marker_likelihood(), replace(config, pelvis_ceiling=0.97), cameras=[object()])
+    assert ceiled.kin_config.pelvis_ceiling == 0.97
+    with pytest.raises(ValueError, match="pelvis_ceiling"):
+        TrackerConfig(pelvis_ceiling=1.2)
 
 
 def test_start_outside_the_solved_gaits_is_refused_and_the_spread_redrawn():

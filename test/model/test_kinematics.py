@@ -189,6 +189,35 @@ def test_heel_rise_keeps_the_pelvis_at_most_at_the_walkers_hip():
     assert checked > 5000 and bent > 20
 
 
+def test_a_pelvis_ceiling_keeps_the_pelvis_lower_with_the_stance_knee_bent():
+    """``pelvis_ceiling`` 0.97: over the stance (no heel strike into the frame) the pelvis stays at most 0.97 of
+    the walker's hip height, the stance knee bending for it, where with the walker's hip itself (1, the default)
+    the prior's knee leaves the pelvis above that most of the time. Contact and ground stay as they were: the
+    stance foot on the ground, the swing foot above it."""
+    ceiling = 0.97
+    outcome = {}
+    for fraction in (1.0, ceiling):
+        walkers, states, poses = run(48, 200, seed=6, config=KinematicConfig(pelvis_ceiling=fraction))
+        above, knees, checked = 0, [], 0
+        for f in range(1, len(walkers)):
+            kept = walkers[f].stance_leg == states[f - 1].contact_leg
+            hip = hip_position(PARAMS, walkers[f])[1]
+            pelvis = poses[f].markers[:, M["pelvis"], 2]
+            if fraction < 1.0:
+                assert np.all(pelvis[kept] <= ceiling * hip[kept] + 1e-4)
+            above += int(np.sum(kept & (pelvis > ceiling * hip + 1e-4)))
+            checked += int(kept.sum())
+            stance = np.where(walkers[f].stance_leg == LEFT, states[f].knee[:, 0], states[f].knee[:, 1])
+            knees.append(stance[kept])
+            soles = poses[f].markers[:, [M["left_heel"], M["left_toe"], M["right_heel"], M["right_toe"]], 2]
+            assert soles.min() > -1e-6                                       # nothing below the ground
+        outcome[fraction] = (above / checked, float(np.median(np.concatenate(knees))))
+    assert outcome[1.0][0] > 0.5 and outcome[ceiling][0] == 0.0
+    assert outcome[ceiling][1] > outcome[1.0][1] + 0.1                      # the stance knee bends (rad)
+    with pytest.raises(ValueError, match="pelvis_ceiling"):
+        KinematicConfig(pelvis_ceiling=0.5)
+
+
 def test_the_landing_knee_is_straightened_to_reach_the_ground():
     """At heel strike the walker's feet meet the ground together, but a landing knee still bent holds the
     kinematic foot above it: the knee is straightened until the foot touches (or fully). Measured on the

@@ -361,6 +361,7 @@ def test_track_option_errors(tmp_path: Path, capsys):
                                 ("--lookahead", "-1", "--lookahead"),
                                 ("--likelihood-scale", "-1", "--likelihood-scale"),
                                 ("--leg-scale-spread", "0.5", "--leg-scale-spread"),
+                                ("--pelvis-ceiling", "1.2", "--pelvis-ceiling"),
                                 ("--depth-band", "-0.1", "--depth-band")):
         assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), option, value]) == 2
         assert text in capsys.readouterr().err
@@ -386,6 +387,10 @@ def test_track_fit_body_option_reaches_the_pipeline(tmp_path: Path, monkeypatch)
     assert seen[-1].particles == TRACK_PARTICLES == pipeline.TrackOptions(Path("b"), Path("o")).particles
     assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--depth-band", "0"]) == 0
     assert seen[-1].depth_band_m == 0.0
+    # --pelvis-ceiling too (default 1: off)
+    assert seen[-1].pelvis_ceiling == 1.0
+    assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--pelvis-ceiling", "0.97"]) == 0
+    assert seen[-1].pelvis_ceiling == 0.97
 
 
 JUNK_PUBLISHER = """

@@ -119,6 +119,7 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
     config = TrackerConfig(
         smc=SMCConfig(lookahead=int(info.get("lookahead", 3)), trust=float(info.get("trust", 0.9))),
         dt=dt, likelihood_scale=float(info.get("likelihood_scale", 0.1)),
+        pelvis_ceiling=float(info.get("pelvis_ceiling", 1.0)),
         spread=AUTO_SPREAD if auto else TrackerConfig.spread,
         recovery=RecoveryConfig(reseed_fallen=recovery, reacquire=recovery, hold_still=recovery))
     likelihood = LikelihoodConfig(head_top_weight=1.0)

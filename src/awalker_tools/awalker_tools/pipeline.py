@@ -108,6 +108,7 @@ class TrackOptions:
     seed: int = 0
     likelihood_scale: float = 0.1
     leg_scale_spread: float = 0.0   # the particles' leg lengths around the body's (TrackerConfig.leg_scale_spread)
+    pelvis_ceiling: float = 1.0     # the pelvis at most this fraction of the walker's hip height (TrackerConfig)
     auto_start: bool = False        # ignore any start description and find the walking person (also when none exists)
     follow_near: tuple[float, float] | None = None   # automatic start: follow the person first seen near this ground point (m)
     recovery: bool = True           # re-seed fallen walkers and re-acquire a lost track (inference/recovery.py)
@@ -355,6 +356,7 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
             Parameter("trust", value=float(options.trust)), Parameter("seed", value=int(options.seed)),
             Parameter("likelihood_scale", value=float(options.likelihood_scale)),
             Parameter("leg_scale_spread", value=float(options.leg_scale_spread)),
+            Parameter("pelvis_ceiling", value=float(options.pelvis_ceiling)),
             Parameter("reseed_fallen", value=bool(options.recovery)), Parameter("reacquire", value=bool(options.recovery)),
             Parameter("hold_still", value=bool(options.recovery)),
             *([Parameter("depth_band_m", value=float(band))] if band is not None else []),
@@ -482,6 +484,7 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
         "input": str(bag.resolve()), "start_source": start_src, "body_source": body_src,
         "particles": options.particles, "lookahead": options.lookahead, "trust": options.trust, "seed": options.seed,
         "likelihood_scale": options.likelihood_scale, "leg_scale_spread": options.leg_scale_spread,
+        "pelvis_ceiling": options.pelvis_ceiling,
         "recovery": options.recovery, "depth_band_m": result.depth_band_m,
         **({"stopped_after_frames": options.stop_after_frames} if enough else {}),
         "frames": result.frames, "posteriors": result.summaries, "seconds": round(result.seconds, 3),

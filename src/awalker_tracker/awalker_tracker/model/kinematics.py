@@ -75,7 +75,9 @@ landed the foot short and the body walked at 0.7x). Two position projections kee
 walker at heel strike, when the walker's rigid legs meet the ground together: *heel rise*
 (``_stance_knee``): late in a long stance the stance foot stands on its toe, which would carry the
 pelvis above the walker's hip (``walker.hip_position``), so the stance knee bends just enough to keep it
-there (people flex it ~35 degrees at toe-off); *landing* (``_landing_knee``): a landing knee still bent
+there (people flex it ~35 degrees at toe-off; ``KinematicConfig.pelvis_ceiling`` < 1 keeps the pelvis below that
+fraction of the walker's hip height, so the stance knee bends over the whole stance as a person's does); *landing*
+(``_landing_knee``): a landing knee still bent
 holds the foot above the ground, so it is straightened until the foot touches (on the hand-made walk of
 ``test_kinematics`` from 0.34 to 0.24 rad, median, and the pelvis drops a median 3 mm in that frame;
 19 mm without the lean).
@@ -244,6 +246,9 @@ class KinematicConfig:
     # per frame (rad, standard deviation): each particle's posture (torso_rest) wanders by this within
     # +- POSTURE_LIMIT of Table 1's rest (module doc, *Posture*)
     posture_drift: float = 0.0
+    # the pelvis stays at or below this fraction of the walker's hip height over the stance, the stance knee
+    # bending as much as that needs (module doc, *Knees*: heel rise; 1 = the walker's hip height itself)
+    pelvis_ceiling: float = 1.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -252,6 +257,9 @@ class KinematicConfig:
             raise ValueError(f"KinematicConfig.stance_knee_rest must lie in [0, pi/2) rad, got {self.stance_knee_rest!r}")
         if self.step_width is not None and not (np.isfinite(self.step_width) and 0.0 <= self.step_width <= 0.5):
             raise ValueError(f"KinematicConfig.step_width must lie in 0-0.5 m (or be None), got {self.step_width!r}")
+        if not (np.isfinite(self.pelvis_ceiling) and 0.85 <= self.pelvis_ceiling <= 1.0):
+            raise ValueError(f"KinematicConfig.pelvis_ceiling must lie in 0.85-1 (of the walker's hip height), got "
+                             f"{self.pelvis_ceiling!r}")
 
     def hip_abduction_rest(self, body: BodyDescription) -> float:
         """psi_bar of both hips' abduction (rad, away from the midline +): Table 1's, or with ``step_width``
@@ -495,7 +503,7 @@ def initial_kinematics(
     scale = _initial_leg_scale(config, n, rng, leg_scale_spread)
     legs = leg_angles(walker)
     _initial_clearance_kernel(_geometry(body), legs, dofs, scale, leg,
-                              np.ascontiguousarray(hip_position(params, walker)[1], float))
+                              np.ascontiguousarray(config.pelvis_ceiling * hip_position(params, walker)[1], float))
     _sole_points_kernel(_geometry(body), legs, dofs, scale, leg, beta, True, point)
     return _initial_state(params, walker, dofs, beta, point, start_position_xy, rng, position_spread,
                           turn_rate_spread, scale, torso_rest)
@@ -661,7 +669,7 @@ def _sample_kinematics(
     contact_point, contact_roll = (np.ascontiguousarray(kin.contact_point, float),
                                    np.ascontiguousarray(kin.contact_roll, float))
     stance_x = np.ascontiguousarray(stance_contact_x(params, walker), float)
-    hip_height = np.ascontiguousarray(hip_position(params, walker)[1], float)
+    hip_height = np.ascontiguousarray(config.pelvis_ceiling * hip_position(params, walker)[1], float)
     over_blocks(n, lambda rows: _sample_kernel(
         geometry, legs[rows], new[rows], scale[rows], previous[rows], contact_point[rows], contact_roll[rows],
         contact_leg[rows],

@@ -92,6 +92,9 @@ class TrackerNode(Node):
         self.leg_scale_spread = float(declare("leg_scale_spread", TrackerConfig.leg_scale_spread,
                                               "spread (log, std) of the particles' leg lengths around the body's "
                                               "(0: the body's own; TrackerConfig.leg_scale_spread)"))
+        self.pelvis_ceiling = float(declare("pelvis_ceiling", TrackerConfig.pelvis_ceiling,
+                                            "the pelvis at most this fraction of the walker's hip height, the stance "
+                                            "knee bending (0.85-1; 1: off; TrackerConfig.pelvis_ceiling)"))
         self.auto_start = bool(declare("auto_start", False, "no start description: find the walking person in the "
                                        "images (inference/autostart.py)"))
         follow = declare("follow_near", Parameter.Type.DOUBLE_ARRAY, "automatic start with several people in view: "
@@ -361,6 +364,7 @@ class TrackerNode(Node):
         cameras = [self.cameras[c] for c in self.camera_names]
         config = TrackerConfig(smc=self.smc_config, dt=dt, likelihood_scale=self.likelihood_scale,
                                recovery=self.recovery, leg_scale_spread=self.leg_scale_spread,
+                               pelvis_ceiling=self.pelvis_ceiling,
                                spread=AUTO_SPREAD if self.start_found_automatically else TrackerConfig.spread)
         model = TrackerModel(body, self.start, image_likelihood(body, cameras),
                              config, cameras=cameras)
