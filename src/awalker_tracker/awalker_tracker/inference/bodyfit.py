@@ -205,9 +205,8 @@ def fit_stance_leg(body: BodyDescription, start: StartDescription, likelihood_fo
                      f"{count} frames")
 
     evidence: dict[tuple[int, int], float] = {}
-    filters = 0
-    while True:
-        more = min(config.stance_repeats, config.stance_max_repeats - filters)
+    filters, more = 0, config.stance_repeats
+    while more > 0:
         candidates = {(leg, repeat): (body, replace(start, stance_leg=leg), config.seed + repeat)
                       for leg in (LEFT, RIGHT) for repeat in range(filters, filters + more)}
         evidence.update(_log_evidence(candidates, likelihood_for, used, tracker_config, config, cameras, report))
@@ -215,10 +214,9 @@ def fit_stance_leg(body: BodyDescription, start: StartDescription, likelihood_fo
         per_leg = {leg: float(logsumexp([evidence[(leg, r)] for r in range(filters)]) - np.log(filters))
                    for leg in (LEFT, RIGHT)}
         margin = abs(per_leg[LEFT] - per_leg[RIGHT])
-        if not margin < config.stance_tie_nats or filters >= config.stance_max_repeats:
-            break
-        if progress is not None:
-            progress(f"the legs lie {margin:.1f} nats apart (< {config.stance_tie_nats:g}): "
-                     f"{min(config.stance_repeats, config.stance_max_repeats - filters)} more filters per leg")
+        # another round while the legs lie within the tie (NaN: both lost, no more) and filters remain
+        more = min(config.stance_repeats, config.stance_max_repeats - filters) if margin < config.stance_tie_nats else 0
+        if more and progress is not None:
+            progress(f"the legs lie {margin:.1f} nats apart (< {config.stance_tie_nats:g}): {more} more filters per leg")
     return StanceFit(_best(per_leg, "fit_stance_leg: both stance legs lost the person (evidence -inf)"), per_leg,
                      len(used), filters)

@@ -205,9 +205,8 @@ class TrackerConfig:
             raise ValueError(f"TrackerConfig: posture_spread must lie in 0-0.3 rad, posture_drift in 0-0.02 rad and "
                              f"posture_min_cameras be >= 1, got {self.posture_spread}, {self.posture_drift}, "
                              f"{self.posture_min_cameras}")
-        if not (np.isfinite(self.pelvis_ceiling) and 0.85 <= self.pelvis_ceiling <= 1.0):
-            raise ValueError(f"TrackerConfig.pelvis_ceiling must lie in 0.85-1 (of the walker's hip height), got "
-                             f"{self.pelvis_ceiling}")
+        from awalker_tracker.model.kinematics import KinematicConfig
+        KinematicConfig(pelvis_ceiling=self.pelvis_ceiling)     # the kinematics' own check of the ceiling it sets
 
 
 # ----------------------------------------------------------------------------- particle states
