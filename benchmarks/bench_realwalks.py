@@ -161,7 +161,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--lookahead", type=int, default=TrackOptions.lookahead,
                         help="awalker track --lookahead (tau) for the tracked runs (runs named ..._laT_sN unless the default)")
     parser.add_argument("--pelvis-ceiling", type=float, default=TrackOptions.pelvis_ceiling,
-                        help="awalker track --pelvis-ceiling for the tracked runs (runs named ..._pcF_sN unless the default)")
+                        help="awalker track --pelvis-ceiling for the tracked runs, with any number of cameras (runs named "
+                             "..._pcF_sN; default: the tracker's, 0.97 with two cameras and off with one)")
     parser.add_argument("--true-body", action="store_true",
                         help="track with the person's own sizes (ground_truth_body.yaml), not the tape's (runs named ..._truebody_sN)")
     parser.add_argument("--carry", choices=CARRIED, default="none",

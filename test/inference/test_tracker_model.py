@@ -163,12 +163,25 @@ def test_initial_particles_spread_around_the_start():
     assert two.kin_config.posture_drift == config.posture_drift > 0
     with pytest.raises(ValueError, match="posture_spread"):
         TrackerConfig(posture_spread=0.5)
-    # the pelvis ceiling reaches the kinematics (off by default)
-    assert two.kin_config.pelvis_ceiling == 1.0
-    ceiled = TrackerModel(body, start, marker_likelihood(), replace(config, pelvis_ceiling=0.97), cameras=[object()])
-    assert ceiled.kin_config.pelvis_ceiling == 0.97
+    # pelvis ceilings (kinematics, *Pelvis ceiling*): by default with two cameras, each particle's around 0.97 and
+    # wandering; off (the walker's hip height) with one camera or none
+    assert np.std(states.kin.pelvis_ceiling) == pytest.approx(config.pelvis_ceiling_spread, rel=0.25)
+    assert np.median(states.kin.pelvis_ceiling) == pytest.approx(config.pelvis_ceiling, abs=0.005)
+    assert two.kin_config.pelvis_ceiling == 0.97 and two.kin_config.pelvis_ceiling_drift == config.pelvis_ceiling_drift > 0
+    for off in (one, model):
+        assert off.kin_config.pelvis_ceiling == 1.0 and off.kin_config.pelvis_ceiling_drift == 0.0
+        assert np.all(off.initial(50, np.random.default_rng(0)).kin.pelvis_ceiling == 1.0)
+    assert [config.pelvis_ceiling_for(n)[0] for n in (0, 1, 2, 3)] == [1.0, 1.0, 0.97, 0.97]
+    assert replace(config, pelvis_ceiling=1.0).pelvis_ceiling_for(2) == (1.0, 0.0, 0.0)     # 1: off, no spread
+    ceiled = TrackerModel(body, start, marker_likelihood(), replace(config, pelvis_ceiling=0.95,
+                                                                    pelvis_ceiling_min_cameras=1), cameras=[object()])
+    assert ceiled.kin_config.pelvis_ceiling == 0.95
     with pytest.raises(ValueError, match="pelvis_ceiling"):
         TrackerConfig(pelvis_ceiling=1.2)
+    with pytest.raises(ValueError, match="pelvis_ceiling_min_cameras"):
+        TrackerConfig(pelvis_ceiling_min_cameras=0)
+    with pytest.raises(ValueError, match="pelvis_ceiling_drift"):
+        TrackerConfig(pelvis_ceiling_drift=0.5)
 
 
 def test_start_outside_the_solved_gaits_is_refused_and_the_spread_redrawn():

@@ -12,6 +12,7 @@ from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescriptio
 from awalker_tracker.model.kinematics import (
     CHORD_LEAN,
     DOF_NAMES,
+    PELVIS_CEILING_RANGE,
     KinematicConfig,
     KinematicState,
     _initial_dofs,
@@ -329,6 +330,9 @@ def sample_posed_kinematics_reference(
     torso_rest = kin.torso_rest
     if config.posture_drift > 0:
         torso_rest = _posture_within_limit(config, torso_rest + config.posture_drift * rng.standard_normal(len(kin)))
+    ceiling = kin.pelvis_ceiling
+    if config.pelvis_ceiling_drift > 0:
+        ceiling = np.clip(ceiling + config.pelvis_ceiling_drift * rng.standard_normal(len(kin)), *PELVIS_CEILING_RANGE)
     if heading is not None:
         new[:, DOF_NAMES.index("heading")] = heading
     legs = leg_angles(walker)
@@ -337,8 +341,9 @@ def sample_posed_kinematics_reference(
     new_leg = walker.stance_leg.astype(np.int8)
     switched = new_leg != old_leg
     before = new.copy()
-    # heel rise: the stance knee bent where the pelvis would stand above the walker's hip (not at a strike)
-    hip = np.where(switched, np.inf, hip_position(params, walker)[1])
+    # heel rise: the stance knee bent where the pelvis would stand above the particle's ceiling, that fraction of
+    # the walker's hip height (not at a strike)
+    hip = np.where(switched, np.inf, ceiling * hip_position(params, walker)[1])
     _keep_swing_foot_above_ground(body, local, legs, new, scale, 1 - new_leg, hip)
     _repose(body, local, legs, new, scale, np.flatnonzero(np.any(new != before, axis=1)))
     old_foot = _pick(local.foot, old_leg)
@@ -372,7 +377,7 @@ def sample_posed_kinematics_reference(
         hip_rotation=named["hip_rotation"], knee=named["knee"], ankle=named["ankle"], previous=current,
         contact_point=contact, contact_roll=beta, contact_leg=new_leg,
         plane_origin=_plane_origin(params, walker, contact, named["heading"]), turn_rate=turn_rate,
-        leg_scale=scale, torso_rest=torso_rest,
+        leg_scale=scale, torso_rest=torso_rest, pelvis_ceiling=ceiling,
     )
     return state, _posed_body(body, legs, new, local, shift)
 
@@ -469,6 +474,7 @@ def initial_kinematics_reference(
     turn_rate_spread: float = 0.0,
     leg_scale_spread: float = 0.0,
     posture_spread: float = 0.0,
+    pelvis_ceiling_spread: float = 0.0,
 ) -> KinematicState:
     """``kinematics.initial_kinematics`` with the sole geometry in numpy (same arguments)."""
     body = body or BodyDescription.default()
@@ -477,13 +483,15 @@ def initial_kinematics_reference(
     torso_rest = _initial_posture(config, n, rng, posture_spread)
     walker, dofs = _initial_dofs(config, body, walker, heading, n, rng, heading_spread, joint_spread, torso_rest)
     scale = _initial_leg_scale(config, n, rng, leg_scale_spread)
+    ceiling = np.clip(config.pelvis_ceiling + pelvis_ceiling_spread * rng.standard_normal(n)
+                      if pelvis_ceiling_spread > 0 else np.full(n, config.pelvis_ceiling), *PELVIS_CEILING_RANGE)
     legs = leg_angles(walker)
     local = _local_pose(body, legs, dofs, scale)
     leg = walker.stance_leg.astype(np.int8)
-    # the stance knees bent where the pelvis would stand above the walker's hip; then the swing knees bent
+    # the stance knees bent where the pelvis would stand above its ceiling; then the swing knees bent
     # where the swing foot would go below the ground, the body on its stance foot
     before = dofs.copy()
-    _keep_swing_foot_above_ground(body, local, legs, dofs, scale, 1 - leg, hip_position(params, walker)[1])
+    _keep_swing_foot_above_ground(body, local, legs, dofs, scale, 1 - leg, ceiling * hip_position(params, walker)[1])
     _repose(body, local, legs, dofs, scale, np.flatnonzero(np.any(dofs != before, axis=1)))
     beta = _lowest_roll(body, _pick(local.foot, leg))
     stance = _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), beta)
@@ -492,5 +500,5 @@ def initial_kinematics_reference(
     _repose(body, local, legs, dofs, scale, np.flatnonzero(np.any(dofs != before, axis=1)))
     point = _sole_point(body, _pick(local.ankles, leg), _pick(local.foot, leg), beta)
     return _initial_state(params, walker, dofs, beta, point, start_position_xy, rng, position_spread,
-                          turn_rate_spread, scale, torso_rest)
+                          turn_rate_spread, scale, torso_rest, ceiling)
 

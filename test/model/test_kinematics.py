@@ -45,12 +45,12 @@ def hand_made_walk(frames: int, n: int, half_angle: float = 0.35, step_frames: i
 
 
 def run(frames: int, n: int, seed: int = 0, config: KinematicConfig | None = None, heading_rate: float = 0.0,
-        **walk):
+        ceiling_spread: float = 0.0, **walk):
     """Simulate the prior over a hand-made walk; returns walkers, states, poses per frame."""
     config = config or KinematicConfig()
     rng = np.random.default_rng(seed)
     walkers = hand_made_walk(frames, n, **walk)
-    kin = initial_kinematics(config, walkers[0], [1.0, 2.0], 0.3, n, rng, body=BODY)
+    kin = initial_kinematics(config, walkers[0], [1.0, 2.0], 0.3, n, rng, body=BODY, pelvis_ceiling_spread=ceiling_spread)
     kin.previous[:, DOF_NAMES.index("heading")] -= heading_rate  # an initial turning velocity
     states = [kin]
     for f in range(1, frames):
@@ -216,6 +216,31 @@ def test_a_pelvis_ceiling_keeps_the_pelvis_lower_with_the_stance_knee_bent():
     assert outcome[ceiling][1] > outcome[1.0][1] + 0.1                      # the stance knee bends (rad)
     with pytest.raises(ValueError, match="pelvis_ceiling"):
         KinematicConfig(pelvis_ceiling=0.5)
+
+
+def test_each_particle_keeps_its_own_pelvis_ceiling():
+    """Pelvis ceilings drawn around 0.97 (spread 0.02) and wandering: over the stance each particle's pelvis
+    stays at most its own ceiling of the walker's hip height, the ceilings stay within PELVIS_CEILING_RANGE
+    and wander, and the particles with the lower ceilings carry the pelvis lower."""
+    from awalker_tracker.model.kinematics import PELVIS_CEILING_RANGE
+
+    config = KinematicConfig(pelvis_ceiling=0.97, pelvis_ceiling_drift=0.002)
+    walkers, states, poses = run(48, 400, seed=7, config=config, ceiling_spread=0.02)
+    assert np.std(states[0].pelvis_ceiling) == pytest.approx(0.02, rel=0.25)
+    low, high = PELVIS_CEILING_RANGE
+    heights = np.zeros(400)
+    for f in range(1, len(walkers)):
+        ceiling = states[f].pelvis_ceiling
+        assert np.all((ceiling >= low) & (ceiling <= high))
+        kept = walkers[f].stance_leg == states[f - 1].contact_leg
+        hip = hip_position(PARAMS, walkers[f])[1]
+        pelvis = poses[f].markers[:, M["pelvis"], 2]
+        assert np.all(pelvis[kept] <= ceiling[kept] * hip[kept] + 1e-4)
+        heights += pelvis
+    moved = np.abs(states[-1].pelvis_ceiling - states[0].pelvis_ceiling)
+    assert np.median(moved) == pytest.approx(0.002 * np.sqrt(47) * 0.6745, rel=0.3)   # a random walk's
+    lower = states[-1].pelvis_ceiling < np.median(states[-1].pelvis_ceiling)
+    assert heights[lower].mean() < heights[~lower].mean() - 0.005 * (len(walkers) - 1)
 
 
 def test_the_landing_knee_is_straightened_to_reach_the_ground():

@@ -58,7 +58,8 @@ def random_case(seed: int, n: int = 3000) -> tuple[WalkerState, KinematicState]:
         contact_point=rng.normal(0, 3, (n, 2)),
         contact_roll=rng.uniform(-BODY.sole_half_angle, BODY.sole_half_angle, n),
         contact_leg=rng.integers(0, 2, n).astype(np.int8), plane_origin=rng.normal(0, 3, (n, 2)),
-        turn_rate=rng.normal(0, 0.5, n), leg_scale=rng.uniform(0.85, 1.1, n), torso_rest=rng.normal(0, 0.1, n))
+        turn_rate=rng.normal(0, 0.5, n), leg_scale=rng.uniform(0.85, 1.1, n), torso_rest=rng.normal(0, 0.1, n),
+        pelvis_ceiling=rng.uniform(0.9, 1.0, n))
     return walker, kin
 
 
@@ -80,8 +81,9 @@ def assert_poses_close(actual: BodyPoseBatch, expected: BodyPoseBatch) -> None:
 @pytest.mark.parametrize("seed, dt", [(0, 1 / 30), (1, 1 / 30), (2, 1 / 60)])
 def test_sample_posed_kinematics_matches_numpy_reference(seed, dt):
     walker, kin = random_case(seed)
-    wander = seed == 1      # leg scales and postures wandering or kept
-    config = KinematicConfig(dt=dt, leg_scale_drift=0.01 if wander else 0.0, posture_drift=0.01 if wander else 0.0)
+    wander = seed == 1      # leg scales, postures and pelvis ceilings wandering or kept
+    config = KinematicConfig(dt=dt, leg_scale_drift=0.01 if wander else 0.0, posture_drift=0.01 if wander else 0.0,
+                             pelvis_ceiling_drift=0.005 if wander else 0.0)
     state, pose = sample_posed_kinematics(config, BODY, PARAMS, walker, kin, np.random.default_rng(seed))
     expected_state, expected_pose = sample_posed_kinematics_reference(config, BODY, PARAMS, walker, kin,
                                                                       np.random.default_rng(seed))
@@ -119,9 +121,9 @@ def test_pose_body_and_sole_points_match_numpy_reference():
 
 def test_initial_kinematics_matches_numpy_reference():
     walker, _ = random_case(5, n=400)
-    config = KinematicConfig()
+    config = KinematicConfig(pelvis_ceiling=0.97)
     spreads = dict(position_spread=0.1, heading_spread=0.2, joint_spread=0.3, turn_rate_spread=0.1,
-                   leg_scale_spread=0.05, posture_spread=0.1)
+                   leg_scale_spread=0.05, posture_spread=0.1, pelvis_ceiling_spread=0.02)
     actual = initial_kinematics(config, walker, [1.0, -2.0], 0.4, 400, np.random.default_rng(5), body=BODY,
                                 **spreads)
     expected = initial_kinematics_reference(config, walker, [1.0, -2.0], 0.4, 400, np.random.default_rng(5),
@@ -132,7 +134,8 @@ def test_initial_kinematics_matches_numpy_reference():
 def test_a_walk_of_sampled_frames_matches_numpy_reference_frame_by_frame():
     """40 frames of the prior on a walker whose legs swing between +-0.4 rad with heel strikes: every
     frame, compiled and reference agree from the same previous state, which then carries on."""
-    n, config = 300, KinematicConfig(leg_scale_drift=0.005, posture_drift=0.003)
+    n, config = 300, KinematicConfig(leg_scale_drift=0.005, posture_drift=0.003, pelvis_ceiling=0.97,
+                                     pelvis_ceiling_drift=0.002)
     rng = np.random.default_rng(6)
     walkers, leg, origin = [], 0, 0.0
     for f in range(40):
@@ -141,8 +144,9 @@ def test_a_walk_of_sampled_frames_matches_numpy_reference_frame_by_frame():
         phi1 = 0.4 - 0.8 * (f % 16) / 16 + 0.02 * rng.standard_normal(n)
         walkers.append(WalkerState.from_arrays(phi1, -phi1, -1.5, 1.5, origin, leg))
     kin = initial_kinematics(config, walkers[0], [0.0, 0.0], 0.2, n, rng, body=BODY, joint_spread=0.05,
-                             leg_scale_spread=0.04, posture_spread=0.08)
+                             leg_scale_spread=0.04, posture_spread=0.08, pelvis_ceiling_spread=0.02)
     assert 0.02 < np.std(kin.leg_scale) < 0.06 and 0.06 < np.std(kin.torso_rest) < 0.1
+    assert 0.01 < np.std(kin.pelvis_ceiling) < 0.025 and np.max(kin.pelvis_ceiling) == 1.0
     for f in range(1, 40):
         seed = 100 + f
         state, pose = sample_posed_kinematics(config, BODY, PARAMS, walkers[f], kin, np.random.default_rng(seed))

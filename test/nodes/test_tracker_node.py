@@ -134,6 +134,18 @@ def test_tracker_node_checks_leg_scale_spread(ros_context):
         node.destroy_node()
 
 
+def test_tracker_node_checks_the_pelvis_ceiling(ros_context):
+    from rclpy.parameter import Parameter
+
+    from awalker_tracker.errors import InputError
+    from awalker_tracker.nodes.tracker import TrackerNode
+
+    for name, bad in (("pelvis_ceiling", 1.2), ("pelvis_ceiling_min_cameras", 0)):
+        with pytest.raises(InputError, match="parameters 'pelvis_ceiling', 'pelvis_ceiling_min_cameras'"):
+            TrackerNode(context=ros_context, parameter_overrides=[
+                Parameter("cameras", value=["cam0"]), Parameter(name, value=bad)])
+
+
 @pytest.mark.parametrize("fitted_frame", [1, 3])
 def test_a_start_without_stance_leg_takes_the_fitted_one_at_its_frame(ros_context, tracker_files, fitted_frame):
     """``fitted_start``: a start naming no stance leg takes the fitted start's leg when both start at the same

@@ -85,6 +85,7 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys, monkeypat
     run = yaml.safe_load((out / "run.yaml").read_text())
     assert 0 < run["seconds_in_filter"] < run["seconds_streaming"] < run["seconds"]
     assert run["depth_band_m"] == 0.25 != RecoveryConfig().depth_band_m     # --depth-band reached the tracker node
+    assert run["pelvis_ceiling"] == 1.0            # one camera: no pelvis ceiling by default (TrackerConfig)
     # a body description came with the bag: one pass, no leg length fitted (fit_body's default)
     assert not (out / "first_pass").exists() and "body_fit" not in run
     # the pictures are drawn after tracking and timed apart
@@ -190,6 +191,22 @@ def test_the_first_pass_stops_after_the_frames_the_fit_uses(synth_bag: Path, tmp
     assert main(["fitbody", str(whole), "--frames", "5"]) == 0
     expected = yaml.safe_load(capsys.readouterr().out)["fitbody"]["log_evidence"]
     assert yaml.safe_load((out / "run.yaml").read_text())["body_fit"]["log_evidence"] == expected
+
+
+def test_the_legs_are_weighed_without_the_pelvis_ceiling(synth_bag: Path, tmp_path: Path, monkeypatch):
+    """A run with a pelvis ceiling (run.yaml) still has its leg candidates weighed with the pelvis at the walker's
+    hip: with the ceiling the evidence favours legs as much longer as it lowers the pelvis."""
+    from awalker_tracker.inference import bodyfit
+
+    out = tmp_path / "run"
+    assert main(["track", str(synth_bag), "--out", str(out), "--particles", "50", "--no-overlay",
+                 "--pelvis-ceiling", "0.95"]) == 0
+    assert yaml.safe_load((out / "run.yaml").read_text())["pelvis_ceiling"] == 0.95
+    seen = []
+    real = bodyfit.fit_leg_length
+    monkeypatch.setattr(bodyfit, "fit_leg_length", lambda *a, **k: seen.append(a[4]) or real(*a, **k))
+    assert main(["fitbody", str(out), "--frames", "3", "--particles", "20"]) == 0
+    assert len(seen) == 1 and [seen[0].pelvis_ceiling_for(n)[0] for n in (1, 2)] == [1.0, 1.0]
 
 
 def test_fit_body_input_errors(synth_bag: Path, tmp_path: Path, capsys):
@@ -387,8 +404,8 @@ def test_track_fit_body_option_reaches_the_pipeline(tmp_path: Path, monkeypatch)
     assert seen[-1].particles == TRACK_PARTICLES == pipeline.TrackOptions(Path("b"), Path("o")).particles
     assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--depth-band", "0"]) == 0
     assert seen[-1].depth_band_m == 0.0
-    # --pelvis-ceiling too (default 1: off)
-    assert seen[-1].pelvis_ceiling == 1.0
+    # --pelvis-ceiling too (None: the tracker's default by camera count)
+    assert seen[-1].pelvis_ceiling is None
     assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--pelvis-ceiling", "0.97"]) == 0
     assert seen[-1].pelvis_ceiling == 0.97
 

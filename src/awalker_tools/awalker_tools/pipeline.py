@@ -39,7 +39,7 @@ import numpy as np
 import yaml
 
 from awalker_tracker.errors import InputError
-from awalker_tracker.inference.tracker import StartDescription
+from awalker_tracker.inference.tracker import StartDescription, TrackerConfig
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEG_NAMES
 
@@ -108,7 +108,10 @@ class TrackOptions:
     seed: int = 0
     likelihood_scale: float = 0.1
     leg_scale_spread: float = 0.0   # the particles' leg lengths around the body's (TrackerConfig.leg_scale_spread)
-    pelvis_ceiling: float = 1.0     # the pelvis at most this fraction of the walker's hip height (TrackerConfig)
+    # the particles' pelvis ceilings around this fraction of the walker's hip height, whatever the number of
+    # cameras (1: off); None: the tracker's default (TrackerConfig.pelvis_ceiling_for: 0.97 with two or more
+    # cameras, off with one)
+    pelvis_ceiling: float | None = None
     auto_start: bool = False        # ignore any start description and find the walking person (also when none exists)
     follow_near: tuple[float, float] | None = None   # automatic start: follow the person first seen near this ground point (m)
     recovery: bool = True           # re-seed fallen walkers and re-acquire a lost track (inference/recovery.py)
@@ -356,7 +359,8 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
             Parameter("trust", value=float(options.trust)), Parameter("seed", value=int(options.seed)),
             Parameter("likelihood_scale", value=float(options.likelihood_scale)),
             Parameter("leg_scale_spread", value=float(options.leg_scale_spread)),
-            Parameter("pelvis_ceiling", value=float(options.pelvis_ceiling)),
+            *([Parameter("pelvis_ceiling", value=float(options.pelvis_ceiling)),
+               Parameter("pelvis_ceiling_min_cameras", value=1)] if options.pelvis_ceiling is not None else []),
             Parameter("reseed_fallen", value=bool(options.recovery)), Parameter("reacquire", value=bool(options.recovery)),
             Parameter("hold_still", value=bool(options.recovery)),
             *([Parameter("depth_band_m", value=float(band))] if band is not None else []),
@@ -484,7 +488,8 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
         "input": str(bag.resolve()), "start_source": start_src, "body_source": body_src,
         "particles": options.particles, "lookahead": options.lookahead, "trust": options.trust, "seed": options.seed,
         "likelihood_scale": options.likelihood_scale, "leg_scale_spread": options.leg_scale_spread,
-        "pelvis_ceiling": options.pelvis_ceiling,
+        "pelvis_ceiling": (options.pelvis_ceiling if options.pelvis_ceiling is not None
+                           else TrackerConfig().pelvis_ceiling_for(len(cameras))[0]),
         "recovery": options.recovery, "depth_band_m": result.depth_band_m,
         **({"stopped_after_frames": options.stop_after_frames} if enough else {}),
         "frames": result.frames, "posteriors": result.summaries, "seconds": round(result.seconds, 3),

@@ -22,10 +22,11 @@ def run(args: argparse.Namespace) -> int:
         TrackerConfig(leg_scale_spread=args.leg_scale_spread)      # the tracker node's check, before anything starts
     except ValueError as exc:
         raise InputError(f"--leg-scale-spread: {exc}") from None
-    try:
-        TrackerConfig(pelvis_ceiling=args.pelvis_ceiling)
-    except ValueError as exc:
-        raise InputError(f"--pelvis-ceiling: {exc}") from None
+    if args.pelvis_ceiling is not None:
+        try:
+            TrackerConfig(pelvis_ceiling=args.pelvis_ceiling)
+        except ValueError as exc:
+            raise InputError(f"--pelvis-ceiling: {exc}") from None
     if args.depth_band is not None and not args.depth_band >= 0:
         raise InputError(f"--depth-band must be >= 0 m (0: off), got {args.depth_band}")
     if not 0.0 <= args.trust <= 1.0:
@@ -82,9 +83,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="let the particles' leg lengths differ from the body description's: log-normal spread "
                              "(e.g. 0.04), wandering 0.1 %% per frame; default 0: the body's own (README \"Leg length "
                              "from the images, online\")")
-    parser.add_argument("--pelvis-ceiling", type=float, default=1.0, metavar="F",
-                        help="keep the pelvis at most F of the walker's hip height over the stance, the stance knee "
-                             "bending as a person's does (0.85-1; default 1: off; 0.97 measured with two cameras, "
+    parser.add_argument("--pelvis-ceiling", type=float, default=None, metavar="F",
+                        help="keep each particle's pelvis at most its own fraction of the walker's hip height, drawn "
+                             "around F, over the stance, the stance knee bending as a person's does, with any number "
+                             "of cameras (0.85-1; 1: off; default 0.97 with two or more cameras and off with one, "
                              "README \"A pelvis ceiling\")")
     parser.add_argument("--depth-band", type=float, default=None, metavar="M",
                         help="one camera: walkers whose pelvis lies more than M metres from where the person's feet row "

@@ -184,11 +184,19 @@ class TrackerConfig:
     posture_spread: float = 0.08
     posture_drift: float = 0.002
     posture_min_cameras: int = 2
-    # The pelvis at most this fraction of the walker's hip height (``KinematicConfig.pelvis_ceiling``; 1: off).
-    # People walk on a stance knee bent ~20 degrees, the pelvis ~0.96 of the standing leg (README "A pelvis
-    # ceiling"); measured on the real walks, hand-started, two cameras, tracker seeds 0-2: 0.97 brings the
-    # pelvis from +36 to +17 mm high and the median of the walk medians from 56.3 to 52.3 mm; not yet the default.
-    pelvis_ceiling: float = 1.0
+    # Pelvis ceilings the filter explores (kinematics module doc, *Pelvis ceiling*), with at least
+    # pelvis_ceiling_min_cameras cameras: each particle's pelvis stays at most its own fraction of the walker's
+    # hip height, pelvis_ceiling plus N(0, pelvis_ceiling_spread^2) when drawn (start, re-seeds) within 0.85-1,
+    # wandering by pelvis_ceiling_drift per frame (std); with fewer cameras, or pelvis_ceiling 1, off (the
+    # walker's hip height). People walk on a stance knee bent ~20 degrees, the pelvis ~0.96 of the standing leg
+    # (README "A pelvis ceiling"). Real walks, two cameras, tracker seeds 0-4, one ceiling of 0.97 for every
+    # particle: hand-started the pelvis +37 -> +17 mm high and the median of the walk medians 56.1 -> 53.5 mm
+    # (39 of 60 runs better), but our own straight walk (walker renders, pelvis at the hip) 29 -> 39 mm, which
+    # the spread lets the images choose; one camera 73.5 -> 79.7 (seeds 0-2: the depth moves with the shape).
+    pelvis_ceiling: float = 0.97
+    pelvis_ceiling_spread: float = 0.02
+    pelvis_ceiling_drift: float = 0.002
+    pelvis_ceiling_min_cameras: int = 2
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -205,8 +213,20 @@ class TrackerConfig:
             raise ValueError(f"TrackerConfig: posture_spread must lie in 0-0.3 rad, posture_drift in 0-0.02 rad and "
                              f"posture_min_cameras be >= 1, got {self.posture_spread}, {self.posture_drift}, "
                              f"{self.posture_min_cameras}")
+        if not (0.0 <= self.pelvis_ceiling_spread <= 0.1 and self.pelvis_ceiling_min_cameras >= 1):
+            raise ValueError(f"TrackerConfig: pelvis_ceiling_spread must lie in 0-0.1 and pelvis_ceiling_min_cameras "
+                             f"be >= 1, got {self.pelvis_ceiling_spread}, {self.pelvis_ceiling_min_cameras}")
         from awalker_tracker.model.kinematics import KinematicConfig
-        KinematicConfig(pelvis_ceiling=self.pelvis_ceiling)     # the kinematics' own check of the ceiling it sets
+        # the kinematics' own checks of what it is given
+        KinematicConfig(pelvis_ceiling=self.pelvis_ceiling, pelvis_ceiling_drift=self.pelvis_ceiling_drift)
+
+    def pelvis_ceiling_for(self, cameras: int) -> tuple[float, float, float]:
+        """(ceiling, spread, drift) of the particles' pelvis ceilings (fractions of the walker's hip height) in a
+        run with this many cameras: (1, 0, 0), off, with fewer than ``pelvis_ceiling_min_cameras`` or a ceiling
+        of 1."""
+        if cameras < self.pelvis_ceiling_min_cameras or self.pelvis_ceiling >= 1.0:
+            return 1.0, 0.0, 0.0
+        return self.pelvis_ceiling, self.pelvis_ceiling_spread, self.pelvis_ceiling_drift
 
 
 # ----------------------------------------------------------------------------- particle states
@@ -253,8 +273,8 @@ class TrackerModel:
                  config: TrackerConfig = TrackerConfig(), params: WalkerParams | None = None,
                  gait_table: Any = None, prior: Any = None, kinematics: Any = None,
                  cameras: list[Any] | None = None) -> None:
-        """``cameras``: the image likelihood's cameras, for re-acquiring a lost track (None: no re-acquisition) and
-        for the postures (``TrackerConfig.posture_min_cameras``)."""
+        """``cameras``: the image likelihood's cameras, for re-acquiring a lost track (None: no re-acquisition),
+        for the postures (``TrackerConfig.posture_min_cameras``) and the pelvis ceiling (``pelvis_ceiling_for``)."""
         from awalker_tracker.model import control, gaits, kinematics as kin_mod
 
         self.body = body
@@ -268,9 +288,11 @@ class TrackerModel:
             self.gaits, kappa_bar_variance=config.kappa_bar_variance)
         # rad: the spread of the particles' postures, 0 (upright) with fewer cameras than posture_min_cameras
         self.posture_spread = config.posture_spread if len(cameras or ()) >= config.posture_min_cameras else 0.0
+        ceiling, self.pelvis_ceiling_spread, ceiling_drift = config.pelvis_ceiling_for(len(cameras or ()))
         self.kin_config = kinematics if kinematics is not None else kin_mod.KinematicConfig(
             dt=config.dt, leg_scale_drift=config.leg_scale_drift if config.leg_scale_spread > 0 else 0.0,
-            posture_drift=config.posture_drift if self.posture_spread > 0 else 0.0, pelvis_ceiling=config.pelvis_ceiling)
+            posture_drift=config.posture_drift if self.posture_spread > 0 else 0.0, 
+            pelvis_ceiling=ceiling, pelvis_ceiling_drift=ceiling_drift)
         self._control = control
         self._gaits = gaits
         self._kin = kin_mod
@@ -317,7 +339,7 @@ class TrackerModel:
             self.kin_config, walker, pelvis_xy, heading, n, rng, body=self.body,
             params=self.params, position_spread=spread.position_m, heading_spread=spread.heading_rad,
             joint_spread=spread.joint_rad, leg_scale_spread=self.config.leg_scale_spread,
-            posture_spread=self.posture_spread)
+            posture_spread=self.posture_spread, pelvis_ceiling_spread=self.pelvis_ceiling_spread)
         pose = self._kin.pose_body(self.body, self.params, walker, kin)
         return TrackerStates(walker, control, kin, pose, speed.copy(), np.zeros(n, bool), np.zeros(n, np.int8))
 

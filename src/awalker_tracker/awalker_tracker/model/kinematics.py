@@ -75,8 +75,9 @@ landed the foot short and the body walked at 0.7x). Two position projections kee
 walker at heel strike, when the walker's rigid legs meet the ground together: *heel rise*
 (``_stance_knee``): late in a long stance the stance foot stands on its toe, which would carry the
 pelvis above the walker's hip (``walker.hip_position``), so the stance knee bends just enough to keep it
-there (people flex it ~35 degrees at toe-off; ``KinematicConfig.pelvis_ceiling`` < 1 keeps the pelvis below that
-fraction of the walker's hip height, so the stance knee bends over the whole stance as a person's does); *landing*
+there (people flex it ~35 degrees at toe-off; a pelvis ceiling < 1, ``KinematicState.pelvis_ceiling``, keeps the
+pelvis below that fraction of the walker's hip height, so the stance knee bends over the whole stance as a person's
+does: *Pelvis ceiling* below); *landing*
 (``_landing_knee``): a landing knee still bent
 holds the foot above the ground, so it is straightened until the foot touches (on the hand-made walk of
 ``test_kinematics`` from 0.34 to 0.24 rad, median, and the pelvis drops a median 3 mm in that frame;
@@ -125,6 +126,14 @@ Table 1's (``initial_kinematics(posture_spread=...)``) and wandering by ``postur
 within +- ``POSTURE_LIMIT``; eq. (6) pulls the torso towards it, and the filter weighs postures as it
 weighs poses. Both are 0 by default (``synth`` draws its walkers upright, bit for bit as before); the
 tracker sets them (``TrackerConfig.posture_spread``, ``posture_drift``; measured there).
+
+Pelvis ceiling (our addition; ``KinematicState.pelvis_ceiling``): the heel-rise projection keeps each
+particle's pelvis at most its own fraction of the walker's hip height, drawn around
+``KinematicConfig.pelvis_ceiling`` (``initial_kinematics(pelvis_ceiling_spread=...)``, within
+``PELVIS_CEILING_RANGE``) and wandering by ``pelvis_ceiling_drift`` per frame, so that the filter weighs how
+far the stance knee bends as it weighs postures: people walk with the pelvis ~0.96 of the standing leg,
+the walker's rigid leg at 1. All 1 and 0 by default (``synth`` draws its walkers so, bit for bit as
+before); the tracker sets them with two or more cameras (``TrackerConfig.pelvis_ceiling``; measured there).
 
 ``plane_origin`` maps the walker's sagittal x to the world: the walker's stance contact
 x (``walker.stance_contact_x``) lands on ``contact_point``, x grows along the heading.
@@ -226,6 +235,10 @@ class TurnPrior:
                        self.max_rate)
 
 
+# fractions of the walker's hip height a particle's pelvis ceiling may take (module doc, *Pelvis ceiling*)
+PELVIS_CEILING_RANGE = (0.85, 1.0)
+
+
 @dataclass(frozen=True)
 class KinematicConfig:
     """Conditional kinematics settings. ``dt`` (s): 1/30 or 1/60 as in the paper."""
@@ -246,9 +259,11 @@ class KinematicConfig:
     # per frame (rad, standard deviation): each particle's posture (torso_rest) wanders by this within
     # +- POSTURE_LIMIT of Table 1's rest (module doc, *Posture*)
     posture_drift: float = 0.0
-    # the pelvis stays at or below this fraction of the walker's hip height over the stance, the stance knee
-    # bending as much as that needs (module doc, *Knees*: heel rise; 1 = the walker's hip height itself)
+    # the particles' pelvis ceilings (module doc, *Pelvis ceiling*) are drawn around this fraction of the
+    # walker's hip height and wander by pelvis_ceiling_drift per frame (standard deviation) within
+    # PELVIS_CEILING_RANGE; 1 = the walker's hip height itself
     pelvis_ceiling: float = 1.0
+    pelvis_ceiling_drift: float = 0.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -257,9 +272,13 @@ class KinematicConfig:
             raise ValueError(f"KinematicConfig.stance_knee_rest must lie in [0, pi/2) rad, got {self.stance_knee_rest!r}")
         if self.step_width is not None and not (np.isfinite(self.step_width) and 0.0 <= self.step_width <= 0.5):
             raise ValueError(f"KinematicConfig.step_width must lie in 0-0.5 m (or be None), got {self.step_width!r}")
-        if not (np.isfinite(self.pelvis_ceiling) and 0.85 <= self.pelvis_ceiling <= 1.0):
-            raise ValueError(f"KinematicConfig.pelvis_ceiling must lie in 0.85-1 (of the walker's hip height), got "
-                             f"{self.pelvis_ceiling!r}")
+        low, high = PELVIS_CEILING_RANGE
+        if not (np.isfinite(self.pelvis_ceiling) and low <= self.pelvis_ceiling <= high):
+            raise ValueError(f"KinematicConfig.pelvis_ceiling must lie in {low}-{high} (of the walker's hip height), "
+                             f"got {self.pelvis_ceiling!r}")
+        if not (np.isfinite(self.pelvis_ceiling_drift) and 0.0 <= self.pelvis_ceiling_drift <= 0.02):
+            raise ValueError(f"KinematicConfig.pelvis_ceiling_drift must lie in 0-0.02 per frame, got "
+                             f"{self.pelvis_ceiling_drift!r}")
 
     def hip_abduction_rest(self, body: BodyDescription) -> float:
         """psi_bar of both hips' abduction (rad, away from the midline +): Table 1's, or with ``step_width``
@@ -329,6 +348,7 @@ class KinematicState:
     turn_rate: np.ndarray       # (N,) omega: the heading's turn rate during this step (rad/s, left +)
     leg_scale: np.ndarray       # (N,) thigh and shank lengths x this (the body's: 1; *Leg length* in the module doc)
     torso_rest: np.ndarray      # (N,) rad: eq. 6's psi_bar of the torso pitch, this particle's posture (*Posture*)
+    pelvis_ceiling: np.ndarray  # (N,) the pelvis at most this fraction of the walker's hip height (*Pelvis ceiling*)
 
     def __len__(self) -> int:
         return int(self.heading.shape[0])
@@ -483,6 +503,7 @@ def initial_kinematics(
     turn_rate_spread: float = 0.0,
     leg_scale_spread: float = 0.0,
     posture_spread: float = 0.0,
+    pelvis_ceiling_spread: float = 0.0,
 ) -> KinematicState:
     """N kinematic states near a rest pose: pelvis above ``start_position_xy`` ((2,) or (N, 2), m),
     torso yaw ``heading`` (rad); Gaussian spreads (m, rad, rad; joints truncated to their limits; turn rate rad/s).
@@ -491,7 +512,8 @@ def initial_kinematics(
     min(its rest angle gain x psi_hip, 0.6 rad), bent further where the swing foot would otherwise go
     below the ground (a foot trailing in double support stays on it); the stance knee at its rest. Each
     particle's posture (the torso pitch's rest) is Table 1's rest plus N(0, ``posture_spread``^2) rad
-    within +- ``POSTURE_LIMIT``, and its torso starts at it.
+    within +- ``POSTURE_LIMIT``, and its torso starts at it. Each particle's pelvis ceiling is
+    ``config.pelvis_ceiling`` plus N(0, ``pelvis_ceiling_spread``^2) within ``PELVIS_CEILING_RANGE``.
     """
     body = body or BodyDescription.default()
     params = params or body.walker_params()
@@ -501,12 +523,14 @@ def initial_kinematics(
     beta = np.empty(n)
     point = np.empty((n, 3))
     scale = _initial_leg_scale(config, n, rng, leg_scale_spread)
+    ceiling = _pelvis_ceiling_within_range(config.pelvis_ceiling + pelvis_ceiling_spread * rng.standard_normal(n)
+                                           if pelvis_ceiling_spread > 0 else np.full(n, config.pelvis_ceiling))
     legs = leg_angles(walker)
     _initial_clearance_kernel(_geometry(body), legs, dofs, scale, leg,
-                              np.ascontiguousarray(config.pelvis_ceiling * hip_position(params, walker)[1], float))
+                              np.ascontiguousarray(ceiling * hip_position(params, walker)[1], float))
     _sole_points_kernel(_geometry(body), legs, dofs, scale, leg, beta, True, point)
     return _initial_state(params, walker, dofs, beta, point, start_position_xy, rng, position_spread,
-                          turn_rate_spread, scale, torso_rest)
+                          turn_rate_spread, scale, torso_rest, ceiling)
 
 
 def _clearance(config: KinematicConfig, walker: WalkerState) -> np.ndarray:
@@ -522,6 +546,11 @@ def _initial_leg_scale(config: KinematicConfig, n: int, rng: np.random.Generator
         return np.ones(n)
     low, high = config.leg_scale_range
     return np.clip(np.exp(spread * rng.standard_normal(n)), low, high)
+
+
+def _pelvis_ceiling_within_range(ceiling: np.ndarray) -> np.ndarray:
+    """(N,) pelvis ceilings clipped to ``PELVIS_CEILING_RANGE``."""
+    return np.clip(ceiling, *PELVIS_CEILING_RANGE)
 
 
 def _initial_posture(config: KinematicConfig, n: int, rng: np.random.Generator, spread: float) -> np.ndarray:
@@ -567,10 +596,11 @@ def _initial_dofs(config: KinematicConfig, body: BodyDescription, walker: Walker
 
 def _initial_state(params: WalkerParams, walker: WalkerState, dofs: np.ndarray, beta: np.ndarray, point: np.ndarray,
                    start_position_xy: np.ndarray, rng: np.random.Generator, position_spread: float,
-                   turn_rate_spread: float, leg_scale: np.ndarray, torso_rest: np.ndarray) -> KinematicState:
+                   turn_rate_spread: float, leg_scale: np.ndarray, torso_rest: np.ndarray,
+                   pelvis_ceiling: np.ndarray) -> KinematicState:
     """``initial_kinematics``' states from the DOFs, the stance foot's contact roll ``beta`` (N,) and its sole
-    point relative to the pelvis ``point`` (N, 3) m, the leg scales and postures (N,): the pelvis above the
-    (spread) start position."""
+    point relative to the pelvis ``point`` (N, 3) m, the leg scales, postures and pelvis ceilings (N,): the
+    pelvis above the (spread) start position."""
     n = dofs.shape[0]
     pelvis_xy = np.broadcast_to(np.asarray(start_position_xy, float).reshape(-1, 2), (n, 2)) \
         + position_spread * rng.standard_normal((n, 2))
@@ -583,6 +613,7 @@ def _initial_state(params: WalkerParams, walker: WalkerState, dofs: np.ndarray, 
         plane_origin=_plane_origin(params, walker, contact_point, named["heading"]),
         turn_rate=turn_rate_spread * rng.standard_normal(n) if turn_rate_spread > 0 else np.zeros(n),
         leg_scale=leg_scale, torso_rest=np.asarray(torso_rest, float).copy(),
+        pelvis_ceiling=np.asarray(pelvis_ceiling, float).copy(),
     )
 
 
@@ -656,6 +687,9 @@ def _sample_kinematics(
     torso_rest = kin.torso_rest
     if config.posture_drift > 0:
         torso_rest = _posture_within_limit(config, torso_rest + config.posture_drift * rng.standard_normal(n))
+    ceiling = kin.pelvis_ceiling
+    if config.pelvis_ceiling_drift > 0:
+        ceiling = _pelvis_ceiling_within_range(ceiling + config.pelvis_ceiling_drift * rng.standard_normal(n))
     if heading is not None:
         new[:, DOF_NAMES.index("heading")] = heading
     legs = leg_angles(walker)
@@ -669,7 +703,7 @@ def _sample_kinematics(
     contact_point, contact_roll = (np.ascontiguousarray(kin.contact_point, float),
                                    np.ascontiguousarray(kin.contact_roll, float))
     stance_x = np.ascontiguousarray(stance_contact_x(params, walker), float)
-    hip_height = np.ascontiguousarray(config.pelvis_ceiling * hip_position(params, walker)[1], float)
+    hip_height = np.ascontiguousarray(ceiling * hip_position(params, walker)[1], float)   # heel rise's bound (m)
     over_blocks(n, lambda rows: _sample_kernel(
         geometry, legs[rows], new[rows], scale[rows], previous[rows], contact_point[rows], contact_roll[rows],
         contact_leg[rows],
@@ -681,6 +715,7 @@ def _sample_kinematics(
         hip_rotation=named["hip_rotation"], knee=named["knee"], ankle=named["ankle"], previous=previous,
         contact_point=contact, contact_roll=beta, contact_leg=stance_leg.copy(),
         plane_origin=plane_origin, turn_rate=turn_rate, leg_scale=scale, torso_rest=torso_rest.copy(),
+        pelvis_ceiling=np.array(ceiling, float),
     )
     return state, pose
 

@@ -93,8 +93,13 @@ class TrackerNode(Node):
                                               "spread (log, std) of the particles' leg lengths around the body's "
                                               "(0: the body's own; TrackerConfig.leg_scale_spread)"))
         self.pelvis_ceiling = float(declare("pelvis_ceiling", TrackerConfig.pelvis_ceiling,
-                                            "the pelvis at most this fraction of the walker's hip height, the stance "
-                                            "knee bending (0.85-1; 1: off; TrackerConfig.pelvis_ceiling)"))
+                                            "with at least pelvis_ceiling_min_cameras cameras, each particle's "
+                                            "pelvis at most its own fraction of the walker's hip height, drawn "
+                                            "around this, the stance knee bending (0.85-1; 1: off; "
+                                            "TrackerConfig.pelvis_ceiling)"))
+        self.pelvis_ceiling_min_cameras = int(declare("pelvis_ceiling_min_cameras",
+                                                      TrackerConfig.pelvis_ceiling_min_cameras,
+                                                      "fewer cameras than this: no pelvis ceiling"))
         self.auto_start = bool(declare("auto_start", False, "no start description: find the walking person in the "
                                        "images (inference/autostart.py)"))
         follow = declare("follow_near", Parameter.Type.DOUBLE_ARRAY, "automatic start with several people in view: "
@@ -143,6 +148,10 @@ class TrackerNode(Node):
             TrackerConfig(leg_scale_spread=self.leg_scale_spread)
         except ValueError as exc:
             raise InputError(f"awalker_tracker: parameter 'leg_scale_spread': {exc}") from None
+        try:
+            TrackerConfig(pelvis_ceiling=self.pelvis_ceiling, pelvis_ceiling_min_cameras=self.pelvis_ceiling_min_cameras)
+        except ValueError as exc:
+            raise InputError(f"awalker_tracker: parameters 'pelvis_ceiling', 'pelvis_ceiling_min_cameras': {exc}") from None
         self.sync = StampSynchronizer(self.camera_names, max_pending=int(queue))
         self.stats = TrackerNodeStats()
         self.tracker: Tracker | None = None
@@ -365,6 +374,7 @@ class TrackerNode(Node):
         config = TrackerConfig(smc=self.smc_config, dt=dt, likelihood_scale=self.likelihood_scale,
                                recovery=self.recovery, leg_scale_spread=self.leg_scale_spread,
                                pelvis_ceiling=self.pelvis_ceiling,
+                               pelvis_ceiling_min_cameras=self.pelvis_ceiling_min_cameras,
                                spread=AUTO_SPREAD if self.start_found_automatically else TrackerConfig.spread)
         model = TrackerModel(body, self.start, image_likelihood(body, cameras),
                              config, cameras=cameras)
