@@ -153,9 +153,16 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys, monkeypat
     assert (got.torso_length < given.torso_length) == (fitted["leg_factor"] > 1.0)
 
 
-def test_track_fit_body_tracks_again_with_the_fitted_legs(synth_bag: Path, tmp_path: Path):
+def test_track_fit_body_tracks_again_with_the_fitted_legs(synth_bag: Path, tmp_path: Path, monkeypatch):
+    from awalker_tools import pipeline
+
+    passes = []
+    real = pipeline._track_once
+    monkeypatch.setattr(pipeline, "_track_once", lambda options, **k: passes.append(options) or real(options, **k))
     out = tmp_path / "run"
     assert main(["track", str(synth_bag), "--out", str(out), "--particles", "100", "--no-overlay", "--fit-body"]) == 0
+    # legs fitted to the walking images: both passes without the pelvis ceiling (pipeline.run_tracking)
+    assert [p.pelvis_ceiling for p in passes] == [1.0, 1.0]
     fitted = out / "first_pass" / "body_fitted.yaml"
     given, got = (BodyDescription.from_yaml(p) for p in (out / "first_pass" / "body.yaml", fitted))
     # a body given with the bag: the candidates around it (GIVEN_BODY_FACTORS), thigh and shank alike
@@ -194,18 +201,21 @@ def test_the_first_pass_stops_after_the_frames_the_fit_uses(synth_bag: Path, tmp
 
 
 def test_the_legs_are_weighed_without_the_pelvis_ceiling(synth_bag: Path, tmp_path: Path, monkeypatch):
-    """A run with a pelvis ceiling (run.yaml) still has its leg candidates weighed with the pelvis at the walker's
-    hip: with the ceiling the evidence favours legs as much longer as it lowers the pelvis."""
+    """A pelvis ceiling asked for with --fit-body holds in both passes (run.yaml), but the leg candidates are
+    weighed with the pelvis at the walker's hip: with the ceiling the evidence favours legs as much longer as it
+    lowers the pelvis."""
+    from awalker_tools import pipeline
     from awalker_tracker.inference import bodyfit
 
-    out = tmp_path / "run"
-    assert main(["track", str(synth_bag), "--out", str(out), "--particles", "50", "--no-overlay",
-                 "--pelvis-ceiling", "0.95"]) == 0
-    assert yaml.safe_load((out / "run.yaml").read_text())["pelvis_ceiling"] == 0.95
+    monkeypatch.setattr(pipeline, "FIT_FRAMES", 3)
     seen = []
     real = bodyfit.fit_leg_length
     monkeypatch.setattr(bodyfit, "fit_leg_length", lambda *a, **k: seen.append(a[4]) or real(*a, **k))
-    assert main(["fitbody", str(out), "--frames", "3", "--particles", "20"]) == 0
+    out = tmp_path / "run"
+    assert main(["track", str(synth_bag), "--out", str(out), "--particles", "50", "--no-overlay", "--fit-body",
+                 "--pelvis-ceiling", "0.95"]) == 0
+    for run_yaml in (out / "first_pass" / "run.yaml", out / "run.yaml"):
+        assert yaml.safe_load(run_yaml.read_text())["pelvis_ceiling"] == 0.95
     assert len(seen) == 1 and [seen[0].pelvis_ceiling_for(n)[0] for n in (1, 2)] == [1.0, 1.0]
 
 
