@@ -180,6 +180,8 @@ def test_initial_particles_spread_around_the_start():
         TrackerConfig(pelvis_ceiling=1.2)
     with pytest.raises(ValueError, match="pelvis_ceiling_min_cameras"):
         TrackerConfig(pelvis_ceiling_min_cameras=0)
+    with pytest.raises(ValueError, match="pelvis_ceiling_spread"):
+        TrackerConfig(pelvis_ceiling_spread=0.5)
     with pytest.raises(ValueError, match="pelvis_ceiling_drift"):
         TrackerConfig(pelvis_ceiling_drift=0.5)
 

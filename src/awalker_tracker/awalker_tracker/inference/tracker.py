@@ -291,7 +291,7 @@ class TrackerModel:
         ceiling, self.pelvis_ceiling_spread, ceiling_drift = config.pelvis_ceiling_for(len(cameras or ()))
         self.kin_config = kinematics if kinematics is not None else kin_mod.KinematicConfig(
             dt=config.dt, leg_scale_drift=config.leg_scale_drift if config.leg_scale_spread > 0 else 0.0,
-            posture_drift=config.posture_drift if self.posture_spread > 0 else 0.0, 
+            posture_drift=config.posture_drift if self.posture_spread > 0 else 0.0,
             pelvis_ceiling=ceiling, pelvis_ceiling_drift=ceiling_drift)
         self._control = control
         self._gaits = gaits

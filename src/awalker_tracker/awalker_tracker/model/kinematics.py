@@ -77,10 +77,8 @@ walker at heel strike, when the walker's rigid legs meet the ground together: *h
 pelvis above the walker's hip (``walker.hip_position``), so the stance knee bends just enough to keep it
 there (people flex it ~35 degrees at toe-off; a pelvis ceiling < 1, ``KinematicState.pelvis_ceiling``, keeps the
 pelvis below that fraction of the walker's hip height, so the stance knee bends over the whole stance as a person's
-does: *Pelvis ceiling* below); *landing*
-(``_landing_knee``): a landing knee still bent
-holds the foot above the ground, so it is straightened until the foot touches (on the hand-made walk of
-``test_kinematics`` from 0.34 to 0.24 rad, median, and the pelvis drops a median 3 mm in that frame;
+does: *Pelvis ceiling* below); *landing* (``_landing_knee``): a landing knee still bent holds the foot
+above the ground, so it is straightened until the foot touches (on the hand-made walk of ``test_kinematics`` from 0.34 to 0.24 rad, median, and the pelvis drops a median 3 mm in that frame;
 19 mm without the lean).
 
 Turning (our addition to Table 1; ``TurnPrior``): Table 1's torso "up" row alone (alpha 0.75,
