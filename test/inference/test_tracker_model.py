@@ -168,14 +168,16 @@ def test_initial_particles_spread_around_the_start():
     assert np.std(states.kin.pelvis_ceiling) == pytest.approx(config.pelvis_ceiling_spread, rel=0.25)
     assert np.median(states.kin.pelvis_ceiling) == pytest.approx(config.pelvis_ceiling, abs=0.005)
     assert two.kin_config.pelvis_ceiling == 0.97 and two.kin_config.pelvis_ceiling_drift == config.pelvis_ceiling_drift > 0
+    assert two.kin_config.hip_over_ankle                # with the ceilings the hip comes down over the ankle
     for off in (one, model):
         assert off.kin_config.pelvis_ceiling == 1.0 and off.kin_config.pelvis_ceiling_drift == 0.0
+        assert not off.kin_config.hip_over_ankle
         assert np.all(off.initial(50, np.random.default_rng(0)).kin.pelvis_ceiling == 1.0)
     assert [config.pelvis_ceiling_for(n)[0] for n in (0, 1, 2, 3)] == [1.0, 1.0, 0.97, 0.97]
     assert replace(config, pelvis_ceiling=1.0).pelvis_ceiling_for(2) == (1.0, 0.0, 0.0)     # 1: off, no spread
     ceiled = TrackerModel(body, start, marker_likelihood(), replace(config, pelvis_ceiling=0.95,
                                                                     pelvis_ceiling_min_cameras=1), cameras=[object()])
-    assert ceiled.kin_config.pelvis_ceiling == 0.95
+    assert ceiled.kin_config.pelvis_ceiling == 0.95 and ceiled.kin_config.hip_over_ankle
     with pytest.raises(ValueError, match="pelvis_ceiling"):
         TrackerConfig(pelvis_ceiling=1.2)
     with pytest.raises(ValueError, match="pelvis_ceiling_min_cameras"):

@@ -4,7 +4,7 @@ kept only to check the kernels against it. Same maths, same rng stream; not used
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -92,11 +92,34 @@ class _LocalPose:
     ankles: np.ndarray  # (N, 2, 3)
     foot: np.ndarray    # (N, 2, 3, 3) columns along the foot (heel->toe), left, up
 
-def _thigh_lead(body: BodyDescription, knee: np.ndarray) -> np.ndarray:
-    """How far (rad) the thigh leans ahead of the walker's leg at knee flexion ``knee`` (rad): ahead of the
-    hip-ankle chord, which leans ``CHORD_LEAN`` back from the walker's leg."""
-    return np.arctan2(body.lower_leg_length * np.sin(knee),
-                      body.upper_leg_length + body.lower_leg_length * np.cos(knee)) - CHORD_LEAN
+@dataclass(frozen=True)
+class _RuledBody(BodyDescription):
+    """A body with the kinematics' knee rule attached (``KinematicConfig.hip_over_ankle``), so that the
+    reference's helpers, which take the body, see it."""
+
+    hip_over_ankle: bool = False
+
+    def __post_init__(self) -> None:
+        """Made from a body that passed its checks (``_ruled``); the rule is no size to check."""
+
+
+def _ruled(body: BodyDescription, config: KinematicConfig | None) -> BodyDescription:
+    """``body`` carrying ``config``'s knee rule (None: the default's)."""
+    values = {f.name: getattr(body, f.name) for f in fields(BodyDescription)}
+    return _RuledBody(**values, hip_over_ankle=bool(config is not None and config.hip_over_ankle))
+
+
+def _thigh_lead(body: BodyDescription, leg: np.ndarray, knee: np.ndarray) -> np.ndarray:
+    """How far (rad) the thigh leans ahead of the walker's leg angle ``leg`` at knee flexion ``knee`` (rad): ahead
+    of the hip-ankle chord, which leans ``CHORD_LEAN`` back from the walker's leg, or with the body's
+    ``hip_over_ankle`` keeps the straight leg's reach (its angle theta: sin theta = L0 sin(leg - CHORD_LEAN) / L)."""
+    thigh, shank = body.upper_leg_length, body.lower_leg_length
+    delta = np.arctan2(shank * np.sin(knee), thigh + shank * np.cos(knee))
+    if not getattr(body, "hip_over_ankle", False):
+        return delta - CHORD_LEAN
+    chord = np.hypot(thigh + shank * np.cos(knee), shank * np.sin(knee))
+    theta = np.arcsin(np.clip((thigh + shank) * np.sin(leg - CHORD_LEAN) / chord, -1.0, 1.0))
+    return theta + delta - leg
 
 
 def _local_pose(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray) -> _LocalPose:
@@ -109,21 +132,22 @@ def _local_pose(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray, scale
     # Chord angle phi about the lateral axis (foot ahead for phi > 0) plus the thigh's lead, then
     # abduction, rotation.
     thigh = np.repeat(heading[:, None], 2, axis=1)
-    pitch = legs + _thigh_lead(body, d["knee"])
+    pitch = legs + _thigh_lead(body, legs, d["knee"])
     thigh = _turn(_turn(_turn(thigh, 1, -pitch), 0, _SIDE * d["hip_abduction"]), 2, -_SIDE * d["hip_rotation"])
     knees = hips - (body.upper_leg_length * scale)[:, None, None] * thigh[..., :, 2]
-    shank, ankles, foot = _lower_legs(body, thigh, knees, dofs, scale)
+    shank, ankles, foot = _lower_legs(body, legs, thigh, knees, dofs, scale)
     return _LocalPose(torso, hips, thigh, knees, shank, ankles, foot)
 
 
-def _lower_legs(body: BodyDescription, thigh: np.ndarray, knees: np.ndarray,
+def _lower_legs(body: BodyDescription, legs: np.ndarray, thigh: np.ndarray, knees: np.ndarray,
                 dofs: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Shank frames, ankle positions and foot frames (N, 2, ...) below the given thighs and knees."""
     knee = dofs[:, 7:9]
     shank = _turn(thigh, 1, knee)                                 # knee flexion
     ankles = knees - (body.lower_leg_length * scale)[:, None, None] * shank[..., :, 2]
     # ankle flexion (the DOF counts from the hip-ankle chord), inversion
-    foot = _turn(_turn(shank, 1, -(dofs[:, 9:11] + knee - _thigh_lead(body, knee))), 0, -_SIDE * dofs[:, 11:13])
+    foot = _turn(_turn(shank, 1, -(dofs[:, 9:11] + knee - _thigh_lead(body, legs, knee))), 0,
+                 -_SIDE * dofs[:, 11:13])
     return shank, ankles, foot
 
 
@@ -214,12 +238,12 @@ def _foot_lowest_z(body: BodyDescription, swing: _Leg, knee: np.ndarray, shift_z
     are turned (the height needs no more)."""
     thigh_z = np.zeros((knee.shape[0], 1, 3))
     thigh_z[:, 0, 2] = 1.0                                        # the heading leaves the z row alone
-    thigh_z = _turn(_turn(_turn(thigh_z, 1, -(swing.leg + _thigh_lead(body, knee))), 0, swing.abduction), 2,
+    thigh_z = _turn(_turn(_turn(thigh_z, 1, -(swing.leg + _thigh_lead(body, swing.leg, knee))), 0, swing.abduction), 2,
                     swing.rotation)
     knee_z = swing.hip_z - swing.thigh_length * thigh_z[:, 0, 2]
     shank_z = _turn(thigh_z, 1, knee)
     ankle_z = knee_z - swing.shank_length * shank_z[:, 0, 2]
-    flexion = -(swing.ankle + knee - _thigh_lead(body, knee))
+    flexion = -(swing.ankle + knee - _thigh_lead(body, swing.leg, knee))
     foot_z = _turn(_turn(shank_z, 1, flexion), 0, swing.inversion)[:, 0]
     along, up = _sole_offsets(body, _lowest_roll_from(body, foot_z[:, 0], foot_z[:, 2]))
     return ankle_z + foot_z[:, 0] * along + foot_z[:, 2] * up + shift_z
@@ -318,6 +342,7 @@ def sample_posed_kinematics_reference(
 ) -> tuple[KinematicState, BodyPoseBatch]:
     """Reference of ``sample_posed_kinematics`` (and, with ``heading``, of ``sample_kinematics``):
     the sampled states and their posed bodies."""
+    body = _ruled(body, config)
     current = kin.dofs()
     struck = walker.stance_leg.astype(np.int8) != kin.contact_leg
     turn_rate = kin.turn_rate
@@ -391,13 +416,15 @@ def _repose(body: BodyDescription, local: _LocalPose, legs: np.ndarray, dofs: np
             getattr(local, name)[rows] = getattr(again, name)
 
 
-def pose_body_reference(body: BodyDescription, params: WalkerParams, walker: WalkerState, kin: KinematicState) -> BodyPoseBatch:
+def pose_body_reference(body: BodyDescription, params: WalkerParams, walker: WalkerState, kin: KinematicState,
+                        config: KinematicConfig | None = None) -> BodyPoseBatch:
     """World markers, joint angles and part poses of N bodies (vectorised).
 
     The pelvis-relative pose comes from the walker's leg angles and the kinematic DOFs; the
     body is then translated so that the contact foot's sole point at ``contact_roll`` sits on
     the ground at ``contact_point``.
     """
+    body = _ruled(body, config)
     del params  # the sagittal leg angles come from the walker; the geometry from ``body``
     legs = leg_angles(walker)
     dofs = kin.dofs()
@@ -440,7 +467,7 @@ def _posed_body(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray, local
 
     joints = np.empty((n, len(JOINT_NAMES)))
     joints[:, 0:3] = dofs[:, 0:3]               # torso pitch, roll, yaw (heading)
-    lead = _thigh_lead(body, dofs[:, 7:9])
+    lead = _thigh_lead(body, legs, dofs[:, 7:9])
     for side in (0, 1):                         # hip flexion (the thigh's angle), abduction, rotation, knee, ankle x2
         joints[:, 3 + 6 * side] = legs[:, side] + lead[:, side]
         joints[:, 4 + 6 * side: 9 + 6 * side] = dofs[:, 3 + side:13:2]
@@ -449,9 +476,10 @@ def _posed_body(body: BodyDescription, legs: np.ndarray, dofs: np.ndarray, local
 
 
 def sole_point_world_reference(body: BodyDescription, walker: WalkerState, kin: KinematicState,
-                     leg: np.ndarray, beta: np.ndarray) -> np.ndarray:
+                               leg: np.ndarray, beta: np.ndarray, config: KinematicConfig | None = None) -> np.ndarray:
     """World position (N, 3) of the material point at angle ``beta`` on the rocker sole of foot
     ``leg`` (LEFT/RIGHT per particle) for the bodies posed by ``pose_body`` (used to check slip)."""
+    body = _ruled(body, config)
     local = _local_pose(body, leg_angles(walker), kin.dofs(), kin.leg_scale)
     shift = _contact_translation(body, local, kin.contact_leg, kin.contact_roll, kin.contact_point)
     leg = np.broadcast_to(np.asarray(leg, np.int8), (len(kin),))
@@ -479,6 +507,7 @@ def initial_kinematics_reference(
     """``kinematics.initial_kinematics`` with the sole geometry in numpy (same arguments)."""
     body = body or BodyDescription.default()
     params = params or body.walker_params()
+    body = _ruled(body, config)
     # the sampling and the state assembly are the package's (not compiled); the sole geometry is the reference's
     torso_rest = _initial_posture(config, n, rng, posture_spread)
     walker, dofs = _initial_dofs(config, body, walker, heading, n, rng, heading_spread, joint_spread, torso_rest)

@@ -56,7 +56,7 @@ def run(frames: int, n: int, seed: int = 0, config: KinematicConfig | None = Non
     for f in range(1, frames):
         kin = sample_kinematics(config, BODY, PARAMS, walkers[f - 1], walkers[f], None, kin, rng)
         states.append(kin)
-    poses = [pose_body(BODY, PARAMS, w, k) for w, k in zip(walkers, states)]
+    poses = [pose_body(BODY, PARAMS, w, k, config) for w, k in zip(walkers, states)]
     return walkers, states, poses
 
 
@@ -174,19 +174,19 @@ def test_contact_rolls_heel_to_toe_and_switches_feet_continuously():
 def test_heel_rise_keeps_the_pelvis_at_most_at_the_walkers_hip():
     """Late in the stance the stance foot stands on its toe; the stance knee bends just enough that the
     pelvis stays no higher than the walker's hip (walker.hip_position), as people flex the knee before
-    toe-off. On long steps (half angle 0.55 rad, ~0.95 m) it bends past 0.45 rad, which the prior's noise
-    about the 0.4 rad rest does not reach on the 0.35 rad walk."""
+    toe-off. On long steps (half angle 0.55 rad, ~0.95 m) the bound holds the pelvis on about a third of
+    the stance frames (measured: 3802 of 11200 within 0.5 mm of it), so without the knee's projection the
+    pelvis would rise above the walker's hip there."""
     walkers, states, poses = run(60, 200, seed=4, half_angle=0.55)
-    checked = bent = 0
+    checked = held = 0
     for f in range(1, len(walkers)):
         kept = walkers[f].stance_leg == states[f - 1].contact_leg          # no heel strike into this frame
         hip = hip_position(PARAMS, walkers[f])[1]
         pelvis = poses[f].markers[:, M["pelvis"], 2]
         assert np.all(pelvis[kept] <= hip[kept] + 1e-4)
         checked += int(kept.sum())
-        stance_knee = np.where(walkers[f].stance_leg == LEFT, states[f].knee[:, 0], states[f].knee[:, 1])
-        bent += int(np.sum(kept & (stance_knee > 0.45)))
-    assert checked > 5000 and bent > 20
+        held += int(np.sum(kept & (pelvis > hip - 5e-4)))
+    assert checked > 5000 and held > 0.15 * checked
 
 
 def test_a_pelvis_ceiling_keeps_the_pelvis_lower_with_the_stance_knee_bent():
@@ -263,29 +263,39 @@ def test_the_landing_knee_is_straightened_to_reach_the_ground():
     assert np.median((pelvis[:-1] - pelvis[1:])[strikes]) < 0.01
 
 
-def test_body_follows_walker_legs_and_speed():
+@pytest.mark.parametrize("hip_over_ankle", [False, True])
+def test_body_follows_walker_legs_and_speed(hip_over_ankle: bool):
     walkers, states, poses = run(64, 100, seed=5)
-    # The hip-ankle chord's sagittal angle == the walker's leg angle less CHORD_LEAN, exactly so while the
-    # hip is neither abducted nor rotated (Table 1's hips, which rest unabducted); the thigh leads the chord
-    # by the knee's lead and the reported hip flexion is the thigh's angle.
-    upright = run(64, 100, seed=5, config=KinematicConfig(step_width=None))
+    # The hip-ankle chord has the knee's length L(knee), and the straight leg's chord leans CHORD_LEAN back from
+    # the walker's leg phi. A bent knee shortens the chord along that angle, or with hip_over_ankle lowers the
+    # hip straight down over the ankle, which stays (l_thigh + l_shank) sin(phi - CHORD_LEAN) ahead of it; exactly
+    # so while the hip is neither abducted nor rotated (Table 1's hips, which rest unabducted). The thigh leads
+    # the chord by the knee's delta and the reported hip flexion is the thigh's angle.
+    upright = run(64, 100, seed=5, config=KinematicConfig(step_width=None, hip_over_ankle=hip_over_ankle))
+    thigh_length, shank_length = BODY.upper_leg_length, BODY.lower_leg_length
     bent = 0
     for walker, kin, pose in zip(*(frames[::7] for frames in upright)):
         forward = np.stack([np.cos(kin.heading), np.sin(kin.heading)], axis=1)
 
-        def sagittal_angle(a: str, b: str) -> np.ndarray:
+        def sagittal(a: str, b: str) -> tuple[np.ndarray, np.ndarray]:
+            """(along the walk, down) from marker a to marker b (m)."""
             axis = pose.markers[:, M[b]] - pose.markers[:, M[a]]
-            return np.arctan2(np.einsum("ij,ij->i", axis[:, :2], forward), -axis[:, 2])
+            return np.einsum("ij,ij->i", axis[:, :2], forward), -axis[:, 2]
 
-        chord, thigh = sagittal_angle("left_hip", "left_ankle"), sagittal_angle("left_hip", "left_knee")
+        ahead, down = sagittal("left_hip", "left_ankle")
+        thigh = np.arctan2(*sagittal("left_hip", "left_knee"))
         abducted = np.abs(kin.hip_abduction[:, 0]) + np.abs(kin.hip_rotation[:, 0])
         close = abducted < 0.02
         assert close.sum() >= 10
-        assert np.allclose(chord[close], leg_angles(walker)[close, 0] - CHORD_LEAN, atol=0.01)
-        knee = kin.knee[:, 0]
-        lead = np.arctan2(BODY.lower_leg_length * np.sin(knee), BODY.upper_leg_length + BODY.lower_leg_length * np.cos(knee))
-        assert np.allclose(thigh[close], leg_angles(walker)[close, 0] - CHORD_LEAN + lead[close], atol=0.01)
-        assert np.allclose(pose.joint_angles[:, J["left_hip_flexion"]], leg_angles(walker)[:, 0] - CHORD_LEAN + lead)
+        phi, knee = leg_angles(walker)[:, 0], kin.knee[:, 0]
+        chord = np.sqrt(thigh_length**2 + shank_length**2 + 2 * thigh_length * shank_length * np.cos(knee))
+        straight = phi - CHORD_LEAN
+        angle = np.arcsin((thigh_length + shank_length) * np.sin(straight) / chord) if hip_over_ankle else straight
+        assert np.allclose(ahead[close], (chord * np.sin(angle))[close], atol=0.001)
+        assert np.allclose(np.hypot(ahead, down)[close], chord[close], atol=0.002)
+        delta = np.arctan2(shank_length * np.sin(knee), thigh_length + shank_length * np.cos(knee))
+        assert np.allclose(thigh[close], (angle + delta)[close], atol=0.01)
+        assert np.allclose(pose.joint_angles[:, J["left_hip_flexion"]], angle + delta)
         bent += int(np.sum(close & (knee > 0.2)))
     assert bent >= 10                   # the thigh's lead was checked with the knee bent
     # Segment lengths are kept.

@@ -78,12 +78,13 @@ def assert_poses_close(actual: BodyPoseBatch, expected: BodyPoseBatch) -> None:
         np.testing.assert_allclose(a, e, rtol=0, atol=TOLERANCE, err_msg=name)
 
 
+@pytest.mark.parametrize("hip_over_ankle", [False, True])
 @pytest.mark.parametrize("seed, dt", [(0, 1 / 30), (1, 1 / 30), (2, 1 / 60)])
-def test_sample_posed_kinematics_matches_numpy_reference(seed, dt):
+def test_sample_posed_kinematics_matches_numpy_reference(seed, dt, hip_over_ankle):
     walker, kin = random_case(seed)
     wander = seed == 1      # leg scales, postures and pelvis ceilings wandering or kept
     config = KinematicConfig(dt=dt, leg_scale_drift=0.01 if wander else 0.0, posture_drift=0.01 if wander else 0.0,
-                             pelvis_ceiling_drift=0.005 if wander else 0.0)
+                             pelvis_ceiling_drift=0.005 if wander else 0.0, hip_over_ankle=hip_over_ankle)
     state, pose = sample_posed_kinematics(config, BODY, PARAMS, walker, kin, np.random.default_rng(seed))
     expected_state, expected_pose = sample_posed_kinematics_reference(config, BODY, PARAMS, walker, kin,
                                                                       np.random.default_rng(seed))
@@ -108,20 +109,23 @@ def test_sample_kinematics_with_scripted_heading_matches_numpy_reference():
     assert_states_close(state, expected)
 
 
-def test_pose_body_and_sole_points_match_numpy_reference():
+@pytest.mark.parametrize("hip_over_ankle", [False, True])
+def test_pose_body_and_sole_points_match_numpy_reference(hip_over_ankle):
     walker, kin = random_case(4)
-    assert_poses_close(pose_body(BODY, PARAMS, walker, kin), pose_body_reference(BODY, PARAMS, walker, kin))
+    config = KinematicConfig(hip_over_ankle=hip_over_ankle)
+    assert_poses_close(pose_body(BODY, PARAMS, walker, kin, config),
+                       pose_body_reference(BODY, PARAMS, walker, kin, config))
     rng = np.random.default_rng(4)
     leg, beta = rng.integers(0, 2, len(kin)).astype(np.int8), rng.uniform(-0.3, 0.3, len(kin))
-    np.testing.assert_allclose(sole_point_world(BODY, walker, kin, leg, beta),
-                               sole_point_world_reference(BODY, walker, kin, leg, beta), rtol=0, atol=TOLERANCE)
-    np.testing.assert_allclose(sole_point_world(BODY, walker, kin, 1, 0.1),      # scalar leg and roll
-                               sole_point_world_reference(BODY, walker, kin, 1, 0.1), rtol=0, atol=TOLERANCE)
+    np.testing.assert_allclose(sole_point_world(BODY, walker, kin, leg, beta, config),
+                               sole_point_world_reference(BODY, walker, kin, leg, beta, config), rtol=0, atol=TOLERANCE)
+    np.testing.assert_allclose(sole_point_world(BODY, walker, kin, 1, 0.1, config),      # scalar leg and roll
+                               sole_point_world_reference(BODY, walker, kin, 1, 0.1, config), rtol=0, atol=TOLERANCE)
 
 
 def test_initial_kinematics_matches_numpy_reference():
     walker, _ = random_case(5, n=400)
-    config = KinematicConfig(pelvis_ceiling=0.97)
+    config = KinematicConfig(pelvis_ceiling=0.97, hip_over_ankle=True)
     spreads = dict(position_spread=0.1, heading_spread=0.2, joint_spread=0.3, turn_rate_spread=0.1,
                    leg_scale_spread=0.05, posture_spread=0.1, pelvis_ceiling_spread=0.02)
     actual = initial_kinematics(config, walker, [1.0, -2.0], 0.4, 400, np.random.default_rng(5), body=BODY,
@@ -135,7 +139,7 @@ def test_a_walk_of_sampled_frames_matches_numpy_reference_frame_by_frame():
     """40 frames of the prior on a walker whose legs swing between +-0.4 rad with heel strikes: every
     frame, compiled and reference agree from the same previous state, which then carries on."""
     n, config = 300, KinematicConfig(leg_scale_drift=0.005, posture_drift=0.003, pelvis_ceiling=0.97,
-                                     pelvis_ceiling_drift=0.002)
+                                     pelvis_ceiling_drift=0.002, hip_over_ankle=True)
     rng = np.random.default_rng(6)
     walkers, leg, origin = [], 0, 0.0
     for f in range(40):

@@ -55,18 +55,25 @@ pose-dependent lower joint limit, applied as a position projection that adds no 
 
 Knees (our reading of "the sagittal hip angle equals the walker's leg angle", and our change to
 Table 1's stance-knee rest): the walker's leg is the straight line from the hip to the rolling foot, so
-the hip-ankle *chord* follows the walker's leg angle phi, and a bent knee shortens the chord instead of
-swinging the shank back: the thigh leans ahead of the chord by delta = atan2(l_shank sin knee,
-l_thigh + l_shank cos knee), the shank trails it by knee - delta, and the foot hangs from the walker's
-leg (the ankle DOF counts from its direction, so a bent knee does not tip the foot; the reported ankle
-flexion is the angle from the shank, the reported hip flexion the thigh's angle). The chord leans
-``CHORD_LEAN`` (0.08 rad) back from the walker's leg (``_thigh_lead`` is delta less it): the walker's
-leg ends at the rolling contact, where a person's centre of pressure lies ahead of the ankle over
-the stance (heel, flat foot, forefoot), so their hip rides ahead of the stance ankle (CMU subject 7: a
-median 65 mm over single support) where a chord along phi kept ours over it (-14 mm in the prior; with
-the lean +46) and the tracked pelvis 7 cm behind the person's on the real walks. The stance knee rests
-at ``stance_knee_rest`` 0.4 rad (Table 1: 0): people walk with the stance knee bent (CMU subject 7: a
-median 20-27 degrees over stance), which holds the hips lower and the knees ahead of the hip-ankle line
+the hip-ankle *chord* follows the walker's leg angle phi, and a bent knee shortens the chord, to
+L(knee) = sqrt(l_thigh^2 + l_shank^2 + 2 l_thigh l_shank cos knee), instead of swinging the shank back: the
+thigh leans ahead of the chord by delta = atan2(l_shank sin knee, l_thigh + l_shank cos knee), the shank trails
+it by knee - delta, and the foot hangs from the walker's leg (the ankle DOF counts from its direction, so a bent
+knee does not tip the foot; the reported ankle flexion is the angle from the shank, the reported hip flexion the
+thigh's angle). By default the chord keeps its angle (phi less ``CHORD_LEAN``) and shortens along it. With
+``KinematicConfig.hip_over_ankle`` (the tracker's whenever the pelvis ceilings are on, below) the bent knee
+lowers the hip straight down over the ankle instead, which stays as far ahead of the hip as the straight leg's,
+L0 sin(phi - CHORD_LEAN) with L0 = l_thigh + l_shank (``_chord_angle``: sin theta = L0 sin(phi - CHORD_LEAN) /
+L(knee)): late in the stance, the chord leaning forward from the ankle, shortening along it slid the hip back as
+the ceilings bend the knee, and the tracked pelvis rode 30 mm behind the person's on the real walks with two
+cameras against 19 without the ceilings (README "The hip comes down over the ankle"). The straight leg's
+chord leans ``CHORD_LEAN`` (0.08 rad) back from the walker's leg: the walker's leg ends at the rolling
+contact, where a person's centre of pressure lies ahead of the ankle over the stance (heel, flat foot,
+forefoot), so their hip rides ahead of the stance ankle (CMU subject 7: a median 65 mm over single
+support) where a chord along phi kept ours over it (-14 mm in the prior; with the lean +46) and the tracked
+pelvis 7 cm behind the person's on the real walks. The stance knee rests at ``stance_knee_rest`` 0.4 rad
+(Table 1: 0): people walk with the stance knee bent (CMU subject 7: a median 20-27 degrees over stance),
+which holds the hips lower and the knees ahead of the hip-ankle line
 (7-9 cm on those walks), where a straight stance leg carried the pelvis 2 cm high and the knees 6-7 cm
 behind. With Table 1's slow knee (k = 20, alpha 0.75) it reaches ~9 degrees on average over the stance
 in the prior. Measured on the real walks (README "Knees"). Since the feet land where the walker's do,
@@ -131,7 +138,8 @@ particle's pelvis at most its own fraction of the walker's hip height, drawn aro
 ``PELVIS_CEILING_RANGE``) and wandering by ``pelvis_ceiling_drift`` per frame, so that the filter weighs how
 far the stance knee bends as it weighs postures: people walk with the pelvis ~0.96 of the standing leg,
 the walker's rigid leg at 1. All 1 and 0 by default (``synth`` draws its walkers so, bit for bit as
-before); the tracker sets them with two or more cameras (``TrackerConfig.pelvis_ceiling``; measured there).
+before); the tracker sets them with two or more cameras (``TrackerConfig.pelvis_ceiling``; measured there), and
+with them lowers the hip over the ankle as the knee bends (``hip_over_ankle``, *Knees* above).
 
 ``plane_origin`` maps the walker's sagittal x to the world: the walker's stance contact
 x (``walker.stance_contact_x``) lands on ``contact_point``, x grows along the heading.
@@ -262,6 +270,10 @@ class KinematicConfig:
     # PELVIS_CEILING_RANGE; 1 = the walker's hip height itself
     pelvis_ceiling: float = 1.0
     pelvis_ceiling_drift: float = 0.0
+    # the knee rule (module doc, *Knees*): False, a bent knee shortens the hip-ankle chord along its angle; True,
+    # it lowers the hip straight down over the ankle, which keeps the straight leg's reach (the tracker's with the
+    # pelvis ceilings on: ``TrackerModel``)
+    hip_over_ankle: bool = False
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -524,9 +536,10 @@ def initial_kinematics(
     ceiling = _pelvis_ceiling_within_range(config.pelvis_ceiling + pelvis_ceiling_spread * rng.standard_normal(n)
                                            if pelvis_ceiling_spread > 0 else np.full(n, config.pelvis_ceiling))
     legs = leg_angles(walker)
-    _initial_clearance_kernel(_geometry(body), legs, dofs, scale, leg,
+    geometry = _geometry(body, config)
+    _initial_clearance_kernel(geometry, legs, dofs, scale, leg,
                               np.ascontiguousarray(ceiling * hip_position(params, walker)[1], float))
-    _sole_points_kernel(_geometry(body), legs, dofs, scale, leg, beta, True, point)
+    _sole_points_kernel(geometry, legs, dofs, scale, leg, beta, True, point)
     return _initial_state(params, walker, dofs, beta, point, start_position_xy, rng, position_spread,
                           turn_rate_spread, scale, torso_rest, ceiling)
 
@@ -697,7 +710,7 @@ def _sample_kinematics(
     beta = np.empty(n)
     plane_origin = np.empty((n, 2))
     pose = _empty_pose(n)
-    geometry = _geometry(body)
+    geometry = _geometry(body, config)
     contact_point, contact_roll = (np.ascontiguousarray(kin.contact_point, float),
                                    np.ascontiguousarray(kin.contact_roll, float))
     stance_x = np.ascontiguousarray(stance_contact_x(params, walker), float)
@@ -718,16 +731,18 @@ def _sample_kinematics(
     return state, pose
 
 
-def pose_body(body: BodyDescription, params: WalkerParams, walker: WalkerState, kin: KinematicState) -> BodyPoseBatch:
+def pose_body(body: BodyDescription, params: WalkerParams, walker: WalkerState, kin: KinematicState,
+              config: KinematicConfig | None = None) -> BodyPoseBatch:
     """World markers, joint angles and part poses of N bodies.
 
     The pelvis-relative pose comes from the walker's leg angles and the kinematic DOFs; the
     body is then translated so that the contact foot's sole point at ``contact_roll`` sits on
-    the ground at ``contact_point``.
+    the ground at ``contact_point``. ``config``: the kinematics the states were sampled with, for its knee
+    rule (``KinematicConfig.hip_over_ankle``; None: the default's).
     """
     del params  # the sagittal leg angles come from the walker; the geometry from ``body``
     pose = _empty_pose(len(kin))
-    geometry, legs, dofs = _geometry(body), leg_angles(walker), kin.dofs()
+    geometry, legs, dofs = _geometry(body, config), leg_angles(walker), kin.dofs()
     contact_leg, contact_roll, contact_point = (np.ascontiguousarray(kin.contact_leg, np.int8),
                                                 np.ascontiguousarray(kin.contact_roll, float),
                                                 np.ascontiguousarray(kin.contact_point, float))
@@ -739,11 +754,12 @@ def pose_body(body: BodyDescription, params: WalkerParams, walker: WalkerState, 
 
 
 def sole_point_world(body: BodyDescription, walker: WalkerState, kin: KinematicState,
-                     leg: np.ndarray, beta: np.ndarray) -> np.ndarray:
+                     leg: np.ndarray, beta: np.ndarray, config: KinematicConfig | None = None) -> np.ndarray:
     """World position (N, 3) of the material point at angle ``beta`` on the rocker sole of foot
-    ``leg`` (LEFT/RIGHT per particle) for the bodies posed by ``pose_body`` (used to check slip)."""
+    ``leg`` (LEFT/RIGHT per particle) for the bodies posed by ``pose_body`` (used to check slip; ``config`` as
+    there)."""
     n = len(kin)
-    geometry, legs, dofs = _geometry(body), leg_angles(walker), kin.dofs()
+    geometry, legs, dofs = _geometry(body, config), leg_angles(walker), kin.dofs()
     contact = np.empty((n, 3))      # pelvis-relative contact point: the body's translation is minus it
     scale = np.ascontiguousarray(kin.leg_scale, float)
     _sole_points_kernel(geometry, legs, dofs, scale, np.ascontiguousarray(kin.contact_leg, np.int8),
@@ -793,14 +809,16 @@ class _Geometry(NamedTuple):
     torso_length: float
     head_length: float
     foot_axis_height: float     # the foot cylinder's axis above the sole line at the heel
+    hip_over_ankle: bool        # a bent knee lowers the hip over the ankle (``KinematicConfig.hip_over_ankle``)
 
 
-def _geometry(body: BodyDescription) -> _Geometry:
+def _geometry(body: BodyDescription, config: KinematicConfig | None = None) -> _Geometry:
+    """The kernels' body sizes, and the knee rule of ``config`` (None: the chord keeps its angle)."""
     return _Geometry(
         float(body.upper_leg_length), float(body.lower_leg_length), float(body.ankle_height),
         float(body.foot_length), float(body.heel_offset), float(body.sole_radius), body.sole_sag,
         body.sole_half_angle, float(body.hip_width), float(body.torso_length), float(body.head_length),
-        float(body.foot_radii_heel[0]))
+        float(body.foot_radii_heel[0]), bool(config is not None and config.hip_over_ankle))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -840,14 +858,31 @@ CHORD_LEAN = 0.08
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _thigh_lead(g: _Geometry, knee: float) -> float:
-    """How far (rad) the thigh leans ahead of the walker's leg at knee flexion ``knee`` (rad): ahead of the
-    hip-ankle chord by delta = atan2(l_shank sin knee, l_thigh + l_shank cos knee), the chord itself
-    ``CHORD_LEAN`` behind the walker's leg; the shank then trails the walker's leg by knee - lead, and
-    the foot, counted from the walker's leg, does not tip with the knee. (A leg scale multiplies both
-    lengths and leaves it unchanged.)"""
-    return math.atan2(g.lower_leg_length * math.sin(knee),
-                      g.upper_leg_length + g.lower_leg_length * math.cos(knee)) - CHORD_LEAN
+def _chord_angle(g: _Geometry, leg: float, knee: float) -> float:
+    """The hip-ankle chord's sagittal angle (rad, foot ahead > 0) for the walker's leg angle ``leg`` at knee
+    flexion ``knee`` (rad): the straight leg's chord lies ``CHORD_LEAN`` behind the walker's leg, and a bent knee
+    shortens the chord along that line; with ``g.hip_over_ankle`` it lowers the hip straight down over the ankle
+    instead, so that the ankle stays as far ahead of the hip as the straight leg's: sin theta = L0 sin(leg -
+    CHORD_LEAN) / L(knee), L0 = l_thigh + l_shank and L(knee) = sqrt(l_thigh^2 + l_shank^2 + 2 l_thigh l_shank
+    cos knee) the chord's length (a leg scale multiplies both lengths and leaves it unchanged; |sin theta| is
+    capped at 1, a knee bent past where that reaches)."""
+    if not g.hip_over_ankle:
+        return leg - CHORD_LEAN
+    thigh, shank = g.upper_leg_length, g.lower_leg_length
+    chord = math.hypot(thigh + shank * math.cos(knee), shank * math.sin(knee))   # (> 0 at pi: sin pi > 0 in floats)
+    return math.asin(min(max((thigh + shank) * math.sin(leg - CHORD_LEAN) / chord, -1.0), 1.0))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _thigh_lead(g: _Geometry, leg: float, knee: float) -> float:
+    """How far (rad) the thigh leans ahead of the walker's leg angle ``leg`` at knee flexion ``knee`` (rad): ahead
+    of the hip-ankle chord (``_chord_angle``) by delta = atan2(l_shank sin knee, l_thigh + l_shank cos knee); the
+    shank then trails the walker's leg by knee - lead, and the foot, counted from the walker's leg, does not tip
+    with the knee. (A leg scale multiplies both lengths and leaves it unchanged.)"""
+    delta = math.atan2(g.lower_leg_length * math.sin(knee), g.upper_leg_length + g.lower_leg_length * math.cos(knee))
+    if not g.hip_over_ankle:
+        return delta - CHORD_LEAN
+    return _chord_angle(g, leg, knee) + delta - leg
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -869,23 +904,23 @@ def _leg_pose(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarra
               frames: np.ndarray, points: np.ndarray) -> None:
     """Hip, thigh frame, knee and what lies below of leg ``side`` of body i (the torso frame is set): the
     thigh ``_thigh_lead`` ahead of the walker's leg angle phi (foot ahead for phi > 0), so that the
-    hip-ankle chord lies ``CHORD_LEAN`` behind phi, then abduction and rotation."""
+    hip-ankle chord lies at ``_chord_angle``, then abduction and rotation."""
     sign, thigh = 1.0 - 2.0 * side, _THIGH + side
     for k in range(3):
         points[_HIP + side, k] = (0.5 * g.hip_width) * sign * frames[_TORSO, k, 1]
-    pitch = legs[i, side] + _thigh_lead(g, dofs[i, 7 + side])
+    pitch = legs[i, side] + _thigh_lead(g, legs[i, side], dofs[i, 7 + side])
     _set_heading(frames, thigh, math.cos(dofs[i, 2]), math.sin(dofs[i, 2]))
     _turn(frames, thigh, 1, math.cos(pitch), -math.sin(pitch))
     _turn(frames, thigh, 0, math.cos(dofs[i, 3 + side]), sign * math.sin(dofs[i, 3 + side]))
     _turn(frames, thigh, 2, math.cos(dofs[i, 5 + side]), -sign * math.sin(dofs[i, 5 + side]))
     for k in range(3):
         points[_KNEE + side, k] = points[_HIP + side, k] - (scale[i] * g.upper_leg_length) * frames[thigh, k, 2]
-    _lower_leg(g, dofs, scale, i, side, frames, points)
+    _lower_leg(g, legs, dofs, scale, i, side, frames, points)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _lower_leg(g: _Geometry, dofs: np.ndarray, scale: np.ndarray, i: int, side: int, frames: np.ndarray,
-               points: np.ndarray) -> None:
+def _lower_leg(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, side: int,
+               frames: np.ndarray, points: np.ndarray) -> None:
     """Shank frame, ankle position and foot frame of leg ``side`` of body i below its thigh and knee
     (knee flexion, then ankle flexion and inversion from ``dofs`` (N, 13); the shank ``scale[i]`` x its length).
     The foot hangs from the walker's leg: its flexion counts from the leg's direction, the shank's own plus
@@ -897,16 +932,16 @@ def _lower_leg(g: _Geometry, dofs: np.ndarray, scale: np.ndarray, i: int, side: 
     for k in range(3):
         points[_ANKLE + side, k] = points[_KNEE + side, k] - (scale[i] * g.lower_leg_length) * frames[shank, k, 2]
     _copy_frame(frames, shank, foot)
-    flexion = _ankle_from_shank(g, dofs[i, 9 + side], knee)
+    flexion = _ankle_from_shank(g, dofs[i, 9 + side], legs[i, side], knee)
     _turn(frames, foot, 1, math.cos(flexion), -math.sin(flexion))                                # ankle flexion
     _turn(frames, foot, 0, math.cos(dofs[i, 11 + side]), -sign * math.sin(dofs[i, 11 + side]))   # inversion
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _ankle_from_shank(g: _Geometry, ankle: float, knee: float) -> float:
-    """The foot's flexion (rad) from its shank for the ankle DOF ``ankle`` (counted from the walker's leg)
-    at knee flexion ``knee``: ankle + knee - ``_thigh_lead``."""
-    return ankle + knee - _thigh_lead(g, knee)
+def _ankle_from_shank(g: _Geometry, ankle: float, leg: float, knee: float) -> float:
+    """The foot's flexion (rad) from its shank for the ankle DOF ``ankle`` (counted from the walker's leg, angle
+    ``leg``) at knee flexion ``knee``: ankle + knee - ``_thigh_lead``."""
+    return ankle + knee - _thigh_lead(g, leg, knee)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -948,7 +983,7 @@ class _LegTurns(NamedTuple):
     """What ``_foot_height`` needs of one leg that does not change with its knee angle."""
 
     lengths: tuple[float, float]      # m: thigh, shank (scaled)
-    leg_turn: tuple[float, float]     # cosine, sine of the walker's leg angle less CHORD_LEAN
+    leg_turn: tuple[float, float]     # cosine, sine of the walker's leg angle less CHORD_LEAN (the straight chord's)
     hip_turns: tuple[float, float, float, float]   # c_abd, s_abd, c_rot, s_rot: the thigh's turns about x, z
     hip_z: float                      # m: the hip's height relative to the pelvis
     ankle_turn: tuple[float, float]   # cosine, sine of the ankle DOF plus CHORD_LEAN (from the walker's leg)
@@ -972,10 +1007,11 @@ def _leg_turns(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarr
 def _foot_height(g: _Geometry, turns: _LegTurns, knee: float, shift_z: float) -> float:
     """World height (m) of the lowest point of a foot's sole with its knee at ``knee`` (rad), the pelvis
     at height ``shift_z`` (m); ``turns`` (``_leg_turns``) holds what of its leg does not change with the
-    knee. The thigh leads the chord by the knee's delta (``_thigh_lead``), so it is turned anew for each
-    knee angle; only the frames' z rows are turned (the height needs no more). The bisection calls this
-    ~14 times per leg, so the angles that do not change with the knee come in as cosines and sines, and
-    delta's by the law of cosines: per call one cosine, one sine and one square root (no arctangent)."""
+    knee. The thigh leads the chord (``_chord_angle``, which turns with the knee over the ankle) by the knee's
+    delta (``_thigh_lead``), so it is turned anew for each knee angle; only the frames' z rows are turned (the
+    height needs no more). The bisection calls this ~14 times per leg, so the angles that do not change with
+    the knee come in as cosines and sines, and delta's and the chord's by the law of cosines: per call one
+    cosine, one sine and one square root, two over the ankle (no arctangent)."""
     lengths, leg_turn, ankle_turn, hip_z = turns.lengths, turns.leg_turn, turns.ankle_turn, turns.hip_z
     c_abd, s_abd, c_rot, s_rot = turns.hip_turns
     c_inv, s_inv = turns.inversion_turn
@@ -984,19 +1020,30 @@ def _foot_height(g: _Geometry, turns: _LegTurns, knee: float, shift_z: float) ->
     across, ahead = g.upper_leg_length + g.lower_leg_length * c_knee, g.lower_leg_length * s_knee
     chord = math.sqrt(across * across + ahead * ahead)
     c_delta, s_delta = across / chord, ahead / chord
-    # thigh pitch = (leg - CHORD_LEAN) + delta
-    c_pitch = leg_turn[0] * c_delta - leg_turn[1] * s_delta
-    s_pitch = leg_turn[1] * c_delta + leg_turn[0] * s_delta
+    # the chord's angle theta (``_chord_angle``): leg - CHORD_LEAN, or over the ankle sin theta = L0 sin(leg -
+    # CHORD_LEAN) / L(knee)
+    c_chord, s_chord = leg_turn
+    if g.hip_over_ankle:
+        s_chord = min(max((g.upper_leg_length + g.lower_leg_length) * leg_turn[1] / chord, -1.0), 1.0)
+        c_chord = math.sqrt(1.0 - s_chord * s_chord)
+    # thigh pitch = theta + delta
+    c_pitch = c_chord * c_delta - s_chord * s_delta
+    s_pitch = s_chord * c_delta + c_chord * s_delta
     x, y, z = s_pitch, 0.0, c_pitch                                 # thigh: the heading leaves z alone
     y, z = c_abd * y + s_abd * z, c_abd * z - s_abd * y             # abduction about x
     x, y = c_rot * x + s_rot * y, c_rot * y - s_rot * x             # rotation about z
     knee_z = hip_z - lengths[0] * z
     x, z = c_knee * x - s_knee * z, c_knee * z + s_knee * x         # shank: knee flexion about y
     ankle_z = knee_z - lengths[1] * z
-    # the foot's flexion from the shank, -_ankle_from_shank = -((ankle + CHORD_LEAN) + (knee - delta))
+    # the foot's flexion from the shank, -_ankle_from_shank = -((ankle + CHORD_LEAN) + (theta0 - theta) +
+    # (knee - delta)), theta0 = leg - CHORD_LEAN the straight leg's chord (theta0 - theta = 0 along it)
     c_bend = c_knee * c_delta + s_knee * s_delta                    # knee - delta
     s_bend = s_knee * c_delta - c_knee * s_delta
-    c_flex = ankle_turn[0] * c_bend - ankle_turn[1] * s_bend        # ankle + CHORD_LEAN + knee - delta
+    if g.hip_over_ankle:
+        c_turn = leg_turn[0] * c_chord + leg_turn[1] * s_chord      # theta0 - theta
+        s_turn = leg_turn[1] * c_chord - leg_turn[0] * s_chord
+        c_bend, s_bend = c_bend * c_turn - s_bend * s_turn, s_bend * c_turn + c_bend * s_turn   # + theta0 - theta
+    c_flex = ankle_turn[0] * c_bend - ankle_turn[1] * s_bend        # ankle + CHORD_LEAN + theta0 - theta + knee - delta
     s_flex = -(ankle_turn[1] * c_bend + ankle_turn[0] * s_bend)     # its negative's sine
     x, z = c_flex * x - s_flex * z, c_flex * z + s_flex * x         # foot: ankle flexion about y
     y, z = c_inv * y + s_inv * z, c_inv * z - s_inv * y             # inversion about x
@@ -1132,10 +1179,10 @@ def _write_posed_body(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, i: int, 
     joints[i, 0], joints[i, 1], joints[i, 2] = dofs[i, 0], dofs[i, 1], dofs[i, 2]   # torso pitch, roll, yaw
     for side in range(2):
         knee = dofs[i, 7 + side]
-        joints[i, 3 + 6 * side] = legs[i, side] + _thigh_lead(g, knee)   # hip flexion: the thigh's angle
+        joints[i, 3 + 6 * side] = legs[i, side] + _thigh_lead(g, legs[i, side], knee)   # hip flexion: the thigh's angle
         for j in range(5):                                                # abduction, rotation, knee, ankle x2
             joints[i, 4 + 6 * side + j] = dofs[i, 3 + side + 2 * j]
-        joints[i, 7 + 6 * side] = _ankle_from_shank(g, dofs[i, 9 + side], knee)   # ankle flexion from the shank
+        joints[i, 7 + 6 * side] = _ankle_from_shank(g, dofs[i, 9 + side], legs[i, side], knee)   # from the shank
 
 
 @numba.njit(cache=True, nogil=True)
