@@ -194,7 +194,7 @@ class TrackerConfig:
     # (39 of 60 runs better), but our own straight walk (walker renders, pelvis at the hip) 29 -> 39 mm, which
     # the spread lets the images choose; one camera 73.5 -> 79.7 (seeds 0-2: the depth moves with the shape).
     # With the ceilings on, a bent knee lowers the hip over the ankle (``KinematicConfig.hip_over_ankle``; README
-    # "The hip comes down over the ankle": two cameras 54.2 -> 52.0 mm, 39 of 60 runs better).
+    # "The hip comes down over the ankle": two cameras 54.2 -> 51.9 mm, 39 of 60 runs better).
     pelvis_ceiling: float = 0.97
     pelvis_ceiling_spread: float = 0.02
     pelvis_ceiling_drift: float = 0.002
