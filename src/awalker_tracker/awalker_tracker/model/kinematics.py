@@ -859,15 +859,13 @@ CHORD_LEAN = 0.08
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _chord_angle(g: _Geometry, leg: float, knee: float) -> float:
-    """The hip-ankle chord's sagittal angle (rad, foot ahead > 0) for the walker's leg angle ``leg`` at knee
-    flexion ``knee`` (rad): the straight leg's chord lies ``CHORD_LEAN`` behind the walker's leg, and a bent knee
-    shortens the chord along that line; with ``g.hip_over_ankle`` it lowers the hip straight down over the ankle
-    instead, so that the ankle stays as far ahead of the hip as the straight leg's: sin theta = L0 sin(leg -
-    CHORD_LEAN) / L(knee), L0 = l_thigh + l_shank and L(knee) = sqrt(l_thigh^2 + l_shank^2 + 2 l_thigh l_shank
-    cos knee) the chord's length (a leg scale multiplies both lengths and leaves it unchanged; |sin theta| is
-    capped at 1, a knee bent past where that reaches)."""
-    if not g.hip_over_ankle:
-        return leg - CHORD_LEAN
+    """The hip-ankle chord's sagittal angle theta (rad, foot ahead > 0) under ``g.hip_over_ankle``, for the walker's
+    leg angle ``leg`` at knee flexion ``knee`` (rad): the bent knee lowers the hip straight down over the ankle, so
+    that the ankle stays as far ahead of the hip as the straight leg's (which lies ``CHORD_LEAN`` behind the
+    walker's leg): sin theta = L0 sin(leg - CHORD_LEAN) / L(knee), L0 = l_thigh + l_shank and L(knee) =
+    sqrt(l_thigh^2 + l_shank^2 + 2 l_thigh l_shank cos knee) the chord's length (a leg scale multiplies both
+    lengths and leaves it unchanged; |sin theta| is capped at 1, a knee bent past where that reaches). Without
+    the rule the chord's angle is leg - CHORD_LEAN at any knee (``_thigh_lead`` uses that directly)."""
     thigh, shank = g.upper_leg_length, g.lower_leg_length
     chord = math.hypot(thigh + shank * math.cos(knee), shank * math.sin(knee))   # (> 0 at pi: sin pi > 0 in floats)
     return math.asin(min(max((thigh + shank) * math.sin(leg - CHORD_LEAN) / chord, -1.0), 1.0))
@@ -904,7 +902,8 @@ def _leg_pose(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarra
               frames: np.ndarray, points: np.ndarray) -> None:
     """Hip, thigh frame, knee and what lies below of leg ``side`` of body i (the torso frame is set): the
     thigh ``_thigh_lead`` ahead of the walker's leg angle phi (foot ahead for phi > 0), so that the
-    hip-ankle chord lies at ``_chord_angle``, then abduction and rotation."""
+    hip-ankle chord lies ``CHORD_LEAN`` behind phi (over the ankle: at ``_chord_angle``), then abduction and
+    rotation."""
     sign, thigh = 1.0 - 2.0 * side, _THIGH + side
     for k in range(3):
         points[_HIP + side, k] = (0.5 * g.hip_width) * sign * frames[_TORSO, k, 1]
