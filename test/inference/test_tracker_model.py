@@ -168,11 +168,20 @@ def test_initial_particles_spread_around_the_start():
     assert np.std(states.kin.pelvis_ceiling) == pytest.approx(config.pelvis_ceiling_spread, rel=0.25)
     assert np.median(states.kin.pelvis_ceiling) == pytest.approx(config.pelvis_ceiling, abs=0.005)
     assert two.kin_config.pelvis_ceiling == 0.97 and two.kin_config.pelvis_ceiling_drift == config.pelvis_ceiling_drift > 0
-    assert two.kin_config.hip_over_ankle                # with the ceilings the hip comes down over the ankle
+    assert two.kin_config.hip_over_ankle                # two cameras: the hip comes down over the ankle
     for off in (one, model):
         assert off.kin_config.pelvis_ceiling == 1.0 and off.kin_config.pelvis_ceiling_drift == 0.0
         assert not off.kin_config.hip_over_ankle
         assert np.all(off.initial(50, np.random.default_rng(0)).kin.pelvis_ceiling == 1.0)
+    # with two cameras the hip comes down over the ankle with the ceilings off too (hands off, after a leg fit)
+    unceiled = TrackerModel(body, start, marker_likelihood(), replace(config, pelvis_ceiling=1.0),
+                            cameras=[object(), object()])
+    assert unceiled.kin_config.pelvis_ceiling == 1.0 and unceiled.kin_config.hip_over_ankle
+    assert not TrackerModel(body, start, marker_likelihood(), replace(config, pelvis_ceiling=1.0,
+                                                                      hip_over_ankle_min_cameras=3),
+                            cameras=[object(), object()]).kin_config.hip_over_ankle
+    with pytest.raises(ValueError, match="hip_over_ankle_min_cameras"):
+        TrackerConfig(hip_over_ankle_min_cameras=0)
     assert [config.pelvis_ceiling_for(n)[0] for n in (0, 1, 2, 3)] == [1.0, 1.0, 0.97, 0.97]
     assert replace(config, pelvis_ceiling=1.0).pelvis_ceiling_for(2) == (1.0, 0.0, 0.0)     # 1: off, no spread
     ceiled = TrackerModel(body, start, marker_likelihood(), replace(config, pelvis_ceiling=0.95,

@@ -193,12 +193,17 @@ class TrackerConfig:
     # particle: hand-started the pelvis +37 -> +17 mm high and the median of the walk medians 56.1 -> 53.5 mm
     # (39 of 60 runs better), but our own straight walk (walker renders, pelvis at the hip) 29 -> 39 mm, which
     # the spread lets the images choose; one camera 73.5 -> 79.7 (seeds 0-2: the depth moves with the shape).
-    # With the ceilings on, a bent knee lowers the hip over the ankle (``KinematicConfig.hip_over_ankle``; README
-    # "The hip comes down over the ankle": two cameras 54.2 -> 51.9 mm, 39 of 60 runs better).
     pelvis_ceiling: float = 0.97
     pelvis_ceiling_spread: float = 0.02
     pelvis_ceiling_drift: float = 0.002
     pelvis_ceiling_min_cameras: int = 2
+    # A bent knee lowers the hip straight down over the ankle (``KinematicConfig.hip_over_ankle``) with at least
+    # hip_over_ankle_min_cameras cameras, and wherever the pelvis ceilings are on (a ceiling bending the stance
+    # knee slid the hip back along the walk without it). README "The hip comes down over the ankle": two
+    # cameras, hand-started, 54.2 -> 51.9 mm (per run -2.2, 39 of 60 runs better); hands off (after a leg fit,
+    # no ceilings) 63.1 -> 61.4 (per run -0.8, within noise, 33 of 60); one camera 73.5 -> 75.9 and worst runs
+    # 88-100 mm (seeds 0-2), so one camera keeps the chord's angle.
+    hip_over_ankle_min_cameras: int = 2
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -215,6 +220,9 @@ class TrackerConfig:
             raise ValueError(f"TrackerConfig: posture_spread must lie in 0-0.3 rad, posture_drift in 0-0.02 rad and "
                              f"posture_min_cameras be >= 1, got {self.posture_spread}, {self.posture_drift}, "
                              f"{self.posture_min_cameras}")
+        if self.hip_over_ankle_min_cameras < 1:
+            raise ValueError(f"TrackerConfig.hip_over_ankle_min_cameras must be >= 1, got "
+                             f"{self.hip_over_ankle_min_cameras}")
         if not (0.0 <= self.pelvis_ceiling_spread <= 0.1 and self.pelvis_ceiling_min_cameras >= 1):
             raise ValueError(f"TrackerConfig: pelvis_ceiling_spread must lie in 0-0.1 and pelvis_ceiling_min_cameras "
                              f"be >= 1, got {self.pelvis_ceiling_spread}, {self.pelvis_ceiling_min_cameras}")
@@ -294,7 +302,8 @@ class TrackerModel:
         self.kin_config = kinematics if kinematics is not None else kin_mod.KinematicConfig(
             dt=config.dt, leg_scale_drift=config.leg_scale_drift if config.leg_scale_spread > 0 else 0.0,
             posture_drift=config.posture_drift if self.posture_spread > 0 else 0.0,
-            pelvis_ceiling=ceiling, pelvis_ceiling_drift=ceiling_drift, hip_over_ankle=ceiling < 1.0)
+            pelvis_ceiling=ceiling, pelvis_ceiling_drift=ceiling_drift,
+            hip_over_ankle=ceiling < 1.0 or len(cameras or ()) >= config.hip_over_ankle_min_cameras)
         self._control = control
         self._gaits = gaits
         self._kin = kin_mod

@@ -61,7 +61,7 @@ thigh leans ahead of the chord by delta = atan2(l_shank sin knee, l_thigh + l_sh
 it by knee - delta, and the foot hangs from the walker's leg (the ankle DOF counts from its direction, so a bent
 knee does not tip the foot; the reported ankle flexion is the angle from the shank, the reported hip flexion the
 thigh's angle). By default the chord keeps its angle (phi less ``CHORD_LEAN``) and shortens along it. With
-``KinematicConfig.hip_over_ankle`` (the tracker's whenever the pelvis ceilings are on, below) the bent knee
+``KinematicConfig.hip_over_ankle`` (the tracker's with two cameras or more, and with the pelvis ceilings) the bent knee
 lowers the hip straight down over the ankle instead, which stays as far ahead of the hip as the straight leg's,
 L0 sin(phi - CHORD_LEAN) with L0 = l_thigh + l_shank (``_chord_angle``: sin theta = L0 sin(phi - CHORD_LEAN) /
 L(knee)): late in the stance, the chord leaning forward from the ankle, shortening along it slid the hip back as
@@ -271,8 +271,8 @@ class KinematicConfig:
     pelvis_ceiling: float = 1.0
     pelvis_ceiling_drift: float = 0.0
     # the knee rule (module doc, *Knees*): False, a bent knee shortens the hip-ankle chord along its angle; True,
-    # it lowers the hip straight down over the ankle, which keeps the straight leg's reach (the tracker's with the
-    # pelvis ceilings on: ``TrackerModel``)
+    # it lowers the hip straight down over the ankle, which keeps the straight leg's reach (the tracker's with two
+    # cameras or more and with the pelvis ceilings: ``TrackerConfig.hip_over_ankle_min_cameras``)
     hip_over_ankle: bool = False
 
     def __post_init__(self) -> None:
