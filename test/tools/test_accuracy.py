@@ -97,9 +97,13 @@ class Bounds:
 # 38 mm low), against 51.8 / 76.3 and 25.3 / 31.4 without (the same day). 500 particles do not always find this
 # walker's straight leg among the ceilings; at bench_accuracy's 15000 they do (median of seeds 0-4 24.8 mm against
 # 23.9, relative 13.7 against 13.8). Relative bound 40 -> 47.
+# Two cameras on maps 160 pixels wide (2 x 2 image pixels each at 320x240, features.map_downsample; 2026-11-29,
+# session 19), tracker seeds 0-9: mean absolute median 47.6 / worst 70.3 mm, relative 30.6 / 38.6, stance
+# 0.89-0.95 (33-35 of 37 frames), against 50.4 / 81.4, 26.2 / 39.7 and 0.89-0.95 on 4 x 4 maps the same day
+# (seed 9 already 33 of 37, under the bound of 0.9 then). Stance bound 0.9 -> 0.86, a frame below the worst.
 BOUNDS = {
     "mono_straight": Bounds(265.0, 52.0, 0.18, 0.9),
-    "two_camera_straight": Bounds(115.0, 47.0, 0.18, 0.9),
+    "two_camera_straight": Bounds(115.0, 47.0, 0.18, 0.86),
     "speed_change": Bounds(280.0, 47.0, 0.24, 0.8),
     # the second half of the turn is followed loosely; stance 0.85 -> 0.7 with the flow in the current
     # frame's pixels (2026-11-27, late: 0.79 at seed 0, 0.89-0.96 at seeds 1-9; before, 0.82-0.96; likelihood
@@ -159,6 +163,16 @@ def test_marker_errors_within_bounds(runs, name: str):
     absolute, relative = result["absolute_mm"]["mean"], result["relative_mm"]["mean"]
     assert absolute < bounds.absolute_mm, f"{name}: mean absolute error {absolute:.0f} mm"
     assert relative < bounds.relative_mm, f"{name}: mean relative error {relative:.0f} mm"
+
+
+def test_two_cameras_at_320x240_track_on_maps_160_pixels_wide(runs):
+    """`awalker track` hands each features node of a two-camera rig the finer maps (vision.features.map_downsample):
+    2 x 2 image pixels per map pixel at these 320x240 images, where one camera keeps 4."""
+    import yaml
+
+    for name, expected in (("two_camera_straight", 2), ("mono_straight", 4)):
+        run = yaml.safe_load((Path(runs(name)["run_dir"]) / "run.yaml").read_text())
+        assert set(run["map_downsample"].values()) == {expected}, name
 
 
 @pytest.mark.parametrize("name", list(SEQUENCES))

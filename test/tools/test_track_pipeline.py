@@ -86,6 +86,8 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys, monkeypat
     assert 0 < run["seconds_in_filter"] < run["seconds_streaming"] < run["seconds"]
     assert run["depth_band_m"] == 0.25 != RecoveryConfig().depth_band_m     # --depth-band reached the tracker node
     assert run["pelvis_ceiling"] == 1.0            # one camera: no pelvis ceiling by default (TrackerConfig)
+    assert run["map_downsample"] == {"cam0": 4}    # one camera: the coarser maps (features.map_downsample)
+    assert {m.downsample for m in result["/cam0/features"]} == {4}
     # a body description came with the bag: one pass, no leg length fitted (fit_body's default)
     assert not (out / "first_pass").exists() and "body_fit" not in run
     # the pictures are drawn after tracking and timed apart
@@ -155,6 +157,7 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys, monkeypat
 
 def test_track_fit_body_tracks_again_with_the_fitted_legs(synth_bag: Path, tmp_path: Path, monkeypatch):
     from awalker_tools import pipeline
+    from awalker_tracker.vision.features import FeatureConfig
 
     passes = []
     real = pipeline._track_once
@@ -163,6 +166,9 @@ def test_track_fit_body_tracks_again_with_the_fitted_legs(synth_bag: Path, tmp_p
     assert main(["track", str(synth_bag), "--out", str(out), "--particles", "100", "--no-overlay", "--fit-body"]) == 0
     # legs fitted to the walking images: both passes without the pelvis ceiling (pipeline.run_tracking)
     assert [p.pelvis_ceiling for p in passes] == [1.0, 1.0]
+    # the first pass on one camera's maps whatever the rig (its height and leg fit were measured on them), the run on
+    # the rig's own (features.map_downsample)
+    assert [p.map_downsample for p in passes] == [FeatureConfig.downsample, None]
     fitted = out / "first_pass" / "body_fitted.yaml"
     given, got = (BodyDescription.from_yaml(p) for p in (out / "first_pass" / "body.yaml", fitted))
     # a body given with the bag: the candidates around it (GIVEN_BODY_FACTORS), thigh and shank alike

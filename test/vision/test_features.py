@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from awalker_tracker.vision import flow as flow_module
-from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
+from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor, map_downsample
 from vision_scene import background_image, noisy, render_frames, side_camera, walking_poses
 
 CAM = side_camera()
@@ -86,3 +86,15 @@ def test_a_forked_child_starts_its_own_flow_thread(monkeypatch):
         os.kill(pid, signal.SIGKILL)
     _, status = os.waitpid(pid, 0)
     assert answered and os.read(read, 1) == b"1" and status == 0
+
+
+def test_map_downsample_keeps_one_camera_coarse_and_makes_several_about_160_pixels_wide():
+    """One camera keeps FeatureConfig's 4 at any size; two cameras or more get maps ~160 map pixels wide:
+    2 at 320x240, 4 at 640x480 (as before), 8 at 1280x960, and at least 1 on tiny images."""
+    assert FeatureConfig().downsample == 4
+    assert [map_downsample(w, 1) for w in (160, 320, 640, 1280)] == [4, 4, 4, 4]
+    assert [map_downsample(w, 2) for w in (100, 320, 640, 1280)] == [1, 2, 4, 8]
+    assert map_downsample(320, 3) == 2
+    for width, cameras in ((0, 2), (320, 0)):
+        with pytest.raises(ValueError, match="must be >= 1"):
+            map_downsample(width, cameras)

@@ -183,7 +183,9 @@ class FeatureNode(Node):
             return self.declare_parameter(name, value, ParameterDescriptor(description=text)).value
 
         self.camera_name = str(declare("camera_name", "", "camera name: /<camera_name>/image_raw[/compressed]"))
-        downsample = declare("downsample", 4, "likelihood-ratio map pixel = downsample x downsample image pixels")
+        downsample = declare("downsample", FeatureConfig.downsample,
+                             "likelihood-ratio map pixel = downsample x downsample image pixels (`awalker track`: "
+                             "vision.features.map_downsample, 2 at 320x240 with two cameras or more)")
         cell = declare("flow_cell_size", 16, "flow grid cell side (px)")
         scale = declare("flow_scale", 1.0, "dense flow computed at this image scale (0-1]")
         floor = declare("flow_floor_std", 1.0, "px added to each flow cell's standard deviation")

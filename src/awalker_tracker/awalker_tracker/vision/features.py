@@ -56,6 +56,11 @@ from awalker_tracker.vision.flow import FlowConfig, FlowGrid, GridFlow, to_grey
 from awalker_tracker.vision.foreground import ForegroundModel, learn_foreground
 
 
+#: Map pixels across the image that a rig of two cameras or more aims at (``map_downsample``): 4 x 4 image
+#: pixels per map pixel at 640x480, the paper's video, and 2 x 2 at 320x240.
+MULTI_CAMERA_MAP_WIDTH = 160
+
+
 @dataclass(frozen=True)
 class FeatureConfig:
     """Feature extraction settings. downsample: map pixel = downsample x downsample image px."""
@@ -79,6 +84,24 @@ class FeatureConfig:
             raise ValueError(f"invalid FeatureConfig {self}")
         if not 0.0 <= self.adapt_rate <= 1.0:
             raise ValueError("FeatureConfig.adapt_rate must be in [0, 1]")
+
+
+def map_downsample(image_width: int, cameras: int) -> int:
+    """Image pixels per map pixel (each way) for a rig of ``cameras`` cameras whose images are ``image_width``
+    px wide: one camera keeps ``FeatureConfig.downsample`` (4); two or more the whole number that makes the
+    map closest to ``MULTI_CAMERA_MAP_WIDTH`` pixels wide (at least 1). (`awalker track` sets the features
+    nodes' ``downsample`` with it.)
+
+    Why: at 320x240 a fixed 4 makes a map 80 pixels wide, where a person 5 m away is ~17 map pixels tall,
+    a leg less than one wide and one map row ~0.2-0.3 m of depth. With two cameras the finer maps tracked
+    the real-walks benchmark closer (README "Two cameras: maps as fine at 320x240 as at 640x480"); with one
+    camera they did not (worse on 3 of 12 walks, by 40-50 mm: the sharper likelihood holds depth and which
+    leg is which no better), so it keeps the coarser maps."""
+    if image_width < 1 or cameras < 1:
+        raise ValueError(f"map_downsample: image width {image_width} px and {cameras} cameras; both must be >= 1")
+    if cameras < 2:
+        return FeatureConfig.downsample
+    return max(1, round(image_width / MULTI_CAMERA_MAP_WIDTH))
 
 
 @dataclass(frozen=True, eq=False)
