@@ -126,7 +126,9 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys, monkeypat
     capsys.readouterr()
     # the leg length fitted to the features the run recorded (issue 12 §3)
     assert main(["fitbody", str(out), "--particles", "100", "--frames", "6", "--factors", "0.9", "1.0", "1.1"]) == 0
-    fitted = yaml.safe_load(capsys.readouterr().out)["fitbody"]
+    captured = capsys.readouterr()
+    fitted = yaml.safe_load(captured.out)["fitbody"]
+    assert "holds maps of" not in captured.err         # one camera's maps: those the fit was measured on
     given, got = (BodyDescription.from_yaml(out / name) for name in ("body.yaml", "body_fitted.yaml"))
     assert fitted["leg_factor"] in (0.9, 1.0, 1.1) and fitted["frames"] == 6
     assert got.upper_leg_length == pytest.approx(fitted["leg_factor"] * given.upper_leg_length)
@@ -153,6 +155,19 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys, monkeypat
     assert fitted["height_kept"] is True and got.height == pytest.approx(given.height)
     assert got.upper_leg_length == pytest.approx(fitted["leg_factor"] * given.upper_leg_length)
     assert (got.torso_length < given.torso_length) == (fitted["leg_factor"] > 1.0)
+
+
+def test_fitbody_says_when_the_maps_are_finer_than_the_fit_was_measured_on(synth_bag: Path, tmp_path: Path, capsys):
+    """A run on finer maps (two cameras, features.map_downsample; here asked for) records them, and `awalker
+    fitbody` on its directory says that the leg fit was measured on 4 x 4 maps."""
+    from awalker_tools.pipeline import TrackOptions, run_tracking
+
+    out = tmp_path / "fine"
+    run_tracking(TrackOptions(bag=synth_bag, out=out, particles=50, overlays=False, quiet=True, map_downsample=2))
+    assert yaml.safe_load((out / "run.yaml").read_text())["map_downsample"] == {"cam0": 2}
+    capsys.readouterr()
+    assert main(["fitbody", str(out), "--particles", "50", "--frames", "4", "--factors", "0.9", "1.1"]) == 0
+    assert "holds maps of 2 x 2 image pixels" in capsys.readouterr().err
 
 
 def test_track_fit_body_tracks_again_with_the_fitted_legs(synth_bag: Path, tmp_path: Path, monkeypatch):

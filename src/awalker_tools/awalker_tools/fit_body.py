@@ -89,6 +89,7 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
     from awalker_tracker.model.body import BodyDescription
     from awalker_tracker.model.walker import LEG_NAMES
     from awalker_tracker.vision.camera import load_calibration
+    from awalker_tracker.vision.features import FeatureConfig
     from awalker_tracker.vision.likelihood import LikelihoodConfig
 
     if not run_dir.is_dir():
@@ -135,6 +136,13 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
     else:
         print(f"awalker fitbody: {len(fit_config.leg_factors)} leg lengths x {frames} frames from frame {first}, "
               f"{fit_config.particles} particles each", file=sys.stderr)
+        finer = sorted({f.downsample for frame in features for f in frame if f.downsample < FeatureConfig.downsample})
+        if finer:
+            print(f"awalker fitbody: note: {run_dir / 'result.bag'} holds maps of {finer[0]} x {finer[0]} image pixels "
+                  f"each (two cameras or more, vision.features.map_downsample); the leg fit was measured on "
+                  f"{FeatureConfig.downsample} x {FeatureConfig.downsample}, and chose longer legs on finer maps. "
+                  f"`awalker track --fit-body` fits on a first pass with {FeatureConfig.downsample} x "
+                  f"{FeatureConfig.downsample} maps", file=sys.stderr)
         fit = fit_leg_length(body, start, likelihood_for, observations, config, fit_config, cameras=cameras,
                              progress=report)
         fitted_body = fit.body
