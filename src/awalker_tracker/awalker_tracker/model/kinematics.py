@@ -469,12 +469,14 @@ def _eq6(config: KinematicConfig, body: BodyDescription, walker: WalkerState, cu
     psi_hip = np.ascontiguousarray(walker.stance_angle - walker.swing_angle, float)
     rate, previous_rate = (np.ascontiguousarray(np.broadcast_to(r, (n,)), float) for r in turn_rates)
     mean, lo, hi = np.empty((n, _D)), np.empty((n, _D)), np.empty((n, _D))
-    _eq6_mean_kernel(table, config.dt, dt2, np.ascontiguousarray(current, float),
-                     np.ascontiguousarray(previous, float), np.ascontiguousarray(torso_rest, float), stance_leg,
-                     psi_hip, rate, previous_rate, mean, lo, hi)
+    current, previous, torso_rest = (np.ascontiguousarray(a, float) for a in (current, previous, torso_rest))
+    over_blocks(n, lambda rows: _eq6_mean_kernel(
+        table, config.dt, dt2, current[rows], previous[rows], torso_rest[rows], stance_leg[rows], psi_hip[rows],
+        rate[rows], previous_rate[rows], mean[rows], lo[rows], hi[rows]))
     z = _standard_truncated_normal(rng, lo, hi)
     new = np.empty((n, _D))
-    _eq6_draw_kernel(table, dt2, stance_leg, psi_hip, mean, z, new)
+    over_blocks(n, lambda rows: _eq6_draw_kernel(table, dt2, stance_leg[rows], psi_hip[rows], mean[rows], z[rows],
+                                                 new[rows]))
     return new
 
 
@@ -790,8 +792,14 @@ def _empty_pose(n: int) -> BodyPoseBatch:
 # (torso and legs: forward, left, up; feet: along the foot heel->toe, left, up); ``points``
 # (6, 3): joint positions relative to the pelvis (m). Legs are [left, right] = side 0, 1; the side
 # sign +1 (left) / -1 (right) mirrors abduction, rotation and inversion.
+# ``turns`` (16,): what posing computed of the particle's angles that later steps need again, so that each
+# cosine and sine is taken once (sines and cosines are ~90 % of the kernels' time): the heading's cosine and
+# sine, then per leg its thigh lead (``_thigh_lead``, rad) and the cosines and sines of its abduction, rotation
+# and inversion turns (signed by side, as ``_leg_turns`` uses them). ``_leg_pose`` writes a leg's entries.
 _TORSO, _THIGH, _SHANK, _FOOT = 0, 1, 3, 5     # frames: torso, then left/right thigh, shank, foot
 _HIP, _KNEE, _ANKLE = 0, 2, 4                   # points: left/right hip, knee, ankle
+_C_HEAD, _S_HEAD = 0, 1                         # turns: the heading's cosine and sine
+_LEAD, _C_ABD, _S_ABD, _C_ROT, _S_ROT, _C_INV, _S_INV = range(7)   # turns[_leg_slot(side) + these]
 
 
 class _Geometry(NamedTuple):
@@ -822,9 +830,15 @@ def _geometry(body: BodyDescription, config: KinematicConfig | None = None) -> _
 
 
 @numba.njit(cache=True, nogil=True)
-def _scratch() -> tuple[np.ndarray, np.ndarray]:
-    """Per-particle scratch: frames (7, 3, 3) and points (6, 3) (see above)."""
-    return np.empty((7, 3, 3)), np.empty((6, 3))
+def _scratch() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-particle scratch: frames (7, 3, 3), points (6, 3) and turns (16,) (see above)."""
+    return np.empty((7, 3, 3)), np.empty((6, 3)), np.empty(16)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _leg_slot(side: int) -> int:
+    """Index in ``turns`` of leg ``side``'s entries."""
+    return 2 + 7 * side
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -858,89 +872,102 @@ CHORD_LEAN = 0.08
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _chord_angle(g: _Geometry, leg: float, knee: float) -> float:
+def _chord_angle(g: _Geometry, leg: float, c_knee: float, s_knee: float) -> float:
     """The hip-ankle chord's sagittal angle theta (rad, foot ahead > 0) under ``g.hip_over_ankle``, for the walker's
     leg angle ``leg`` at knee flexion ``knee`` (rad): the bent knee lowers the hip straight down over the ankle, so
     that the ankle stays as far ahead of the hip as the straight leg's (which lies ``CHORD_LEAN`` behind the
     walker's leg): sin theta = L0 sin(leg - CHORD_LEAN) / L(knee), L0 = l_thigh + l_shank and L(knee) =
     sqrt(l_thigh^2 + l_shank^2 + 2 l_thigh l_shank cos knee) the chord's length (a leg scale multiplies both
     lengths and leaves it unchanged; |sin theta| is capped at 1, a knee bent past where that reaches). Without
-    the rule the chord's angle is leg - CHORD_LEAN at any knee (``_thigh_lead`` uses that directly)."""
+    the rule the chord's angle is leg - CHORD_LEAN at any knee (``_thigh_lead`` uses that directly). The knee
+    comes as its cosine ``c_knee`` and sine ``s_knee``."""
     thigh, shank = g.upper_leg_length, g.lower_leg_length
-    chord = math.hypot(thigh + shank * math.cos(knee), shank * math.sin(knee))   # (> 0 at pi: sin pi > 0 in floats)
+    chord = math.hypot(thigh + shank * c_knee, shank * s_knee)   # (> 0 at pi: sin pi > 0 in floats)
     return math.asin(min(max((thigh + shank) * math.sin(leg - CHORD_LEAN) / chord, -1.0), 1.0))
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _thigh_lead(g: _Geometry, leg: float, knee: float) -> float:
+def _thigh_lead(g: _Geometry, leg: float, c_knee: float, s_knee: float) -> float:
     """How far (rad) the thigh leans ahead of the walker's leg angle ``leg`` at knee flexion ``knee`` (rad): ahead
     of the hip-ankle chord (``_chord_angle``) by delta = atan2(l_shank sin knee, l_thigh + l_shank cos knee); the
     shank then trails the walker's leg by knee - lead, and the foot, counted from the walker's leg, does not tip
-    with the knee. (A leg scale multiplies both lengths and leaves it unchanged.)"""
-    delta = math.atan2(g.lower_leg_length * math.sin(knee), g.upper_leg_length + g.lower_leg_length * math.cos(knee))
+    with the knee. (A leg scale multiplies both lengths and leaves it unchanged.) The knee comes as its cosine
+    ``c_knee`` and sine ``s_knee``."""
+    delta = math.atan2(g.lower_leg_length * s_knee, g.upper_leg_length + g.lower_leg_length * c_knee)
     if not g.hip_over_ankle:
         return delta - CHORD_LEAN
-    return _chord_angle(g, leg, knee) + delta - leg
+    return _chord_angle(g, leg, c_knee, s_knee) + delta - leg
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _local_pose(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, frames: np.ndarray,
-                points: np.ndarray) -> None:
-    """Forward kinematics of body i relative to the pelvis (world orientation) into ``frames`` and
-    ``points``: legs (N, 2) the sagittal leg angles (rad), dofs (N, 13) in ``DOF_NAMES`` order, scale (N,)
+                points: np.ndarray, turns: np.ndarray) -> None:
+    """Forward kinematics of body i relative to the pelvis (world orientation) into ``frames``, ``points`` and
+    ``turns``: legs (N, 2) the sagittal leg angles (rad), dofs (N, 13) in ``DOF_NAMES`` order, scale (N,)
     the factor on thigh and shank lengths."""
     c_head, s_head = math.cos(dofs[i, 2]), math.sin(dofs[i, 2])
+    turns[_C_HEAD], turns[_S_HEAD] = c_head, s_head
     _set_heading(frames, _TORSO, c_head, s_head)
     _turn(frames, _TORSO, 1, math.cos(dofs[i, 0]), math.sin(dofs[i, 0]))    # pitch: lean forward
     _turn(frames, _TORSO, 0, math.cos(dofs[i, 1]), math.sin(dofs[i, 1]))    # roll: lean to the right
     for side in range(2):
-        _leg_pose(g, legs, dofs, scale, i, side, frames, points)
+        _leg_pose(g, legs, dofs, scale, i, side, frames, points, turns)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _leg_pose(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, side: int,
-              frames: np.ndarray, points: np.ndarray) -> None:
-    """Hip, thigh frame, knee and what lies below of leg ``side`` of body i (the torso frame is set): the
-    thigh ``_thigh_lead`` ahead of the walker's leg angle phi (foot ahead for phi > 0), so that the
-    hip-ankle chord lies ``CHORD_LEAN`` behind phi (over the ankle: at ``_chord_angle``), then abduction and
-    rotation."""
-    sign, thigh = 1.0 - 2.0 * side, _THIGH + side
+              frames: np.ndarray, points: np.ndarray, turns: np.ndarray) -> None:
+    """Hip, thigh frame, knee and what lies below of leg ``side`` of body i (the torso frame and the heading's
+    ``turns`` are set): the thigh ``_thigh_lead`` ahead of the walker's leg angle phi (foot ahead for phi > 0),
+    so that the hip-ankle chord lies ``CHORD_LEAN`` behind phi (over the ankle: at ``_chord_angle``), then
+    abduction and rotation. Writes the leg's ``turns``."""
+    sign, thigh, slot = 1.0 - 2.0 * side, _THIGH + side, _leg_slot(side)
     for k in range(3):
         points[_HIP + side, k] = (0.5 * g.hip_width) * sign * frames[_TORSO, k, 1]
-    pitch = legs[i, side] + _thigh_lead(g, legs[i, side], dofs[i, 7 + side])
-    _set_heading(frames, thigh, math.cos(dofs[i, 2]), math.sin(dofs[i, 2]))
+    knee = dofs[i, 7 + side]
+    c_knee, s_knee = math.cos(knee), math.sin(knee)
+    lead = _thigh_lead(g, legs[i, side], c_knee, s_knee)
+    abduction, rotation = sign * dofs[i, 3 + side], -sign * dofs[i, 5 + side]
+    c_abd, s_abd, c_rot, s_rot = math.cos(abduction), math.sin(abduction), math.cos(rotation), math.sin(rotation)
+    turns[slot + _LEAD] = lead
+    turns[slot + _C_ABD], turns[slot + _S_ABD], turns[slot + _C_ROT], turns[slot + _S_ROT] = c_abd, s_abd, c_rot, s_rot
+    pitch = legs[i, side] + lead
+    _set_heading(frames, thigh, turns[_C_HEAD], turns[_S_HEAD])
     _turn(frames, thigh, 1, math.cos(pitch), -math.sin(pitch))
-    _turn(frames, thigh, 0, math.cos(dofs[i, 3 + side]), sign * math.sin(dofs[i, 3 + side]))
-    _turn(frames, thigh, 2, math.cos(dofs[i, 5 + side]), -sign * math.sin(dofs[i, 5 + side]))
+    _turn(frames, thigh, 0, c_abd, s_abd)
+    _turn(frames, thigh, 2, c_rot, s_rot)
     for k in range(3):
         points[_KNEE + side, k] = points[_HIP + side, k] - (scale[i] * g.upper_leg_length) * frames[thigh, k, 2]
-    _lower_leg(g, legs, dofs, scale, i, side, frames, points)
+    _lower_leg(g, legs, dofs, scale, i, side, frames, points, turns, c_knee, s_knee)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _lower_leg(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, side: int,
-               frames: np.ndarray, points: np.ndarray) -> None:
+               frames: np.ndarray, points: np.ndarray, turns: np.ndarray, c_knee: float, s_knee: float) -> None:
     """Shank frame, ankle position and foot frame of leg ``side`` of body i below its thigh and knee
     (knee flexion, then ankle flexion and inversion from ``dofs`` (N, 13); the shank ``scale[i]`` x its length).
     The foot hangs from the walker's leg: its flexion counts from the leg's direction, the shank's own plus
-    knee - lead (``_ankle_from_shank``), so that a bent knee does not tip the foot."""
-    sign, shank, foot = 1.0 - 2.0 * side, _SHANK + side, _FOOT + side
-    knee = dofs[i, 7 + side]
+    knee - lead (``_ankle_from_shank``), so that a bent knee does not tip the foot. ``turns``: the leg's lead is
+    set (``_leg_pose``); writes its inversion's. The knee comes also as its cosine and sine."""
+    sign, shank, foot, slot = 1.0 - 2.0 * side, _SHANK + side, _FOOT + side, _leg_slot(side)
     _copy_frame(frames, _THIGH + side, shank)
-    _turn(frames, shank, 1, math.cos(knee), math.sin(knee))                                      # knee flexion
+    _turn(frames, shank, 1, c_knee, s_knee)                                                      # knee flexion
     for k in range(3):
         points[_ANKLE + side, k] = points[_KNEE + side, k] - (scale[i] * g.lower_leg_length) * frames[shank, k, 2]
     _copy_frame(frames, shank, foot)
-    flexion = _ankle_from_shank(g, dofs[i, 9 + side], legs[i, side], knee)
+    flexion = _ankle_from_shank(dofs[i, 9 + side], dofs[i, 7 + side], turns[slot + _LEAD])
     _turn(frames, foot, 1, math.cos(flexion), -math.sin(flexion))                                # ankle flexion
-    _turn(frames, foot, 0, math.cos(dofs[i, 11 + side]), -sign * math.sin(dofs[i, 11 + side]))   # inversion
+    inversion = -sign * dofs[i, 11 + side]
+    c_inv, s_inv = math.cos(inversion), math.sin(inversion)
+    turns[slot + _C_INV], turns[slot + _S_INV] = c_inv, s_inv
+    _turn(frames, foot, 0, c_inv, s_inv)                                                         # inversion
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _ankle_from_shank(g: _Geometry, ankle: float, leg: float, knee: float) -> float:
-    """The foot's flexion (rad) from its shank for the ankle DOF ``ankle`` (counted from the walker's leg, angle
-    ``leg``) at knee flexion ``knee``: ankle + knee - ``_thigh_lead``."""
-    return ankle + knee - _thigh_lead(g, leg, knee)
+def _ankle_from_shank(ankle: float, knee: float, lead: float) -> float:
+    """The foot's flexion (rad) from its shank for the ankle DOF ``ankle`` (counted from the walker's leg) at knee
+    flexion ``knee`` with the thigh ``lead`` (``_thigh_lead``) ahead of the walker's leg: ankle + knee - lead."""
+    return ankle + knee - lead
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -991,15 +1018,15 @@ class _LegTurns(NamedTuple):
 
 @numba.njit(cache=True, nogil=True)
 def _leg_turns(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, side: int,
-               points: np.ndarray) -> _LegTurns:
-    """``_LegTurns`` of body i's leg ``side`` (its hip posed in ``points``)."""
-    sign = 1.0 - 2.0 * side
-    abduction, rotation, inversion = sign * dofs[i, 3 + side], -sign * dofs[i, 5 + side], -sign * dofs[i, 11 + side]
+               points: np.ndarray, turns: np.ndarray) -> _LegTurns:
+    """``_LegTurns`` of body i's leg ``side`` (the leg posed: its hip in ``points``, its abduction, rotation and
+    inversion turns in ``turns``)."""
+    slot = _leg_slot(side)
     leg, ankle = legs[i, side] - CHORD_LEAN, dofs[i, 9 + side] + CHORD_LEAN
     return _LegTurns((scale[i] * g.upper_leg_length, scale[i] * g.lower_leg_length), (math.cos(leg), math.sin(leg)),
-                     (math.cos(abduction), math.sin(abduction), math.cos(rotation), math.sin(rotation)),
+                     (turns[slot + _C_ABD], turns[slot + _S_ABD], turns[slot + _C_ROT], turns[slot + _S_ROT]),
                      points[_HIP + side, 2], (math.cos(ankle), math.sin(ankle)),
-                     (math.cos(inversion), math.sin(inversion)))
+                     (turns[slot + _C_INV], turns[slot + _S_INV]))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -1076,22 +1103,22 @@ def _knee_at_ground(g: _Geometry, turns: _LegTurns, shift_z: float, low: float, 
 
 @numba.njit(cache=True, nogil=True)
 def _clear_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, swing: int,
-                points: np.ndarray, shift_z: float) -> float:
+                points: np.ndarray, turns: np.ndarray, shift_z: float) -> float:
     """Ground clearance: where body i's foot ``swing`` would go below z = 0 (``shift_z``: the pelvis
     height minus the wanted clearance, m), the knee angle (rad) that bends it just enough
     (``_knee_at_ground`` in [knee, pi]); else the sampled knee angle. The knee-less walker's trailing
     leg sweeps through the floor after toe-off; this pose-dependent lower knee limit keeps the body
     physical (no penetration), like the joint limits of eq. (6). (``_stance_knee`` uses it too.)"""
     knee = dofs[i, 7 + swing]
-    turns = _leg_turns(g, legs, dofs, scale, i, swing, points)
-    if _foot_height(g, turns, knee, shift_z) >= 0.0:
+    leg_turns = _leg_turns(g, legs, dofs, scale, i, swing, points, turns)
+    if _foot_height(g, leg_turns, knee, shift_z) >= 0.0:
         return knee
-    return _knee_at_ground(g, turns, shift_z, knee, math.pi)
+    return _knee_at_ground(g, leg_turns, shift_z, knee, math.pi)
 
 
 @numba.njit(cache=True, nogil=True)
 def _landing_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, leg: int,
-                  points: np.ndarray, shift_z: float) -> float:
+                  points: np.ndarray, turns: np.ndarray, shift_z: float) -> float:
     """Heel strike: the walker's feet meet the ground together, but a landing knee still bent holds the
     kinematic foot above it (the chord is shorter than the walker's leg). Where body i's landing foot
     ``leg`` is above the ground (``shift_z``: the pelvis height held by the old contact, m), the knee
@@ -1101,41 +1128,41 @@ def _landing_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.nd
     knee = dofs[i, 7 + leg]
     if knee <= 0.0:
         return knee
-    turns = _leg_turns(g, legs, dofs, scale, i, leg, points)
-    if _foot_height(g, turns, knee, shift_z) <= 0.0:
+    leg_turns = _leg_turns(g, legs, dofs, scale, i, leg, points, turns)
+    if _foot_height(g, leg_turns, knee, shift_z) <= 0.0:
         return knee
-    if _foot_height(g, turns, 0.0, shift_z) >= 0.0:
+    if _foot_height(g, leg_turns, 0.0, shift_z) >= 0.0:
         return 0.0
-    return _knee_at_ground(g, turns, shift_z, 0.0, knee)
+    return _knee_at_ground(g, leg_turns, shift_z, 0.0, knee)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _project_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, previous: np.ndarray, i: int,
-                  side: int, knee: float, frames: np.ndarray, points: np.ndarray) -> None:
+                  side: int, knee: float, frames: np.ndarray, points: np.ndarray, turns: np.ndarray) -> None:
     """Set body i's knee ``side`` to ``knee`` (rad) as a position projection: psi_{t-1} in ``previous`` moves
     along, so that eq. (6) next frame sees the sampled knee velocity; the leg is posed again."""
     if knee != dofs[i, 7 + side]:
         previous[i, 7 + side] += knee - dofs[i, 7 + side]
         dofs[i, 7 + side] = knee
-        _leg_pose(g, legs, dofs, scale, i, side, frames, points)
+        _leg_pose(g, legs, dofs, scale, i, side, frames, points, turns)
 
 
 @numba.njit(cache=True, nogil=True)
 def _stance_knee(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, previous: np.ndarray, i: int,
-                 leg: int, frames: np.ndarray, points: np.ndarray, hip_height: float) -> None:
+                 leg: int, frames: np.ndarray, points: np.ndarray, turns: np.ndarray, hip_height: float) -> None:
     """Heel rise: the stance foot hangs from the walker's leg, so late in a long stance it stands on its
     toe and would carry the pelvis above the walker's hip (where the landing foot then cannot reach the
     ground). Where body i's pelvis at ``hip_height`` (m, the walker's)
     would put its stance foot ``leg`` below the ground, the stance knee is bent just enough
     (``_clear_knee``: people flex it ~35 degrees at toe-off), as a position projection (``previous``
     moves along), and the leg posed again."""
-    _project_knee(g, legs, dofs, scale, previous, i, leg, _clear_knee(g, legs, dofs, scale, i, leg, points, hip_height),
-                  frames, points)
+    _project_knee(g, legs, dofs, scale, previous, i, leg,
+                  _clear_knee(g, legs, dofs, scale, i, leg, points, turns, hip_height), frames, points, turns)
 
 
 @numba.njit(cache=True, nogil=True)
 def _write_posed_body(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, i: int, shift: tuple[float, float, float],
-                      frames: np.ndarray, points: np.ndarray, markers: np.ndarray, joints: np.ndarray,
+                      frames: np.ndarray, points: np.ndarray, turns: np.ndarray, markers: np.ndarray, joints: np.ndarray,
                       origin: np.ndarray, rotation: np.ndarray) -> None:
     """Posed body i from its pelvis-relative pose and the pelvis world position ``shift`` (m):
     markers (N, 13, 3) m in MARKER_NAMES order, joints (N, 15) rad in JOINT_NAMES order, segment
@@ -1177,11 +1204,11 @@ def _write_posed_body(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, i: int, 
             rotation[i, 6 + side, k, 2] = frames[foot, k, 0]
     joints[i, 0], joints[i, 1], joints[i, 2] = dofs[i, 0], dofs[i, 1], dofs[i, 2]   # torso pitch, roll, yaw
     for side in range(2):
-        knee = dofs[i, 7 + side]
-        joints[i, 3 + 6 * side] = legs[i, side] + _thigh_lead(g, legs[i, side], knee)   # hip flexion: the thigh's angle
+        lead = turns[_leg_slot(side) + _LEAD]
+        joints[i, 3 + 6 * side] = legs[i, side] + lead       # hip flexion: the thigh's angle
         for j in range(5):                                                # abduction, rotation, knee, ankle x2
             joints[i, 4 + 6 * side + j] = dofs[i, 3 + side + 2 * j]
-        joints[i, 7 + 6 * side] = _ankle_from_shank(g, dofs[i, 9 + side], legs[i, side], knee)   # from the shank
+        joints[i, 7 + 6 * side] = _ankle_from_shank(dofs[i, 9 + side], dofs[i, 7 + side], lead)   # from the shank
 
 
 @numba.njit(cache=True, nogil=True)
@@ -1199,12 +1226,12 @@ def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.n
     hip_height (N,) m the walker's hip height over the ground, which the stance knee keeps the body's
     pelvis from exceeding (``_stance_knee``).
     Writes the new contact (N, 2), its roll (N,), the plane origin (N, 2) and the posed bodies."""
-    frames, points = _scratch()
+    frames, points, turns = _scratch()
     for i in range(dofs.shape[0]):
-        _local_pose(g, legs, dofs, scale, i, frames, points)
+        _local_pose(g, legs, dofs, scale, i, frames, points, turns)
         old, leg = contact_leg[i], stance_leg[i]
         if leg == old:
-            _stance_knee(g, legs, dofs, scale, previous, i, leg, frames, points, hip_height[i])
+            _stance_knee(g, legs, dofs, scale, previous, i, leg, frames, points, turns, hip_height[i])
         # Roll without slip: the ground contact advances by the arc length rolled on the sole,
         # along the old contact foot's heel->toe direction on the ground.
         beta = _foot_lowest_roll(g, frames, old)
@@ -1217,8 +1244,8 @@ def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.n
             # held by the old contact), then the contact passes to the new stance foot's lowest point,
             # put where the body has that point; its height snaps to the ground
             px, py, pz = _sole_point(g, frames, points, old, beta)
-            _project_knee(g, legs, dofs, scale, previous, i, leg, _landing_knee(g, legs, dofs, scale, i, leg, points, -pz),
-                          frames, points)
+            _project_knee(g, legs, dofs, scale, previous, i, leg,
+                          _landing_knee(g, legs, dofs, scale, i, leg, points, turns, -pz), frames, points, turns)
             beta = _foot_lowest_roll(g, frames, leg)
             qx, qy, _ = _sole_point(g, frames, points, leg, beta)
             cx, cy = qx + (cx - px), qy + (cy - py)
@@ -1228,12 +1255,13 @@ def _sample_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.n
         swing = 1 - leg
         # the stance foot (and so ``shift``) is unchanged by the swing knee
         _project_knee(g, legs, dofs, scale, previous, i, swing,
-                      _clear_knee(g, legs, dofs, scale, i, swing, points, shift[2] - clearance[i]), frames, points)
+                      _clear_knee(g, legs, dofs, scale, i, swing, points, turns, shift[2] - clearance[i]), frames, points,
+                      turns)
         new_contact[i, 0], new_contact[i, 1] = cx, cy
         new_roll[i] = beta
-        plane_origin[i, 0] = cx - stance_x[i] * math.cos(dofs[i, 2])
-        plane_origin[i, 1] = cy - stance_x[i] * math.sin(dofs[i, 2])
-        _write_posed_body(g, legs, dofs, i, shift, frames, points, markers, joints, origin, rotation)
+        plane_origin[i, 0] = cx - stance_x[i] * turns[_C_HEAD]
+        plane_origin[i, 1] = cy - stance_x[i] * turns[_S_HEAD]
+        _write_posed_body(g, legs, dofs, i, shift, frames, points, turns, markers, joints, origin, rotation)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -1242,12 +1270,12 @@ def _pose_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.nda
                  origin: np.ndarray, rotation: np.ndarray) -> None:
     """``pose_body`` for N particles: legs (N, 2) rad, dofs (N, 13), leg scales (N,); the contact foot's sole point at
     contact_roll (N,) rad is put on the ground at contact_point (N, 2) m. Writes the posed bodies."""
-    frames, points = _scratch()
+    frames, points, turns = _scratch()
     for i in range(dofs.shape[0]):
-        _local_pose(g, legs, dofs, scale, i, frames, points)
+        _local_pose(g, legs, dofs, scale, i, frames, points, turns)
         px, py, pz = _sole_point(g, frames, points, contact_leg[i], contact_roll[i])
         shift = (contact_point[i, 0] - px, contact_point[i, 1] - py, -pz)
-        _write_posed_body(g, legs, dofs, i, shift, frames, points, markers, joints, origin, rotation)
+        _write_posed_body(g, legs, dofs, i, shift, frames, points, turns, markers, joints, origin, rotation)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -1256,9 +1284,9 @@ def _sole_points_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale:
                         lowest: bool, out: np.ndarray) -> None:
     """Pelvis-relative points (N, 3) m at angle beta (N,) rad on the rocker soles of feet ``leg`` (N,);
     with ``lowest``, beta is first set to each sole's lowest point (in place)."""
-    frames, points = _scratch()
+    frames, points, turns = _scratch()
     for i in range(dofs.shape[0]):
-        _local_pose(g, legs, dofs, scale, i, frames, points)
+        _local_pose(g, legs, dofs, scale, i, frames, points, turns)
         if lowest:
             beta[i] = _foot_lowest_roll(g, frames, leg[i])
         out[i, 0], out[i, 1], out[i, 2] = _sole_point(g, frames, points, leg[i], beta[i])
@@ -1271,13 +1299,13 @@ def _initial_clearance_kernel(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, 
     the walker's ``hip_height`` (N,) m (``_stance_knee``), then the swing knee where the swing foot would go
     below the ground (no clearance: a foot trailing in double support stays on it), the body standing on
     its stance foot's lowest point."""
-    frames, points = _scratch()
+    frames, points, turns = _scratch()
     for i in range(dofs.shape[0]):
-        _local_pose(g, legs, dofs, scale, i, frames, points)
+        _local_pose(g, legs, dofs, scale, i, frames, points, turns)
         leg = stance_leg[i]
-        _stance_knee(g, legs, dofs, scale, dofs, i, leg, frames, points, hip_height[i])
+        _stance_knee(g, legs, dofs, scale, dofs, i, leg, frames, points, turns, hip_height[i])
         _, _, pz = _sole_point(g, frames, points, leg, _foot_lowest_roll(g, frames, leg))
-        dofs[i, 8 - leg] = _clear_knee(g, legs, dofs, scale, i, 1 - leg, points, -pz)
+        dofs[i, 8 - leg] = _clear_knee(g, legs, dofs, scale, i, 1 - leg, points, turns, -pz)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
