@@ -66,6 +66,31 @@ def test_cylinder_geometry():
     assert all(m.header.stamp.nanosec == 10 for m in array.markers)
 
 
+def test_a_reused_marker_builder_gives_the_markers_of_a_fresh_one():
+    """The pose publisher keeps one MarkerBuilder and updates its messages: nothing of one frame may stay in the
+    next (contacts appear, vanish and change between heel strike and stance). Compared field by field (the
+    serialised bytes are not: CDR's padding bytes are left as they were in memory)."""
+    from awalker_tracker.nodes.convert import summary_to_msg
+    from awalker_tracker.nodes.pose_publisher import MarkerBuilder, body_cylinders
+
+    rng = np.random.default_rng(5)
+    cylinders = body_cylinders(BodyDescription.default())
+    reused = MarkerBuilder(cylinders, "b7")
+    kinds = [None, (FootContactEstimate(LEFT, np.array([0.3, 0.1, 0.0]), 0.6, False),
+                    FootContactEstimate(RIGHT, np.full(3, np.nan), 0.0, False)),
+             (FootContactEstimate(LEFT, np.full(3, np.nan), 0.0, False),
+              FootContactEstimate(RIGHT, np.array([0.9, -0.1, 0.0]), 0.05, True))]
+    counts = set()
+    for frame in range(9):
+        msg = summary_to_msg(make_summary(1000 + frame, frame, rng, kinds[frame % 3]))
+        again = reused.build(msg)
+        fresh = MarkerBuilder(cylinders, "b7").build(msg)
+        assert again == fresh
+        counts.add(len(again.markers))
+        assert all(m.header.stamp.nanosec == 1000 + frame for m in again.markers)
+    assert counts == {11, 12}          # one or both contacts shown
+
+
 def test_particle_clouds_pack_into_a_pointcloud2_heaviest_first():
     from awalker_tracker.nodes.convert import PARTICLE_POINT, particles_to_pointcloud2, summary_to_msg
 

@@ -38,7 +38,7 @@ def header(stamp_ns: int, frame_id: str) -> Header:
 
 
 def points_to_msg(points: np.ndarray) -> list[Point]:
-    return [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in np.asarray(points, float)]
+    return [Point(x=x, y=y, z=z) for x, y, z in np.asarray(points, float).reshape(-1, 3).tolist()]
 
 
 def points_from_msg(points: list[Point]) -> np.ndarray:
