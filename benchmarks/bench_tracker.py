@@ -14,14 +14,18 @@ compiled) by a short untimed run first; ``warm_up_s`` says how long that took.
 
 ``--baseline REV`` also runs this benchmark's filter tables on the code of git revision REV (a
 temporary worktree, e.g. the last numpy implementation 831cccf) in the same session and reports
-the speed-up of each entry against it. Prints JSON.
+the speed-up of each entry against it. ``--repeats K`` runs the filter tables K times (with a
+baseline: ours, the baseline's, ours, ... alternately) and reports each entry's median run with all
+its runs' frames/s: on this shared machine the speed drifts by 10-30 % within minutes, so one run of
+each is not a comparison. Prints JSON.
 
     .venv/bin/python benchmarks/bench_tracker.py [--frames 20] [--particles 500 1000 5000] [--cameras 1 3]
-        [--rates 30 60] [--skip-end-to-end] [--long-frames 300] [--baseline REV]
+        [--rates 30 60] [--skip-end-to-end] [--long-frames 300] [--baseline REV] [--repeats K]
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -184,10 +188,57 @@ def sustained(particles: int, bag: Path, folder: Path) -> dict:
             "filter_frames_per_s": round(frames / max(run["seconds_in_filter"], 1e-9), 2)}
 
 
+def filter_tables(args, body, start, obs, sequences: dict) -> dict:
+    """One run of the filter tables: the 3D-marker stand-in and the image likelihood per camera count and
+    input rate (``sequences``: camera count -> ``image_sequence``'s (body, start, cameras, observations))."""
+    from awalker_tracker.inference.tracker import image_likelihood
+
+    tables: dict = {"excluding_image_likelihood": [], "image_likelihood": []}
+    for n in args.particles:
+        tables["excluding_image_likelihood"].append(run_filter(body, start, marker_likelihood(0.03), obs, n))
+        print(f"marker likelihood N={n}: {tables['excluding_image_likelihood'][-1]['frames_per_s']} frames/s",
+              file=sys.stderr)
+    for cams, (body_i, start_i, cameras, observations) in sequences.items():
+        likelihood = image_likelihood(body_i, cameras)
+        tables[f"warm_up_{cams}_cameras_s"] = warm_up(body_i, start_i, likelihood, observations)
+        for rate in args.rates:
+            if rate != 30.0 and cams != 1:
+                continue
+            for n in args.particles:
+                r = run_filter(body_i, start_i, likelihood, observations, n, rate_hz=rate)
+                r["cameras"] = cams
+                tables["image_likelihood"].append(r)
+                print(f"image likelihood {cams} camera(s) {rate:g} Hz N={n}: {r['frames_per_s']} frames/s",
+                      file=sys.stderr)
+    return tables
+
+
+TABLES = ("excluding_image_likelihood", "image_likelihood")
+
+
+def _entry_key(table: str, entry: dict) -> tuple:
+    return table, entry["particles"], entry.get("cameras", 0), entry.get("frame_rate_hz", 30.0)
+
+
+def median_tables(runs: list[dict]) -> dict:
+    """The filter tables of several runs: per entry the run of median frames/s, with every run's frames/s
+    (``frames_per_s_runs``); the warm-up times of the first run."""
+    merged = {k: v for k, v in runs[0].items() if k not in TABLES}
+    for table in TABLES:
+        entries = []
+        for index, first in enumerate(runs[0].get(table, [])):
+            same = [run[table][index] for run in runs]
+            assert all(_entry_key(table, e) == _entry_key(table, first) for e in same)
+            ordered = sorted(same, key=lambda e: e["frames_per_s"])
+            entry = dict(ordered[len(ordered) // 2])
+            entry["frames_per_s_runs"] = [e["frames_per_s"] for e in same]
+            entries.append(entry)
+        merged[table] = entries
+    return merged
+
+
 def main() -> None:
     import tempfile
-
-    from awalker_tracker.inference.tracker import image_likelihood
 
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--frames", type=int, default=20)
@@ -200,7 +251,12 @@ def main() -> None:
                         help="input frame rates (Hz); rates other than 30 are run with 1 camera")
     parser.add_argument("--baseline", metavar="REV", help="also run the filter tables on git revision REV and "
                         "report the speed-up against it")
+    parser.add_argument("--repeats", type=int, default=1,
+                        help="run the filter tables this many times (alternately with the baseline's) and report "
+                        "the median of each entry: the machine's speed drifts within minutes")
     args = parser.parse_args()
+    if args.repeats < 1:
+        parser.error("--repeats must be >= 1")
     from test_tracker_model import simulate_walk
 
     body, markers, _, _ = simulate_walk(args.frames, 1.3, 0.7, 0.0, seed=3)
@@ -208,26 +264,20 @@ def main() -> None:
     obs = markers + 0.01 * np.random.default_rng(0).standard_normal(markers.shape)
     results: dict = {"lookahead": 3, "machine": "2 cores shared with other jobs",
                      "load_average_1min": round(os.getloadavg()[0], 2),
-                     "warm_up_s": warm_up(body, start, marker_likelihood(0.03), obs),
-                     "excluding_image_likelihood": [], "image_likelihood": [], "end_to_end": [], "sustained": []}
-    for n in args.particles:
-        results["excluding_image_likelihood"].append(run_filter(body, start, marker_likelihood(0.03), obs, n))
-        print(f"marker likelihood N={n}: {results['excluding_image_likelihood'][-1]['frames_per_s']} frames/s",
-              file=sys.stderr)
+                     "warm_up_s": warm_up(body, start, marker_likelihood(0.03), obs), "repeats": args.repeats,
+                     "end_to_end": [], "sustained": []}
     with tempfile.TemporaryDirectory() as tmp:
-        for cams in args.cameras:
-            body_i, start_i, cameras, observations = image_sequence(cams, args.frames + 5, Path(tmp))
-            likelihood = image_likelihood(body_i, cameras)
-            results[f"warm_up_{cams}_cameras_s"] = warm_up(body_i, start_i, likelihood, observations)
-            for rate in args.rates:
-                if rate != 30.0 and cams != 1:
-                    continue
-                for n in args.particles:
-                    r = run_filter(body_i, start_i, likelihood, observations, n, rate_hz=rate)
-                    r["cameras"] = cams
-                    results["image_likelihood"].append(r)
-                    print(f"image likelihood {cams} camera(s) {rate:g} Hz N={n}: {r['frames_per_s']} frames/s",
-                          file=sys.stderr)
+        sequences = {cams: image_sequence(cams, args.frames + 5, Path(tmp)) for cams in args.cameras}
+        ours, theirs = [], []
+        with _baseline_tree(args.baseline) as tree:
+            for repeat in range(args.repeats):
+                print(f"filter tables, run {repeat + 1} of {args.repeats}", file=sys.stderr)
+                ours.append(filter_tables(args, body, start, obs, sequences))
+                if tree is not None:
+                    theirs.append(_baseline_tables(args, tree))
+        results.update(median_tables(ours))
+        if args.baseline:
+            results["baseline"] = compare_with_baseline(args.baseline, results, median_tables(theirs))
         if not args.skip_end_to_end:
             for n in (500, 5000):
                 results["end_to_end"].append(end_to_end(n, Path(tmp)))
@@ -237,49 +287,57 @@ def main() -> None:
                 for n in (500, 5000):
                     results["sustained"].append(sustained(n, walk, Path(tmp)))
                     print(f"sustained N={n}: {results['sustained'][-1]}", file=sys.stderr)
-    if args.baseline:
-        results["baseline"] = compare_with_baseline(args, results)
     print(json.dumps(results, indent=1))
 
 
-def compare_with_baseline(args, results: dict) -> dict:
-    """Run this benchmark's filter tables on git revision ``args.baseline`` (a temporary worktree, its
-    own benchmark script, no end-to-end) and return its figures with the speed-up of every entry
-    measured in both (frames/s here / frames/s there)."""
+@contextlib.contextmanager
+def _baseline_tree(revision: str | None):
+    """A temporary git worktree of ``revision`` (None: no baseline, yields None)."""
     import subprocess
     import tempfile
 
+    if revision is None:
+        yield None
+        return
     repo = Path(__file__).resolve().parents[1]
     with tempfile.TemporaryDirectory() as tmp:
         tree = Path(tmp) / "baseline"
-        subprocess.run(["git", "-C", str(repo), "worktree", "add", "--detach", str(tree), args.baseline],
+        subprocess.run(["git", "-C", str(repo), "worktree", "add", "--detach", str(tree), revision],
                        check=True, capture_output=True)
         try:
-            env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-                str(tree / "src" / pkg) for pkg in ("awalker_tracker", "awalker_tools")))
-            command = [sys.executable, str(tree / "benchmarks" / "bench_tracker.py"), "--skip-end-to-end",
-                       "--frames", str(args.frames), "--particles", *map(str, args.particles),
-                       "--cameras", *map(str, args.cameras)]
-            print(f"baseline {args.baseline}: {' '.join(command[1:])}", file=sys.stderr)
-            done = subprocess.run(command, env=env, cwd=tree, check=True, capture_output=True, text=True)
+            yield tree
         finally:
             subprocess.run(["git", "-C", str(repo), "worktree", "remove", "--force", str(tree)], check=False)
-    theirs = json.loads(done.stdout)
 
-    def key(table: str, entry: dict) -> tuple:
-        return table, entry["particles"], entry.get("cameras", 0), entry.get("frame_rate_hz", 30.0)
 
-    ours = {key(t, e): e for t in ("excluding_image_likelihood", "image_likelihood") for e in results[t]}
+def _baseline_tables(args, tree: Path) -> dict:
+    """One run of the baseline's own benchmark (its filter tables, no end-to-end) in a process of its own."""
+    import subprocess
+
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        str(tree / "src" / pkg) for pkg in ("awalker_tracker", "awalker_tools")))
+    command = [sys.executable, str(tree / "benchmarks" / "bench_tracker.py"), "--skip-end-to-end",
+               "--frames", str(args.frames), "--particles", *map(str, args.particles),
+               "--cameras", *map(str, args.cameras), "--rates", *map(str, args.rates)]
+    print(f"baseline: {' '.join(command[1:])}", file=sys.stderr)
+    done = subprocess.run(command, env=env, cwd=tree, check=True, capture_output=True, text=True)
+    return json.loads(done.stdout)
+
+
+def compare_with_baseline(revision: str, results: dict, theirs: dict) -> dict:
+    """The baseline's filter tables (``theirs``) with the speed-up of every entry measured in both
+    (frames/s here / frames/s there, medians over the repeats)."""
+    ours = {_entry_key(t, e): e for t in TABLES for e in results[t]}
     speedup = []
-    for table in ("excluding_image_likelihood", "image_likelihood"):
+    for table in TABLES:
         for entry in theirs.get(table, []):
-            mine = ours.get(key(table, entry))
+            mine = ours.get(_entry_key(table, entry))
             if mine is not None:
                 speedup.append({"table": table, "particles": entry["particles"], "cameras": entry.get("cameras", 0),
                                 "frame_rate_hz": entry.get("frame_rate_hz", 30.0), "frames_per_s": mine["frames_per_s"],
                                 "baseline_frames_per_s": entry["frames_per_s"],
                                 "speedup": round(mine["frames_per_s"] / entry["frames_per_s"], 2)})
-    return {"revision": args.baseline, "speedup": speedup, "figures": theirs}
+    return {"revision": revision, "speedup": speedup, "figures": theirs}
 
 
 if __name__ == "__main__":
