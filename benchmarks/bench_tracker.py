@@ -17,7 +17,8 @@ temporary worktree, e.g. the last numpy implementation 831cccf) in the same sess
 the speed-up of each entry against it. ``--repeats K`` runs the filter tables K times (with a
 baseline: ours, the baseline's, ours, ... alternately) and reports each entry's median run with all
 its runs' frames/s: on this shared machine the speed drifts by 10-30 % within minutes, so one run of
-each is not a comparison. Prints JSON.
+each is not a comparison. ``core_sin_cos_ns`` times a compiled sine-and-cosine loop on each core in
+turn: a yardstick for the day's speed. Prints JSON.
 
     .venv/bin/python benchmarks/bench_tracker.py [--frames 20] [--particles 500 1000 5000] [--cameras 1 3]
         [--rates 30 60] [--skip-end-to-end] [--long-frames 300] [--baseline REV] [--repeats K]
@@ -188,6 +189,44 @@ def sustained(particles: int, bag: Path, folder: Path) -> dict:
             "filter_frames_per_s": round(frames / max(run["seconds_in_filter"], 1e-9), 2)}
 
 
+def core_speeds() -> list[float]:
+    """ns per sine-and-cosine pair of a compiled loop, on each core this process may use in turn (the thread
+    pinned to it): a yardstick for the machine's speed, which varies by day and between its two cores (one ran
+    the kernels ~1.5x slower than the other on 2026-11-30), so that runs of different days can be compared."""
+    import threading
+
+    import numba
+
+    @numba.njit(cache=True, nogil=True)
+    def trig_loop(values: np.ndarray, repeats: int) -> float:
+        total = 0.0
+        for _ in range(repeats):
+            for x in values:
+                total += np.sin(x) + np.cos(x * 1.1)
+        return total
+
+    values = np.random.default_rng(0).uniform(-1.0, 1.0, 20000)
+    trig_loop(values, 1)
+    speeds: list[float] = []
+
+    def measure(cpu: int) -> None:
+        os.sched_setaffinity(0, {cpu})        # this thread only (Linux)
+        best = min(_timed(lambda: trig_loop(values, 5)) for _ in range(5))
+        speeds.append(round(1e9 * best / (5 * values.size), 2))
+
+    for cpu in sorted(os.sched_getaffinity(0)):
+        thread = threading.Thread(target=measure, args=(cpu,))
+        thread.start()
+        thread.join()
+    return speeds
+
+
+def _timed(fn) -> float:
+    started = time.perf_counter()
+    fn()
+    return time.perf_counter() - started
+
+
 def filter_tables(args, body, start, obs, sequences: dict) -> dict:
     """One run of the filter tables: the 3D-marker stand-in and the image likelihood per camera count and
     input rate (``sequences``: camera count -> ``image_sequence``'s (body, start, cameras, observations))."""
@@ -264,6 +303,7 @@ def main() -> None:
     obs = markers + 0.01 * np.random.default_rng(0).standard_normal(markers.shape)
     results: dict = {"lookahead": 3, "machine": "2 cores shared with other jobs",
                      "load_average_1min": round(os.getloadavg()[0], 2),
+                     "core_sin_cos_ns": core_speeds(),
                      "warm_up_s": warm_up(body, start, marker_likelihood(0.03), obs), "repeats": args.repeats,
                      "end_to_end": [], "sustained": []}
     with tempfile.TemporaryDirectory() as tmp:
