@@ -123,8 +123,13 @@ _MIN_DEPTH = 1e-6    # m: points nearer than this (or behind) are not in front o
 #   precomputes the sample positions along and across and which rows compare flow, divides once
 #   per projected point, and computes each part's image box once per state.
 # - error_model="numpy": no zero-division checks (every divisor here is bounded away from 0).
-_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
-_inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+# - Fast math without its NaN and infinity assumptions (``_FAST``: LLVM may fuse multiply-adds, reorder sums, use
+#   reciprocals and faster log and square root): 13-14 % less kernel time (5000 states: 6.6-6.8 ms against
+#   7.6-7.8), the log-likelihoods changed by ~1e-14. NaN tests (points behind the camera, the clamped map
+#   indices) keep their meaning, as "nnan" and "ninf" are not among the flags.
+_FAST = {"contract", "reassoc", "arcp", "nsz", "afn"}
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy", fastmath=_FAST)
+_inline = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always", fastmath=_FAST)
 
 
 @_inline
