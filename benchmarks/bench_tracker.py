@@ -260,8 +260,8 @@ def _entry_key(table: str, entry: dict) -> tuple:
 
 
 def median_tables(runs: list[dict]) -> dict:
-    """The filter tables of several runs: per entry the run of median frames/s, with every run's frames/s
-    (``frames_per_s_runs``); the warm-up times of the first run."""
+    """The filter tables of several runs: per entry the run of median frames/s (of two middle runs, the faster),
+    with every run's frames/s (``frames_per_s_runs``); the warm-up times of the first run."""
     merged = {k: v for k, v in runs[0].items() if k not in TABLES}
     for table in TABLES:
         entries = []

@@ -46,7 +46,7 @@ def test_summary_message_roundtrip():
 
 def test_cylinder_geometry():
     from awalker_tracker.nodes.convert import summary_to_msg
-    from awalker_tracker.nodes.pose_publisher import body_cylinders, marker_array_from_summary, quaternion_z_to
+    from awalker_tracker.nodes.pose_publisher import MarkerBuilder, body_cylinders, quaternion_z_to
 
     for d in ([0, 0, 1], [1, 0, 0], [0.3, -0.4, 0.5], [0, 0, -1]):
         q = np.array(quaternion_z_to(np.array(d, float)))
@@ -55,7 +55,7 @@ def test_cylinder_geometry():
         assert np.allclose(rot_z, np.array(d) / np.linalg.norm(d))
     s = make_summary(10, 0, np.random.default_rng(1))
     body = BodyDescription.default()
-    array = marker_array_from_summary(summary_to_msg(s), body_cylinders(body))
+    array = MarkerBuilder(body_cylinders(body)).build(summary_to_msg(s))
     cyl = [m for m in array.markers if m.ns.endswith("/body")]
     assert len(cyl) == 8
     knee, ankle = s.map_markers[MARKER_NAMES.index("left_knee")], s.map_markers[MARKER_NAMES.index("left_ankle")]

@@ -127,8 +127,8 @@ class MarkerBuilder:
         values = xyz.tolist()
         for point, row in zip(self._lines.points, self._line_rows):
             point.x, point.y, point.z = values[row]
-        for point, row in zip(self._joints.points, range(len(values))):
-            point.x, point.y, point.z = values[row]
+        for point, value in zip(self._joints.points, values):
+            point.x, point.y, point.z = value
         out: list[Marker] = [self._lines, self._joints]
         for cyl, a, b in self._cylinders:
             start, end = xyz[a], xyz[b]
@@ -153,12 +153,6 @@ class MarkerBuilder:
         for m in out:
             m.header = hdr
         return MarkerArray(markers=out)
-
-
-def marker_array_from_summary(msg: PosteriorSummary, cylinders: tuple[tuple[str, str, float], ...],
-                              body_id: str = "walker") -> MarkerArray:
-    """The MarkerArray of one posterior summary (``MarkerBuilder``, with messages of its own)."""
-    return MarkerBuilder(cylinders, body_id).build(msg)
 
 
 class PosePublisherNode(Node):
