@@ -181,6 +181,23 @@ def test_illumination_gains_are_median_ratios():
     assert np.allclose(gains[:3], truth, rtol=1e-6)
     assert np.allclose(gains[3:], np.mean(truth), rtol=1e-6)
     assert np.all(illumination_gains(m, np.zeros_like(reference)) == 1.0)    # too dark: no estimate
+    dim = illumination_gains(reference * np.float32(0.01), reference)     # far darker: clipped at 0.05
+    assert np.all(dim == np.float32(0.05))
+
+
+@pytest.mark.parametrize("d", [1, 4])
+def test_measurements_in_the_reference_lighting_are_one_call_of_the_two(d):
+    """measurements(image, d, reference) is measurements(image, d) / illumination_gains(m, reference), bit for bit."""
+    rng = np.random.default_rng(11)
+    image = rng.integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    lit = np.clip(image * np.float32([1.25, 0.9, 1.05]), 0, 255).astype(np.uint8)
+    reference = measurements(image, d)
+    m = measurements(lit, d)
+    gains = illumination_gains(m, reference)
+    assert not np.allclose(gains, 1.0)
+    assert np.array_equal(measurements(lit, d, reference), m / gains)
+    with pytest.raises(ValueError, match="reference measurements"):
+        measurements(lit, d, reference[1:])
 
 
 def reference_tensors(grey: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:

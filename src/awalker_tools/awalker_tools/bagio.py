@@ -402,10 +402,10 @@ def decode_image(msg: Any, msgtype: str, topic: str) -> np.ndarray:
         fmt = str(msg.format).lower()
         if not any(k in fmt for k in ("png", "jpeg", "jpg")):
             raise InputError(f"{topic}: unsupported compressed image format {msg.format!r}; expected png or jpeg")
-        bgr = cv2.imdecode(np.asarray(msg.data, np.uint8), cv2.IMREAD_COLOR)
-        if bgr is None:
+        rgb = cv2.imdecode(np.asarray(msg.data, np.uint8), cv2.IMREAD_COLOR_RGB)
+        if rgb is None:
             raise InputError(f"{topic}: cannot decode {msg.format!r} image data ({len(msg.data)} bytes)")
-        return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        return rgb
     if msgtype != IMAGE:
         raise InputError(f"{topic}: expected {IMAGE} or {COMPRESSED_IMAGE}, got {msgtype}")
     encoding = str(msg.encoding).lower()

@@ -73,10 +73,10 @@ def image_from_msg(msg: Image | CompressedImage, topic: str = "image") -> np.nda
     An rgb8 image without row padding is a view of the message's data (not copied)."""
     if isinstance(msg, CompressedImage):
         data = np.frombuffer(msg.data, np.uint8)
-        decoded = cv2.imdecode(data, cv2.IMREAD_COLOR) if data.size else None
+        decoded = cv2.imdecode(data, cv2.IMREAD_COLOR_RGB) if data.size else None
         if decoded is None:
             raise InputError(f"{topic}: cannot decode CompressedImage format {msg.format!r}; expected jpeg or png")
-        return cv2.cvtColor(decoded, cv2.COLOR_BGR2RGB)
+        return decoded
     encoding = msg.encoding.lower()
     if encoding not in IMAGE_ENCODINGS:
         raise InputError(f"{topic}: unsupported encoding {msg.encoding!r}; expected one of {', '.join(IMAGE_ENCODINGS)}")

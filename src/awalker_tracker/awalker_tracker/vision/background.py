@@ -49,10 +49,14 @@ from awalker_tracker.vision.densities import (  # noqa: F401 (constants re-expor
 DEFAULT_FLOOR_STD = (3.0, 3.0, 3.0, 2.0, 2.0)
 # 99.9 % quantile of chi-square with 5 degrees of freedom: residuals beyond it are outliers.
 CHI2_5_999 = 20.515
+# Every GAIN_STRIDE-th measurement per axis gives the illumination gains (``illumination_gains``).
+GAIN_STRIDE = 3
 
 
-def measurements(rgb: np.ndarray, downsample: int = 1) -> np.ndarray:
-    """The 5-D measurement (R, G, B, dI/dx, dI/dy) per pixel of the downsampled image, (h, w, 5) float32."""
+def measurements(rgb: np.ndarray, downsample: int = 1, reference: np.ndarray | None = None) -> np.ndarray:
+    """The 5-D measurement (R, G, B, dI/dx, dI/dy) per pixel of the downsampled image, (h, w, 5) float32.
+    With ``reference`` measurements (h, w, 5): expressed in the reference's lighting, i.e. divided by
+    ``illumination_gains(m, reference)``, in the same compiled call."""
     image = np.asarray(rgb)
     if image.ndim != 3 or image.shape[2] != 3:
         raise ValueError(f"expected an (H, W, 3) RGB image, got shape {image.shape}")
@@ -62,7 +66,13 @@ def measurements(rgb: np.ndarray, downsample: int = 1) -> np.ndarray:
         image = image.astype(np.float32)
     height, width = image.shape[:2]
     out = np.empty((height // downsample, width // downsample, MEASUREMENT_DIM), np.float32)
-    _measurement_kernel(np.ascontiguousarray(image).reshape(height, width * 3), downsample, out)
+    rows = np.ascontiguousarray(image).reshape(height, width * 3)
+    if reference is None:
+        _measurement_kernel(rows, downsample, out)
+    else:
+        if np.shape(reference) != out.shape:
+            raise ValueError(f"reference measurements of shape {np.shape(reference)}; expected {out.shape}")
+        _compensated_measurement_kernel(rows, downsample, np.asarray(reference, np.float32), GAIN_STRIDE, out)
     return out
 
 
@@ -152,14 +162,37 @@ class BackgroundModel:
         return BackgroundModel(self.mean + weight * (m - self.mean), self.covariance, self.shadows)
 
 
-def illumination_gains(m: np.ndarray, reference: np.ndarray, stride: int = 3) -> np.ndarray:
-    """Per-channel gains (5,) mapping ``reference`` measurements (h, w, 5) to ``m``: the median
+def illumination_gains(m: np.ndarray, reference: np.ndarray, stride: int = GAIN_STRIDE) -> np.ndarray:
+    """Per-channel gains (5,) float32 mapping ``reference`` measurements (h, w, 5) to ``m``: the median
     ratio of each colour channel over every ``stride``-th pixel (robust to the person, who covers
-    a small part of the image), the mean colour gain for the two gradient channels."""
-    gains = np.ones(MEASUREMENT_DIM, np.float32)
-    _colour_gains(np.asarray(m, np.float32), np.asarray(reference, np.float32), stride, gains)
-    gains[3:] = gains[:3].mean()
-    return np.clip(gains, 0.05, 20.0)
+    a small part of the image), the mean colour gain for the two gradient channels, within [0.05, 20]."""
+    gains = np.empty(MEASUREMENT_DIM, np.float32)
+    _gains_kernel(np.asarray(m, np.float32), np.asarray(reference, np.float32), stride, gains)
+    return gains
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _gains_kernel(m: np.ndarray, reference: np.ndarray, stride: int, gains: np.ndarray) -> None:
+    """``illumination_gains`` into gains (5,) float32 (float32 arithmetic, as numpy's on float32 arrays)."""
+    gains[:] = 1.0
+    _colour_gains(m, reference, stride, gains)
+    gains[3] = gains[4] = (gains[0] + gains[1] + gains[2]) / np.float32(3.0)
+    for c in range(MEASUREMENT_DIM):
+        gains[c] = min(max(gains[c], np.float32(0.05)), np.float32(20.0))
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _compensated_measurement_kernel(image: np.ndarray, d: int, reference: np.ndarray, stride: int,
+                                    out: np.ndarray) -> None:
+    """``_measurement_kernel``'s measurements divided by their ``illumination_gains`` against ``reference``:
+    one call, so that a thread taking the interpreter lock back after each call waits once."""
+    _measurement_kernel(image, d, out)
+    gains = np.empty(MEASUREMENT_DIM, np.float32)
+    _gains_kernel(out, reference, stride, gains)
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            for c in range(MEASUREMENT_DIM):
+                out[i, j, c] = out[i, j, c] / gains[c]
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")

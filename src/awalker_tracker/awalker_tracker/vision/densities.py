@@ -166,19 +166,25 @@ def component_kernel(x: np.ndarray, means: np.ndarray, inv_chol: np.ndarray, log
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def ratio_kernel(x: np.ndarray, bg_mean: np.ndarray, bg_inv_chol: np.ndarray, bg_log_norm: float, shadows: bool,
-                 shadow_inv_chol: np.ndarray, shadow_log_norm: float, means: np.ndarray, inv_chol: np.ndarray,
-                 log_weight_norm: np.ndarray, log_count: np.ndarray, keep: float, floor: float, clip: float,
-                 out: np.ndarray) -> None:
+def ratio_kernel(pixels: np.ndarray, bg_mean: np.ndarray, bg_inv_chol: np.ndarray, bg_log_norm: float,
+                 shadows: bool, shadow_inv_chol: np.ndarray, shadow_log_norm: float, means: np.ndarray,
+                 inv_chol: np.ndarray, log_weight_norm: np.ndarray, log_count: np.ndarray, keep: float, floor: float,
+                 clip: float, out: np.ndarray) -> None:
     """Clipped log p_fg,c - log p_bg per pixel and class (see ``ForegroundModel.log_likelihood_ratios``).
 
-    x, bg_mean (5, M) float32: measurements and background means; the background arguments as
+    pixels (M, 5) float32: the measurements as they come (``as_channels``' layout is made here, in the same
+    call: a feature thread that takes the interpreter lock back once per call waits once, not twice);
+    bg_mean (5, M) float32: the background means; the background arguments as
     ``background.BackgroundModel.kernel_arguments`` gives them. Class c's components k:
     means (C, K, 5), inv_chol (C, K, 5, 5), log_weight_norm (C, K) = log weight + log
     normaliser (-inf pads classes with fewer than K), log_count (C,) = log of the real count.
     keep = log(1 - eps), floor = log eps + log uniform density. out (C, M) float32."""
     classes, components = log_weight_norm.shape
-    size = x.shape[1]
+    size = pixels.shape[0]
+    x = np.empty((MEASUREMENT_DIM, size), np.float32)
+    for p in range(size):
+        for ch in range(MEASUREMENT_DIM):
+            x[ch, p] = pixels[p, ch]
     comp = np.empty((classes, components, BLOCK))
     log_bg = np.empty(BLOCK)
     shaded = np.empty(BLOCK)

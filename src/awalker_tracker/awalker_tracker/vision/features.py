@@ -29,9 +29,11 @@ and comparing (``compensate_gain``), so slow or sudden lighting changes do not t
 background into foreground.
 Occlusion mask (255 / True = occluded): its pixels get ratio 0, cells it touches are invalid.
 
-Two cores: a frame's flow is estimated on a worker thread of the extractor while the calling thread learns
-and computes the maps (OpenCV's DIS and the compiled kernels release the interpreter lock; the two share no
-data, so the features are the same as one after the other). One thread (``blocks.thread_count``, e.g.
+Two cores: a frame's grey image and flow are computed on a worker thread of the extractor while the calling
+thread learns and computes the maps (OpenCV's DIS and the compiled kernels release the interpreter lock; the
+two share no data, so the features are the same as one after the other). The maps take two compiled calls a
+frame once the models are learned (measurements in the reference lighting, then the ratios): each return to
+Python must take the interpreter lock back, which can cost a switch interval while another thread runs Python. One thread (``blocks.thread_count``, e.g.
 ``AWALKER_THREADS=1``) runs them one after the other.
 """
 from __future__ import annotations
@@ -49,7 +51,6 @@ from awalker_tracker.vision.background import (
     BackgroundModel,
     fit_background,
     fit_background_robust,
-    illumination_gains,
     measurements,
 )
 from awalker_tracker.vision.flow import FlowConfig, FlowGrid, GridFlow, to_grey
@@ -194,18 +195,24 @@ class FeatureExtractor:
         d = self.config.downsample
         return labels[d // 2 :: d, d // 2 :: d][: shape[0], : shape[1]]
 
-    def _start_flow(self, grey: np.ndarray) -> Future | FlowGrid:
-        """This frame's flow from the previous grey image: on the extractor's worker thread when the
-        process may use two threads or more (a future), else computed here."""
+    def _flow_step(self, image: np.ndarray) -> tuple[FlowGrid, np.ndarray]:
+        """(flow from the previous grey image to this frame's, this frame's grey image); the flow is empty for
+        the first frame and after a change of size."""
+        grey = to_grey(image)
         height, width = grey.shape
         if self._prev_grey is None or self._prev_grey.shape != grey.shape:
-            return FlowGrid.empty(height, width, self.config.flow.cell_size)
+            return FlowGrid.empty(height, width, self.config.flow.cell_size), grey
+        return self._flow.estimate(self._prev_grey, grey), grey
+
+    def _start_flow(self, image: np.ndarray) -> Future | tuple[FlowGrid, np.ndarray]:
+        """``_flow_step`` of this frame: on the extractor's worker thread when the process may use two threads
+        or more (a future), else computed here."""
         if thread_count() < 2:
-            return self._flow.estimate(self._prev_grey, grey)
+            return self._flow_step(image)
         if self._flow_thread is None or self._flow_thread_pid != os.getpid():
             self._flow_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="awalker-flow")
             self._flow_thread_pid = os.getpid()
-        return self._flow_thread.submit(self._flow.estimate, self._prev_grey, grey)
+        return self._flow_thread.submit(self._flow_step, image)
 
     def _log(self, text: str) -> None:
         if self.verbose:
@@ -226,12 +233,11 @@ class FeatureExtractor:
         if image.ndim != 3 or image.shape[2] != 3:
             raise ValueError(f"expected an (H, W, 3) RGB image, got shape {image.shape}")
         height, width = image.shape[:2]
-        grey = to_grey(image)
-        pending = self._start_flow(grey)
+        pending = self._start_flow(image)
         try:
             llr = self._maps(image, class_labels, fill_with_bands)
         finally:
-            flow = pending.result() if isinstance(pending, Future) else pending
+            flow, grey = pending.result() if isinstance(pending, Future) else pending
         self._prev_grey = grey
         self.frame_index += 1
         return occluded(FrameFeatures(self.classes, llr, cfg.downsample, width, height, flow), occlusion_mask)
@@ -240,16 +246,18 @@ class FeatureExtractor:
         """The log-likelihood-ratio maps (C, h, w) float32 of a frame, after learning what this frame teaches
         the background and foreground models (module doc)."""
         cfg = self.config
-        m = measurements(image, cfg.downsample)
-        if self.background is not None and self.background.shape != m.shape[:2]:
-            height, width = image.shape[:2]
+        height, width = image.shape[:2]
+        shape = (height // cfg.downsample, width // cfg.downsample)
+        if self.background is not None and self.background.shape != shape:
             raise ValueError(f"frame size {width}x{height} differs from the first frames'")
+        reference = None
         if cfg.compensate_gain:
             # Lighting: measurements are expressed in the illumination of the first frame seen.
             reference = self.background.mean if self.background is not None else (
                 self._buffer[0] if self._buffer else None)
-            if reference is not None and reference.shape == m.shape:
-                m = m / illumination_gains(m, reference)
+            if reference is not None and reference.shape[:2] != shape:
+                reference = None
+        m = measurements(image, cfg.downsample, reference)
         # ---- model learning ----------------------------------------------------------------
         if self.background is None:
             known = self.background_frames > 0

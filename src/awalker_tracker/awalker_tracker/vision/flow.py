@@ -9,10 +9,14 @@ texture-weighted mean, a few iterations of Cauchy-weighted means over the cell's
 ``robust_scale_px``), weighted also by the gradient magnitude (flow is only measured where
 there is texture). Every 2nd vector per axis is used when the cell's side in the flow image is even.
 
-Per-cell work runs in two serial numba kernels, each one pass over the image with no
+Per-cell work runs in serial numba kernels, each one pass over the image with no
 temporaries: ``_gradient_tensors`` (3x3 Sobel gradients of the grey frame, the cell sums of the
 gradient tensor, the gradient magnitude where the M-estimator samples it) and
-``_robust_cell_means`` (all IRLS iterations of a cell while its vectors are in cache).
+``_robust_cell_means`` (all IRLS iterations of a cell while its vectors are in cache), whose
+``_cell_estimates`` adds each cell's validity and covariance. At full scale the two passes are one
+call (``_direct_cell_flow``): with DIS, two releases of the interpreter lock per frame, where numpy's
+array operations on the grid took a dozen more, and each time a thread takes the lock back it may
+wait a switch interval behind another thread's Python (the tracker's, in `awalker track`).
 
 Covariance (paper: "eigenvalues/vectors of the local gradient tensor in each region of
 support"): Sigma = noise_std^2 * T^-1 + floor_std^2 * I with T = sum over the cell of
@@ -128,7 +132,6 @@ class GridFlow:
         # Forward flow belongs to the previous frame's pixels, which differ wherever the body moved in
         # or out of a cell (one camera, real walks, tracker seeds 0-9: a median 6 mm better per run; README).
         dense = self._dis.calc(b, a, None)     # a flow passed in would be taken as the initial flow
-        np.negative(dense, out=dense)
         sub = max(int(round(size * cfg.scale)), 1)         # a cell in the flow image
         if dense.shape[0] < rows * sub or dense.shape[1] < cols * sub:
             dense = cv2.resize(dense, (cols * sub, rows * sub), interpolation=cv2.INTER_LINEAR)
@@ -139,26 +142,21 @@ class GridFlow:
         direct = sub == size
         step = stride if direct else 1
         magnitude = np.empty((rows * size // step, cols * size // step), np.float32)
-        _gradient_tensors(np.ascontiguousarray(grey, np.uint8), size, step, tensor, magnitude)
-        if not direct:
-            magnitude = cv2.resize(magnitude, (cols * sub, rows * sub), interpolation=cv2.INTER_AREA)[::stride, ::stride]
-        flow = np.empty((rows, cols, 2))
-        _robust_cell_means(dense[: rows * sub : stride, : cols * sub : stride], magnitude, sub // stride,
-                           width / a.shape[1], height / a.shape[0], 1.0 / cfg.robust_scale_px ** 2,
-                           cfg.robust_iterations, flow)
-        # Smallest eigenvalue per pixel and Sigma = noise^2 T^-1 + floor^2 I (2x2 in closed form).
-        txx, txy, tyy = tensor[..., 0], tensor[..., 1], tensor[..., 2]
-        area = size * size
-        eig_min = (0.5 * (txx + tyy) - np.sqrt(0.25 * (txx - tyy) ** 2 + txy ** 2)) / area
-        valid = (eig_min >= cfg.min_texture) & np.all(np.isfinite(flow), axis=-1)
-        det = np.maximum(txx * tyy - txy * txy, 1e-12)
-        scale = cfg.noise_std ** 2 / det
-        floor = cfg.floor_std ** 2
+        flow = np.empty((rows, cols, 2), np.float32)
         cov = np.empty((rows, cols, 2, 2), np.float32)
-        cov[..., 0, 0] = np.where(valid, scale * tyy + floor, 1e4)
-        cov[..., 1, 1] = np.where(valid, scale * txx + floor, 1e4)
-        cov[..., 0, 1] = cov[..., 1, 0] = np.where(valid, -scale * txy, 0.0)
-        return FlowGrid(grid_centers(rows, cols, size), np.nan_to_num(flow).astype(np.float32), cov, valid, size)
+        valid = np.empty((rows, cols), np.bool_)
+        # The backward flow is negated by scaling it with minus the image scale (exact: rounding is symmetric).
+        estimates = (dense[: rows * sub : stride, : cols * sub : stride], sub // stride, -width / a.shape[1],
+                     -height / a.shape[0], 1.0 / cfg.robust_scale_px ** 2, cfg.robust_iterations, float(size * size),
+                     cfg.noise_std ** 2, cfg.floor_std ** 2, cfg.min_texture, flow, cov, valid)
+        grey = np.ascontiguousarray(grey, np.uint8)
+        if direct:
+            _direct_cell_flow(grey, size, step, tensor, magnitude, *estimates)
+        else:   # the texture weights at the flow image's resolution
+            _gradient_tensors(grey, size, step, tensor, magnitude)
+            magnitude = cv2.resize(magnitude, (cols * sub, rows * sub), interpolation=cv2.INTER_AREA)[::stride, ::stride]
+            _cell_estimates(estimates[0], magnitude, *estimates[1:6], tensor, *estimates[6:])
+        return FlowGrid(grid_centers(rows, cols, size), flow, cov, valid, size)
 
 
 # ---- per-cell kernels (numba, serial) -------------------------------------------------------
@@ -254,6 +252,50 @@ def _robust_cell_means(dense: np.ndarray, magnitude: np.ndarray, n: int, scale_x
                 est_v = sum_v / total
             out[r, c, 0] = est_u
             out[r, c, 1] = est_v
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _cell_estimates(dense: np.ndarray, magnitude: np.ndarray, n: int, scale_x: float, scale_y: float, inv_c2: float,
+                    iterations: int, tensor: np.ndarray, area: float, noise_var: float, floor_var: float,
+                    min_texture: float, flow: np.ndarray, cov: np.ndarray, valid: np.ndarray) -> None:
+    """Each cell's flow, validity and covariance in one call (one release of the interpreter lock, not one per
+    array operation: the feature thread waits for this thread's result, and each time a thread takes the lock
+    back it may wait a switch interval behind the tracker's Python).
+
+    ``_robust_cell_means`` of the dense vectors (arguments as there) -> flow (rows, cols, 2) float32 (NaN as 0);
+    from the cell gradient tensors T = tensor (rows, cols, 3) = sums of (Ix^2, IxIy, Iy^2) over ``area`` px:
+    valid (rows, cols) = smallest eigenvalue of T / area >= ``min_texture`` and a finite flow;
+    cov (rows, cols, 2, 2) float32 = noise_var T^-1 + floor_var I where valid (det T floored at 1e-12),
+    else 1e4 I."""
+    means = np.empty((flow.shape[0], flow.shape[1], 2))
+    _robust_cell_means(dense, magnitude, n, scale_x, scale_y, inv_c2, iterations, means)
+    for r in range(flow.shape[0]):
+        for c in range(flow.shape[1]):
+            txx, txy, tyy = tensor[r, c, 0], tensor[r, c, 1], tensor[r, c, 2]
+            gap = txx - tyy
+            eig_min = (0.5 * (txx + tyy) - np.sqrt(0.25 * (gap * gap) + txy * txy)) / area
+            u, v = means[r, c, 0], means[r, c, 1]
+            ok = eig_min >= min_texture and np.isfinite(u) and np.isfinite(v)
+            det = txx * tyy - txy * txy
+            scale = noise_var / (det if det > 1e-12 else 1e-12)
+            cov[r, c, 0, 0] = scale * tyy + floor_var if ok else 1e4
+            cov[r, c, 1, 1] = scale * txx + floor_var if ok else 1e4
+            cov[r, c, 0, 1] = cov[r, c, 1, 0] = -scale * txy if ok else 0.0
+            valid[r, c] = ok
+            flow[r, c, 0] = 0.0 if np.isnan(u) else u
+            flow[r, c, 1] = 0.0 if np.isnan(v) else v
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _direct_cell_flow(grey: np.ndarray, size: int, step: int, tensor: np.ndarray, magnitude: np.ndarray,
+                      dense: np.ndarray, n: int, scale_x: float, scale_y: float, inv_c2: float, iterations: int,
+                      area: float, noise_var: float, floor_var: float, min_texture: float, flow: np.ndarray,
+                      cov: np.ndarray, valid: np.ndarray) -> None:
+    """``_gradient_tensors`` then ``_cell_estimates`` in one call, when the flow image is the grey image's size
+    (the texture weights need no resizing between them)."""
+    _gradient_tensors(grey, size, step, tensor, magnitude)
+    _cell_estimates(dense, magnitude, n, scale_x, scale_y, inv_c2, iterations, tensor, area, noise_var, floor_var,
+                    min_texture, flow, cov, valid)
 
 
 def student_t_log_likelihood(v: np.ndarray, u: np.ndarray, information: np.ndarray,

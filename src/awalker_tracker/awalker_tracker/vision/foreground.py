@@ -126,9 +126,9 @@ class ForegroundModel:
         floor = float(np.log(eps) + OUTLIER_LOG_DENSITY)
         keep = float(np.log1p(-eps))
         means, inv_chol, log_weight_norm, log_count = self._packed
-        x = as_channels(m)
-        out = np.empty((len(self.classes), x.shape[1]), np.float32)
-        ratio_kernel(x, *background.kernel_arguments, means, inv_chol, log_weight_norm, log_count, keep, floor,
+        pixels = np.asarray(m, np.float32).reshape(-1, MEASUREMENT_DIM)
+        out = np.empty((len(self.classes), pixels.shape[0]), np.float32)
+        ratio_kernel(pixels, *background.kernel_arguments, means, inv_chol, log_weight_norm, log_count, keep, floor,
                      float(clip), out)
         return out.reshape((len(self.classes),) + m.shape[:2])
 
