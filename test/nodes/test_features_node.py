@@ -200,6 +200,47 @@ def test_node_publishes_features_for_every_image(ros_context):
         probe.destroy_node()
 
 
+def test_an_error_on_the_flow_thread_is_raised_in_the_executor(ros_context, monkeypatch):
+    """A failure while a frame's flow is estimated (on the extractor's thread) is not lost in that thread: the
+    executor spinning the node raises it."""
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile
+    from sensor_msgs.msg import Image
+
+    from awalker_tracker.nodes.features import FeatureNode
+    from awalker_tracker.vision import flow as flow_module
+
+    monkeypatch.setenv("AWALKER_THREADS", "2")
+
+    def broken(self, prev_grey, grey):
+        raise RuntimeError("flow kernel broke")
+
+    monkeypatch.setattr(flow_module.GridFlow, "estimate", broken)
+    node = FeatureNode(context=ros_context, parameter_overrides=[Parameter("camera_name", value="cam")])
+    probe = Node("probe", context=ros_context)
+    image_pub = probe.create_publisher(Image, "/cam/image_raw", QoSProfile(depth=10))
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(probe)
+    frames = scene_frames()
+    try:
+        deadline = time.monotonic() + 10
+        while image_pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        for k in range(3):              # the second frame is the first with a flow to estimate
+            image_pub.publish(image_msg(frames[k], 2_000_000_000 + k * 33_333_333))
+        with pytest.raises(RuntimeError, match="awalker_features \\(cam\\): features failed") as failed:
+            while time.monotonic() < deadline + 10:
+                executor.spin_once(timeout_sec=0.05)
+        assert "flow kernel broke" in str(failed.value.__cause__)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        probe.destroy_node()
+
+
 def test_node_requires_a_camera_name(ros_context):
     from awalker_tracker.nodes.features import FeatureNode
 

@@ -65,6 +65,46 @@ def test_a_frame_of_another_size_is_refused_and_the_flow_thread_is_waited_for(mo
     assert after.flow.valid.any() and extractor.frame_index == 6
 
 
+def test_submitted_frames_are_done_in_order_with_the_features_of_process(monkeypatch):
+    """submit returns once the maps are made; the futures complete in the frames' order with process's features,
+    and a frame waits while two others wait for their flow."""
+    frames = _frames()
+    alone, _ = _extract(frames, "1", monkeypatch)
+    monkeypatch.setenv("AWALKER_THREADS", "2")
+    release = threading.Event()
+
+    def held(self, prev_grey, grey):
+        assert release.wait(30.0)
+        return ESTIMATE(self, prev_grey, grey)
+
+    monkeypatch.setattr(flow_module.GridFlow, "estimate", held)
+    extractor = FeatureExtractor(FeatureConfig(background_frames=3, downsample=2))
+    done_order: list[int] = []
+    futures = []
+
+    def submit(k: int) -> None:
+        futures.append(extractor.submit(frames[k]))
+        futures[-1].add_done_callback(lambda _, k=k: done_order.append(k))
+
+    for k in range(3):          # frame 0 has no flow to wait for; frames 1 and 2 wait
+        submit(k)
+    blocked = threading.Thread(target=submit, args=(3,))
+    blocked.start()
+    blocked.join(0.5)
+    assert blocked.is_alive() and len(futures) == 3 and done_order == [0]     # held: two frames wait already
+    release.set()
+    blocked.join(30.0)
+    for k in range(4, len(frames)):
+        submit(k)
+    features = [future.result(30.0) for future in futures]
+    extractor.close()
+    assert done_order == list(range(len(frames)))
+    for one, other in zip(alone, features):
+        np.testing.assert_array_equal(one.llr, other.llr)
+        for field in ("centers", "flow", "covariance", "valid"):
+            np.testing.assert_array_equal(getattr(one.flow, field), getattr(other.flow, field))
+
+
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="needs fork")
 def test_a_forked_child_starts_its_own_flow_thread(monkeypatch):
     monkeypatch.setenv("AWALKER_THREADS", "2")

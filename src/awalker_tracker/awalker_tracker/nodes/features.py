@@ -26,7 +26,9 @@ Subscribes (camera ``<cam>`` from the ``camera_name`` parameter):
   misses labelled by height bands; without them, by height bands alone.
 Publishes ``/<cam>/features`` (awalker_msgs/ImageFeatures, reliable, depth 10), stamped with
 the image stamp, for every image it can decode — also during background learning (zero maps),
-so lockstep replay never waits. Undecodable images and out-of-order stamps are logged with the
+so lockstep replay never waits. A frame's features are published, in the frames' order, once its
+flow is estimated on the extractor's thread (``FeatureExtractor.submit``), while the node decodes
+the next image and makes its maps; an unexpected error there is raised in the executor's thread. Undecodable images and out-of-order stamps are logged with the
 topic and counted (``stats``), and skipped.
 
 Message conversions (``image_from_msg``, ``features_to_msg``, ``features_from_msg``) are plain
@@ -38,6 +40,7 @@ import array
 import sys
 import time
 from collections import deque
+from concurrent.futures import Future
 from dataclasses import dataclass
 from typing import Any
 
@@ -234,6 +237,8 @@ class FeatureNode(Node):
         self._held: deque[tuple[Image | CompressedImage, str, int, float]] = deque()
         self._hold_timer: Any = None
         self._wait_over = self.create_guard_condition(lambda: self._release_held(overdue=True))
+        self._failure: Exception | None = None
+        self._failed = self.create_guard_condition(self._fail)
         self._labels: np.ndarray | None = None
         self._start: Any = None
         self._info: CameraInfo | None = None
@@ -384,9 +389,9 @@ class FeatureNode(Node):
             learned = self.extractor.foreground is not None
             had_background = self.extractor.background is not None
             if start_labels is not None:
-                features = self.extractor.process(rgb, mask, start_labels, fill_with_bands=True)
+                pending = self.extractor.submit(rgb, mask, start_labels, fill_with_bands=True)
             else:
-                features = self.extractor.process(rgb, mask, self._labels)
+                pending = self.extractor.submit(rgb, mask, self._labels)
             if not had_background and self.extractor.background is not None:
                 frames = self.extractor.frame_index - 1
                 self.stats.background_from = (
@@ -404,9 +409,32 @@ class FeatureNode(Node):
             return
         self._last_stamp = stamp
         hdr = Header(stamp=msg.header.stamp, frame_id=msg.header.frame_id or f"{self.camera_name}_optical_frame")
-        self.publisher.publish(features_to_msg(features, hdr, self.camera_name))
+        pending.add_done_callback(lambda done: self._publish(done, hdr, f"{topic} at {stamp} ns", started))
+
+    def _publish(self, done: Future, hdr: Header, where: str, started: float) -> None:
+        """Publish a frame's features once its flow is estimated (called on the extractor's flow thread, in the
+        frames' order, or at once). An unexpected error is kept and raised in the executor's thread (``_fail``)."""
+        try:
+            features = done.result()
+            self.publisher.publish(features_to_msg(features, hdr, self.camera_name))
+        except (InputError, ValueError) as exc:
+            self._skip(f"{where}: {exc}")
+            return
+        except Exception as exc:
+            self._failure = exc
+            self._failed.trigger()
+            return
         self.stats.frames += 1
         self.stats.seconds += time.perf_counter() - started
+
+    def _fail(self) -> None:
+        """Raise the error a frame's features met on the flow thread, here in the executor's thread."""
+        raise RuntimeError(f"awalker_features ({self.camera_name}): features failed") from self._failure
+
+    def destroy_node(self) -> None:
+        """Publish what the extractor still works on, then destroy the node."""
+        self.extractor.close()
+        super().destroy_node()
 
     def _skip(self, text: str) -> None:
         self.stats.skipped += 1

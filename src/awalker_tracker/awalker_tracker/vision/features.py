@@ -31,7 +31,9 @@ Occlusion mask (255 / True = occluded): its pixels get ratio 0, cells it touches
 
 Two cores: a frame's grey image and flow are computed on a worker thread of the extractor while the calling
 thread learns and computes the maps (OpenCV's DIS and the compiled kernels release the interpreter lock; the
-two share no data, so the features are the same as one after the other). The maps take two compiled calls a
+two share no data, so the features are the same as one after the other). ``submit`` returns once the maps are
+made, with a future of the features done when the flow is: the caller goes on with the next frame (decoding
+it, its maps) while this one's flow is estimated, at most ``MAX_PENDING_FLOWS`` frames behind. The maps take two compiled calls a
 frame once the models are learned (measurements in the reference lighting, then the ratios): each return to
 Python must take the interpreter lock back, which can cost a switch interval while another thread runs Python. One thread (``blocks.thread_count``, e.g.
 ``AWALKER_THREADS=1``) runs them one after the other.
@@ -40,6 +42,7 @@ from __future__ import annotations
 
 import os
 import sys
+from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -60,6 +63,8 @@ from awalker_tracker.vision.foreground import ForegroundModel, learn_foreground
 #: Map pixels across the image that a rig of two cameras or more aims at (``map_downsample``): 4 x 4 image
 #: pixels per map pixel at 640x480, the paper's video, and 2 x 2 at 320x240.
 MULTI_CAMERA_MAP_WIDTH = 160
+#: Frames whose maps are made but whose flow is not (``FeatureExtractor.submit``) before the next waits.
+MAX_PENDING_FLOWS = 2
 
 
 @dataclass(frozen=True)
@@ -174,6 +179,7 @@ class FeatureExtractor:
         self._refits: list[int] = []           # frame counts after which the robust background is refitted
         self._flow = GridFlow(config.flow)
         self._prev_grey: np.ndarray | None = None
+        self._pending: deque[Future] = deque()    # flows of submitted frames, oldest first (done ones too)
         self._flow_thread: ThreadPoolExecutor | None = None
         self._flow_thread_pid = 0       # the process that started it (a forked child starts its own)
 
@@ -195,24 +201,37 @@ class FeatureExtractor:
         d = self.config.downsample
         return labels[d // 2 :: d, d // 2 :: d][: shape[0], : shape[1]]
 
-    def _flow_step(self, image: np.ndarray) -> tuple[FlowGrid, np.ndarray]:
-        """(flow from the previous grey image to this frame's, this frame's grey image); the flow is empty for
-        the first frame and after a change of size."""
+    def _flow_step(self, image: np.ndarray) -> FlowGrid:
+        """The flow from the previous frame's grey image to this one's (kept for the next frame); empty for the
+        first frame and after a change of size. Steps run one at a time, in the frames' order."""
         grey = to_grey(image)
-        height, width = grey.shape
-        if self._prev_grey is None or self._prev_grey.shape != grey.shape:
-            return FlowGrid.empty(height, width, self.config.flow.cell_size), grey
-        return self._flow.estimate(self._prev_grey, grey), grey
+        previous, self._prev_grey = self._prev_grey, grey
+        if previous is None or previous.shape != grey.shape:
+            return FlowGrid.empty(grey.shape[0], grey.shape[1], self.config.flow.cell_size)
+        return self._flow.estimate(previous, grey)
 
-    def _start_flow(self, image: np.ndarray) -> Future | tuple[FlowGrid, np.ndarray]:
+    def _start_flow(self, image: np.ndarray) -> Future:
         """``_flow_step`` of this frame: on the extractor's worker thread when the process may use two threads
-        or more (a future), else computed here."""
+        or more, else done here (a future either way)."""
         if thread_count() < 2:
-            return self._flow_step(image)
+            done: Future = Future()
+            try:
+                done.set_result(self._flow_step(image))
+            except Exception as exc:
+                done.set_exception(exc)
+            return done
         if self._flow_thread is None or self._flow_thread_pid != os.getpid():
             self._flow_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="awalker-flow")
             self._flow_thread_pid = os.getpid()
         return self._flow_thread.submit(self._flow_step, image)
+
+    def close(self) -> None:
+        """Wait until every submitted frame is done (its future's callbacks too) and stop the worker thread
+        (a later frame starts another)."""
+        if self._flow_thread is not None and self._flow_thread_pid == os.getpid():
+            self._flow_thread.shutdown(wait=True)
+        self._flow_thread = None
+        self._pending.clear()
 
     def _log(self, text: str) -> None:
         if self.verbose:
@@ -228,19 +247,42 @@ class FeatureExtractor:
                 class_labels: np.ndarray | None = None, fill_with_bands: bool = False) -> FrameFeatures:
         """Features of the next frame (RGB (H, W, 3) uint8); updates the models as described above.
         ``class_labels`` (and ``fill_with_bands``) are used if this frame learns the foreground."""
+        return self.submit(rgb, occlusion_mask, class_labels, fill_with_bands).result()
+
+    def submit(self, rgb: np.ndarray, occlusion_mask: np.ndarray | None = None,
+               class_labels: np.ndarray | None = None, fill_with_bands: bool = False) -> Future:
+        """``process`` that returns once the frame's maps are made (the models learned from it): a future of its
+        FrameFeatures, done when its flow is, on the worker thread; frames are done in the order submitted. At
+        most ``MAX_PENDING_FLOWS`` frames wait for their flow: a further one waits here for the oldest.
+        ValueError (raised here) for an image that is not RGB or not the size of the first frames."""
         cfg = self.config
         image = np.asarray(rgb)
         if image.ndim != 3 or image.shape[2] != 3:
             raise ValueError(f"expected an (H, W, 3) RGB image, got shape {image.shape}")
         height, width = image.shape[:2]
-        pending = self._start_flow(image)
+        if self.background is not None and self.background.shape != (height // cfg.downsample, width // cfg.downsample):
+            raise ValueError(f"frame size {width}x{height} differs from the first frames'")
+        while len(self._pending) >= MAX_PENDING_FLOWS:
+            self._pending.popleft().exception()     # waits; its own future carries any error
+        flow = self._start_flow(image)
         try:
             llr = self._maps(image, class_labels, fill_with_bands)
-        finally:
-            flow, grey = pending.result() if isinstance(pending, Future) else pending
-        self._prev_grey = grey
+        except BaseException:
+            flow.exception()            # this frame's flow step still runs (and keeps its grey image)
+            raise
         self.frame_index += 1
-        return occluded(FrameFeatures(self.classes, llr, cfg.downsample, width, height, flow), occlusion_mask)
+        features: Future = Future()
+
+        def finish(done: Future) -> None:
+            try:
+                features.set_result(occluded(FrameFeatures(self.classes, llr, cfg.downsample, width, height,
+                                                           done.result()), occlusion_mask))
+            except BaseException as exc:
+                features.set_exception(exc)
+
+        self._pending.append(flow)
+        flow.add_done_callback(finish)
+        return features
 
     def _maps(self, image: np.ndarray, class_labels: np.ndarray | None, fill_with_bands: bool) -> np.ndarray:
         """The log-likelihood-ratio maps (C, h, w) float32 of a frame, after learning what this frame teaches
@@ -248,8 +290,6 @@ class FeatureExtractor:
         cfg = self.config
         height, width = image.shape[:2]
         shape = (height // cfg.downsample, width // cfg.downsample)
-        if self.background is not None and self.background.shape != shape:
-            raise ValueError(f"frame size {width}x{height} differs from the first frames'")
         reference = None
         if cfg.compensate_gain:
             # Lighting: measurements are expressed in the illumination of the first frame seen.
