@@ -200,45 +200,76 @@ def test_node_publishes_features_for_every_image(ros_context):
         probe.destroy_node()
 
 
-def test_an_error_on_the_flow_thread_is_raised_in_the_executor(ros_context, monkeypatch):
-    """A failure while a frame's flow is estimated (on the extractor's thread) is not lost in that thread: the
-    executor spinning the node raises it."""
+def _features_with_a_broken_flow(ros_context, monkeypatch, error: Exception, frames: int):
+    """A features node (flow on its own thread) whose flow estimate raises ``error`` for the second frame (the first
+    with a flow), fed ``frames`` images; spins until it published the others or the executor raised. Returns
+    (the node's stats, the stamps published, what the executor raised or None)."""
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.parameter import Parameter
     from rclpy.qos import QoSProfile
     from sensor_msgs.msg import Image
 
+    from awalker_msgs.msg import ImageFeatures
+    from awalker_tracker.nodes.convert import stamp_to_ns
     from awalker_tracker.nodes.features import FeatureNode
     from awalker_tracker.vision import flow as flow_module
 
     monkeypatch.setenv("AWALKER_THREADS", "2")
+    estimate = flow_module.GridFlow.estimate
+    calls: list[int] = []
 
-    def broken(self, prev_grey, grey):
-        raise RuntimeError("flow kernel broke")
+    def broken_once(self, prev_grey, grey):
+        calls.append(1)
+        if len(calls) == 1:
+            raise error
+        return estimate(self, prev_grey, grey)
 
-    monkeypatch.setattr(flow_module.GridFlow, "estimate", broken)
+    monkeypatch.setattr(flow_module.GridFlow, "estimate", broken_once)
     node = FeatureNode(context=ros_context, parameter_overrides=[Parameter("camera_name", value="cam")])
     probe = Node("probe", context=ros_context)
-    image_pub = probe.create_publisher(Image, "/cam/image_raw", QoSProfile(depth=10))
+    received: list = []
+    probe.create_subscription(ImageFeatures, "/cam/features", received.append, QoSProfile(depth=50))
+    image_pub = probe.create_publisher(Image, "/cam/image_raw", QoSProfile(depth=50))
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(node)
     executor.add_node(probe)
-    frames = scene_frames()
+    images = scene_frames()[:frames]
+    raised = None
     try:
         deadline = time.monotonic() + 10
         while image_pub.get_subscription_count() == 0 and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
-        for k in range(3):              # the second frame is the first with a flow to estimate
-            image_pub.publish(image_msg(frames[k], 2_000_000_000 + k * 33_333_333))
-        with pytest.raises(RuntimeError, match="awalker_features \\(cam\\): features failed") as failed:
-            while time.monotonic() < deadline + 10:
+        for k, rgb in enumerate(images):
+            image_pub.publish(image_msg(rgb, 2_000_000_000 + k * 33_333_333))
+        try:
+            while len(received) + node.stats.skipped < len(images) and time.monotonic() < deadline + 10:
                 executor.spin_once(timeout_sec=0.05)
-        assert "flow kernel broke" in str(failed.value.__cause__)
+            for _ in range(5):
+                executor.spin_once(timeout_sec=0.05)
+        except Exception as exc:
+            raised = exc
+        return node.stats, [stamp_to_ns(m.header.stamp) for m in received], raised
     finally:
         executor.shutdown()
         node.destroy_node()
         probe.destroy_node()
+
+
+def test_an_error_on_the_flow_thread_is_raised_in_the_executor(ros_context, monkeypatch):
+    """A failure while a frame's flow is estimated (on the extractor's thread) is not lost in that thread: the
+    executor spinning the node raises it."""
+    _, _, raised = _features_with_a_broken_flow(ros_context, monkeypatch, RuntimeError("flow kernel broke"), 3)
+    assert isinstance(raised, RuntimeError) and "awalker_features (cam): features failed" in str(raised)
+    assert "flow kernel broke" in str(raised.__cause__)
+
+
+def test_a_frame_refused_on_the_flow_thread_is_skipped_and_counted(ros_context, monkeypatch):
+    """A ValueError on the flow thread skips that frame, as one in the image callback does; the frames after it
+    are published, their flow from the skipped frame's image."""
+    stats, stamps, raised = _features_with_a_broken_flow(ros_context, monkeypatch, ValueError("bad cell grid"), 4)
+    assert raised is None and stats.skipped == 1 and stats.frames == 3
+    assert stamps == [2_000_000_000 + k * 33_333_333 for k in (0, 2, 3)]
 
 
 def test_node_requires_a_camera_name(ros_context):

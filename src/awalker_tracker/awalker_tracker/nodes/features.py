@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import array
 import sys
+import threading
 import time
 from collections import deque
 from concurrent.futures import Future
@@ -238,6 +239,7 @@ class FeatureNode(Node):
         self._hold_timer: Any = None
         self._wait_over = self.create_guard_condition(lambda: self._release_held(overdue=True))
         self._failure: Exception | None = None
+        self._skip_lock = threading.Lock()
         self._failed = self.create_guard_condition(self._fail)
         self._labels: np.ndarray | None = None
         self._start: Any = None
@@ -437,7 +439,8 @@ class FeatureNode(Node):
         super().destroy_node()
 
     def _skip(self, text: str) -> None:
-        self.stats.skipped += 1
+        with self._skip_lock:        # the executor's thread and the extractor's flow thread both skip frames
+            self.stats.skipped += 1
         self.get_logger().error(f"{text}; frame skipped ({self.stats.skipped} so far)")
 
 

@@ -210,20 +210,27 @@ class FeatureExtractor:
             return FlowGrid.empty(grey.shape[0], grey.shape[1], self.config.flow.cell_size)
         return self._flow.estimate(previous, grey)
 
-    def _start_flow(self, image: np.ndarray) -> Future:
-        """``_flow_step`` of this frame: on the extractor's worker thread when the process may use two threads
-        or more, else done here (a future either way)."""
+    def _flow_worker(self) -> ThreadPoolExecutor | None:
+        """The extractor's flow thread when the process may use two threads or more, else None. A forked child
+        starts one of its own and forgets the frames its parent had in work (they are done in the parent)."""
         if thread_count() < 2:
-            done: Future = Future()
-            try:
-                done.set_result(self._flow_step(image))
-            except Exception as exc:
-                done.set_exception(exc)
-            return done
+            return None
         if self._flow_thread is None or self._flow_thread_pid != os.getpid():
             self._flow_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="awalker-flow")
             self._flow_thread_pid = os.getpid()
-        return self._flow_thread.submit(self._flow_step, image)
+            self._pending.clear()
+        return self._flow_thread
+
+    def _start_flow(self, image: np.ndarray, worker: ThreadPoolExecutor | None) -> Future:
+        """``_flow_step`` of this frame: on ``worker``, or done here without one (a future either way)."""
+        if worker is not None:
+            return worker.submit(self._flow_step, image)
+        done: Future = Future()
+        try:
+            done.set_result(self._flow_step(image))
+        except Exception as exc:
+            done.set_exception(exc)
+        return done
 
     def close(self) -> None:
         """Wait until every submitted frame is done (its future's callbacks too) and stop the worker thread
@@ -262,9 +269,10 @@ class FeatureExtractor:
         height, width = image.shape[:2]
         if self.background is not None and self.background.shape != (height // cfg.downsample, width // cfg.downsample):
             raise ValueError(f"frame size {width}x{height} differs from the first frames'")
+        worker = self._flow_worker()
         while len(self._pending) >= MAX_PENDING_FLOWS:
             self._pending.popleft().exception()     # waits; its own future carries any error
-        flow = self._start_flow(image)
+        flow = self._start_flow(image, worker)
         try:
             llr = self._maps(image, class_labels, fill_with_bands)
         except BaseException:
