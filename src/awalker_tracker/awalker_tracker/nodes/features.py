@@ -28,8 +28,9 @@ Publishes ``/<cam>/features`` (awalker_msgs/ImageFeatures, reliable, depth 10), 
 the image stamp, for every image it can decode — also during background learning (zero maps),
 so lockstep replay never waits. A frame's features are published, in the frames' order, once its
 flow is estimated on the extractor's thread (``FeatureExtractor.submit``), while the node decodes
-the next image and makes its maps; an unexpected error there is raised in the executor's thread. Undecodable images and out-of-order stamps are logged with the
-topic and counted (``stats``), and skipped.
+the next image and makes its maps; an unexpected error there is raised in the executor's thread.
+Undecodable images and out-of-order stamps are logged with the topic and counted (``stats``), and
+skipped.
 
 Message conversions (``image_from_msg``, ``features_to_msg``, ``features_from_msg``) are plain
 functions the tracker side reuses.

@@ -33,10 +33,11 @@ Two cores: a frame's grey image and flow are computed on a worker thread of the 
 thread learns and computes the maps (OpenCV's DIS and the compiled kernels release the interpreter lock; the
 two share no data, so the features are the same as one after the other). ``submit`` returns once the maps are
 made, with a future of the features done when the flow is: the caller goes on with the next frame (decoding
-it, its maps) while this one's flow is estimated, at most ``MAX_PENDING_FLOWS`` frames behind. The maps take two compiled calls a
-frame once the models are learned (measurements in the reference lighting, then the ratios): each return to
-Python must take the interpreter lock back, which can cost a switch interval while another thread runs Python. One thread (``blocks.thread_count``, e.g.
-``AWALKER_THREADS=1``) runs them one after the other.
+it, its maps) while this one's flow is estimated, at most ``MAX_PENDING_FLOWS`` frames behind. The maps take
+two compiled calls a frame once the models are learned (measurements in the reference lighting, then the
+ratios): each return to Python must take the interpreter lock back, which can cost a switch interval while
+another thread runs Python. One thread (``blocks.thread_count``, e.g. ``AWALKER_THREADS=1``) runs them one
+after the other.
 """
 from __future__ import annotations
 
