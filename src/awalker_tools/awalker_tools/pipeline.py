@@ -302,10 +302,10 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
     from rclpy.parameter import Parameter
     from rclpy.signals import SignalHandlerOptions
 
+    from awalker_tracker.nodes.base import AwalkerNode, private_node_options
     from awalker_tracker.nodes.features import FeatureNode
     from awalker_tracker.nodes.pose_publisher import PosePublisherNode
     from awalker_tracker.nodes.tracker import TrackerNode
@@ -353,19 +353,25 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     started = time.monotonic()
     try:
-        driver = Node("awalker_track_replay", context=context)
+        def node_options(overrides: list[Any] | None = None) -> dict[str, Any]:
+            """A node's keyword arguments: its parameter overrides, and with the topics private, none of what only
+            another process could use (``nodes.base.private_node_options``)."""
+            return {"parameter_overrides": list(overrides or [])} if options.share_topics else private_node_options(
+                overrides)
+
+        driver = AwalkerNode("awalker_track_replay", context=context, **node_options())
         nodes.append(driver)
         # the features nodes get the same start and body as the tracker (files or bag topics alike)
         # (automatic start: none, the features nodes learn the background robustly from the walk)
-        features = [FeatureNode(context=context, parameter_overrides=[
+        features = [FeatureNode(context=context, **node_options([
             Parameter("camera_name", value=c.name),
             Parameter("downsample", value=downsample[c.name]),
             Parameter("start_description", value=str(out / START_FILE) if start is not None else ""),
             Parameter("use_start_description", value=start is not None),
-            Parameter("body_description", value=str(out / BODY_FILE) if body is not None else "")]) for c in cameras]
+            Parameter("body_description", value=str(out / BODY_FILE) if body is not None else "")])) for c in cameras]
         nodes += features
         band = options.depth_band_m if options.recovery else 0.0      # None: the tracker node's default
-        tracker = TrackerNode(context=context, parameter_overrides=[
+        tracker = TrackerNode(context=context, **node_options([
             Parameter("cameras", value=names), Parameter("calibration", value=str(out / CALIBRATION_FILE)),
             Parameter("start_description", value=str(out / START_FILE) if start is not None else ""),
             Parameter("auto_start", value=start is None), Parameter("start_output", value=str(out / START_FILE)),
@@ -382,11 +388,11 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
             Parameter("reseed_fallen", value=bool(options.recovery)), Parameter("reacquire", value=bool(options.recovery)),
             Parameter("hold_still", value=bool(options.recovery)),
             *([Parameter("depth_band_m", value=float(band))] if band is not None else []),
-            Parameter("idle_flush_s", value=1.0e9)])
+            Parameter("idle_flush_s", value=1.0e9)]))
         tracker.keep_summaries = True
         nodes.append(tracker)
-        poser = PosePublisherNode(context=context, parameter_overrides=[
-            Parameter("body_description", value=str(out / BODY_FILE) if body is not None else "")])
+        poser = PosePublisherNode(context=context, **node_options([
+            Parameter("body_description", value=str(out / BODY_FILE) if body is not None else "")]))
         nodes.append(poser)
         from awalker_msgs.msg import GaitStep, ImageFeatures, PosteriorSummary
         from sensor_msgs.msg import JointState, PointCloud2
@@ -403,7 +409,7 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
             "/awalker/ack": (Header, "std_msgs/msg/Header"),
         }
         topics.update({f"/{c}/features": (ImageFeatures, "awalker_msgs/msg/ImageFeatures") for c in names})
-        recorder_node = Node("awalker_track_recorder", context=context)
+        recorder_node = AwalkerNode("awalker_track_recorder", context=context, **node_options())
         nodes.append(recorder_node)
         recorder = Recorder(recorder_node, result_bag, topics, options.storage)
         executor = SingleThreadedExecutor(context=context)

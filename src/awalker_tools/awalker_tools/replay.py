@@ -43,6 +43,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rosbags.interfaces import Connection
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.nodes.base import AwalkerNode
 from awalker_tracker.nodes.spin import run_node
 
 from awalker_tools.bagio import (
@@ -500,7 +501,7 @@ def run_replay(executor: Any, replayer: Replayer) -> ReplaySummary:
 # ---------------------------------------------------------------------------------------------
 # The node and its console script
 # ---------------------------------------------------------------------------------------------
-class ReplayNode(Node):
+class ReplayNode(AwalkerNode):
     """rclpy node replaying the bag given by parameter ``bag`` (see ReplayConfig for the others)."""
 
     def __init__(self, node_name: str = "awalker_replay", **kwargs: Any) -> None:

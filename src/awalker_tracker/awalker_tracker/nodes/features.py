@@ -52,7 +52,6 @@ import rclpy
 from awalker_msgs.msg import FlowGrid as FlowGridMsg
 from awalker_msgs.msg import ImageFeatures
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
@@ -61,6 +60,7 @@ from std_msgs.msg import Header, String
 from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import PART_CLASSES, BodyDescription
 from awalker_tracker.model.walker import LEFT
+from awalker_tracker.nodes.base import AwalkerNode
 from awalker_tracker.nodes.convert import camera_from_msgs, stamp_to_ns
 from awalker_tracker.nodes.spin import run_node
 from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor, FrameFeatures
@@ -177,7 +177,7 @@ class FeatureNodeStats:
     frames_without_mask: int = 0  # images processed without their occlusion mask on a camera that has masks
 
 
-class FeatureNode(Node):
+class FeatureNode(AwalkerNode):
     """Image features for one camera (see the module docstring)."""
 
     def __init__(self, **kwargs: Any) -> None:

@@ -29,6 +29,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from awalker_tracker.inference.gait import WALKER_STRIKE_DELAY, Step, StepCounter
 from awalker_tracker.model.body import BodyDescription
+from awalker_tracker.nodes.base import AwalkerNode
 from awalker_tracker.nodes.convert import POSTERIOR_DEPTH, particles_to_pointcloud2, points_from_msg, stamp_to_ns
 from awalker_tracker.nodes.spin import run_node
 
@@ -155,7 +156,7 @@ class MarkerBuilder:
         return MarkerArray(markers=out)
 
 
-class PosePublisherNode(Node):
+class PosePublisherNode(AwalkerNode):
     """Publishes JointState / MarkerArray (and tf) for every posterior summary."""
 
     def __init__(self, **kwargs) -> None:

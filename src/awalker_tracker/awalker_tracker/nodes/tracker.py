@@ -26,7 +26,6 @@ import rclpy
 from awalker_msgs.msg import ImageFeatures, PosteriorSummary
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo
@@ -42,6 +41,7 @@ from awalker_tracker.inference.tracker import (
     ImageObservation, StartDescription, Tracker, TrackerConfig, TrackerModel, image_likelihood)
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEG_NAMES
+from awalker_tracker.nodes.base import AwalkerNode
 from awalker_tracker.nodes.convert import POSTERIOR_DEPTH, camera_from_msgs, header, stamp_to_ns, summary_to_msg
 from awalker_tracker.nodes.features import features_from_msg
 from awalker_tracker.nodes.spin import run_node
@@ -66,7 +66,7 @@ class TrackerNodeStats:
     seconds_in_filter: float = 0.0
 
 
-class TrackerNode(Node):
+class TrackerNode(AwalkerNode):
     """Runs the physics-based particle filter on synchronised per-camera features."""
 
     def __init__(self, **kwargs: Any) -> None:
