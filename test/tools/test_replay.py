@@ -35,6 +35,16 @@ def _spin_for(executor: SingleThreadedExecutor, seconds: float) -> None:
         executor.spin_once(timeout_sec=0.01)
 
 
+def _rig(ros_context) -> tuple[Receiver, Node, SingleThreadedExecutor]:
+    """A receiver that acknowledges frames, a plain node to replay through, and an executor spinning both."""
+    receiver = Receiver(context=ros_context)
+    driver = Node("replay", context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(receiver)
+    executor.add_node(driver)
+    return receiver, driver, executor
+
+
 def _expected_bytes(images: list[dict], cam: str) -> list[bytes]:
     return [frame[cam].tobytes() for frame in images]
 
@@ -160,16 +170,32 @@ def test_lockstep_frames_ahead_keeps_that_many_frames_unacknowledged(ros_context
             ReplayConfig(lockstep=True, frames_ahead=bad).validated("replay test")
 
 
+def test_a_replay_through_the_callers_reader_leaves_it_open(ros_context, tmp_path: Path) -> None:
+    """Replayer(reader=...) replays the bag through an open reader it was given and does not close it: the
+    caller reads on and replays again through it (`awalker track` opens a bag once for all its passes)."""
+    bag = tmp_path / "bag"
+    stamps, images = make_bag(bag, frames=5)
+    receiver, driver, executor = _rig(ros_context)
+    config = ReplayConfig(lockstep=True, wait_for_subscribers=5.0, ack_timeout=10.0)
+    try:
+        with SequenceReader(bag) as sequence:
+            for _ in range(2):
+                summary = run_replay(executor, Replayer(driver, bag, config, reader=sequence.reader))
+                assert summary.stopped is None and summary.frames == 5, summary.lines()
+                assert sum(1 for _ in sequence.frames(decode=False)) == 5      # the reader is still open
+        _spin_for(executor, 0.2)
+        assert [s for s, _ in receiver.images["cam0"]] == stamps + stamps
+        assert [b for _, b in receiver.images["cam0"]] == 2 * _expected_bytes(images, "cam0")
+    finally:
+        executor.shutdown()
+
+
 def test_local_readers_start_the_replay_without_the_settle_time(ros_context, tmp_path: Path) -> None:
     """Readers in this process are known to have matched (both ends), so the replay starts at once and
     loses nothing; without ``local_nodes`` it sits out ``settle`` (here 1000 s) before the first message."""
     bag = tmp_path / "bag"
     stamps, images = make_bag(bag, frames=6)
-    receiver = Receiver(context=ros_context)
-    driver = Node("replay", context=ros_context)
-    executor = SingleThreadedExecutor(context=ros_context)
-    executor.add_node(receiver)
-    executor.add_node(driver)
+    receiver, driver, executor = _rig(ros_context)
     config = ReplayConfig(lockstep=True, wait_for_subscribers=5.0, settle=1000.0, ack_timeout=10.0)
     try:
         waiting = Replayer(driver, bag, config)

@@ -176,7 +176,7 @@ def test_track_fit_body_tracks_again_with_the_fitted_legs(synth_bag: Path, tmp_p
 
     passes = []
     real = pipeline._track_once
-    monkeypatch.setattr(pipeline, "_track_once", lambda options, **k: passes.append(options) or real(options, **k))
+    monkeypatch.setattr(pipeline, "_track_once", lambda options, *a, **k: passes.append(options) or real(options, *a, **k))
     out = tmp_path / "run"
     assert main(["track", str(synth_bag), "--out", str(out), "--particles", "100", "--no-overlay", "--fit-body"]) == 0
     # legs fitted to the walking images: both passes without the pelvis ceiling (pipeline.run_tracking)

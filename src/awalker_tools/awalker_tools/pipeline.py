@@ -246,24 +246,31 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     """Run the whole pipeline on ``options.bag``; write the outputs into ``options.out``. With a body
     to fit (``TrackOptions.fit_body``), a first pass into ``out/first_pass``, the fit, and the run."""
     from awalker_tools.bagio import SequenceReader
+
+    bag = Path(options.bag)
+    if not bag.exists():
+        raise InputError(f"{bag}: no such bag (expected a rosbag2 directory, .mcap or .db3)")
+    with SequenceReader(bag) as reader:      # opened once for every pass (opening parses its metadata, ~30 ms)
+        return _run_passes(options, reader)
+
+
+def _run_passes(options: TrackOptions, reader: Any) -> TrackResult:
+    """``run_tracking`` on the bag open in ``reader`` (a ``bagio.SequenceReader``)."""
     from awalker_tools.fit_body import fit_run_dir
     from awalker_tracker.inference.bodyfit import BodyFitConfig
     from awalker_tracker.vision.features import FeatureConfig
 
     bag, out = Path(options.bag), Path(options.out)
-    if not bag.exists():
-        raise InputError(f"{bag}: no such bag (expected a rosbag2 directory, .mcap or .db3)")
     fit_legs, fit_stance = bool(options.fit_body), False
     if options.fit_body is not False:
-        with SequenceReader(bag) as reader:
-            try:
-                start, _, body, _ = resolve_descriptions(bag, reader, options.start, options.body, options.auto_start)
-            except InputError:
-                return _track_once(options)          # which reports what is missing
+        try:
+            start, _, body, _ = resolve_descriptions(bag, reader, options.start, options.body, options.auto_start)
+        except InputError:
+            return _track_once(options, reader)          # which reports what is missing
         fit_legs = fit_legs or body is None
         fit_stance = start is None or start.stance_leg is None
     if not (fit_legs or fit_stance):
-        return _track_once(options)
+        return _track_once(options, reader)
     if fit_legs and options.pelvis_ceiling is None:
         # A leg fitted to the walking person's images already carries the pelvis where they show it, where the
         # pelvis ceiling lowers a standing (tape) leg to where people walk; both passes keep the pelvis at the
@@ -283,7 +290,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     # fit chose longer legs still (real walks hands off, 07_01 straight, seed 0: 0.917 m against 0.873, the
     # person's 0.807), the pelvis 86 mm high against 41 over 7 runs; the second pass tracks on the finer maps.
     _track_once(replace(options, out=first_dir, overlays=False, stop_after_frames=fit_frames,
-                        particles=FIRST_PASS_PARTICLES, map_downsample=FeatureConfig.downsample))
+                        particles=FIRST_PASS_PARTICLES, map_downsample=FeatureConfig.downsample), reader)
     _progress(options, f"awalker track: fitting {fitting} to the images of {first_dir}")
     # the fit's own particle count (BodyFitConfig: 5000; fewer pick less reliably), whatever the run's
     fitted = fit_run_dir(first_dir, None if fit_legs else (1.0,), seed=options.seed, frames=fit_frames)
@@ -294,11 +301,13 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     fitted["seconds_first_pass_and_fit"] = round(time.monotonic() - started, 3)
     second = replace(options, body=Path(fitted["written"]) if fit_legs else options.body,
                      fitted_start=Path(fitted["start_written"]) if "start_written" in fitted else None)
-    return _track_once(second, body_fit=fitted)
+    return _track_once(second, reader, body_fit=fitted)
 
 
-def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackResult:
-    """One pass of the pipeline (``run_tracking``); ``body_fit``: the fit that gave its body, for run.yaml."""
+def _track_once(options: TrackOptions, reader: Any, body_fit: dict | None = None) -> TrackResult:
+    """One pass of the pipeline (``run_tracking``) on the bag open in ``reader`` (a ``bagio.SequenceReader``: its
+    descriptions are read through it, and the replay reads the messages through it); ``body_fit``: the fit that
+    gave its body, for run.yaml."""
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -312,15 +321,13 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
     from awalker_tracker.vision.camera import save_calibration
     from awalker_tracker.vision.features import map_downsample
 
-    from awalker_tools.bagio import SequenceReader
     from awalker_tools.replay import ReplayConfig, Replayer
 
     bag, out = Path(options.bag), Path(options.out)
-    with SequenceReader(bag) as reader:
-        cameras = reader.cameras
-        num_frames = len(reader.frame_stamps)
-        start, start_src, body, body_src = resolve_descriptions(bag, reader, options.start, options.body,
-                                                                options.auto_start)
+    cameras = reader.cameras
+    num_frames = len(reader.frame_stamps)
+    start, start_src, body, body_src = resolve_descriptions(bag, reader, options.start, options.body,
+                                                            options.auto_start)
     if start is not None and start.frame >= num_frames:
         raise InputError(f"start description ({start_src}): start frame {start.frame} but {bag} has {num_frames} frames")
     out.mkdir(parents=True, exist_ok=True)
@@ -420,7 +427,7 @@ def _track_once(options: TrackOptions, body_fit: dict | None = None) -> TrackRes
         # every reader is in this process: start once they have matched, with no settle time
         replayer = Replayer(driver, bag, ReplayConfig(lockstep=True, wait_for_subscribers=10.0,
                                                         ack_timeout=ACK_TIMEOUT_S, frames_ahead=FRAMES_AHEAD),
-                            local_nodes=nodes)
+                            local_nodes=nodes, reader=reader.reader)
         last = streaming = time.monotonic()
         enough = False          # options.stop_after_frames filtered: the replay is stopped on purpose
         try:

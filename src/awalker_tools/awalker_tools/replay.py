@@ -41,6 +41,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rcl_interfaces.msg import ParameterDescriptor
 from rosbags.interfaces import Connection
+from rosbags.rosbag2 import Reader
 
 from awalker_tracker.errors import InputError
 from awalker_tracker.nodes.base import AwalkerNode
@@ -249,23 +250,27 @@ class Replayer:
         config: ReplayConfig = ReplayConfig(),
         on_frame: Callable[[int], None] | None = None,
         local_nodes: Sequence[Node] = (),
+        reader: Reader | None = None,
     ) -> None:
         """``on_frame(stamp_ns)`` is called right after each frame's messages were published.
         ``local_nodes``: the nodes of this process that the replay feeds (they may also talk among
         themselves). With them, the replay starts as soon as every publisher-subscription pair among
         them and ``node`` has matched at both ends (``unmatched_local_topics``), without the
-        ``settle`` time that readers in other processes need."""
+        ``settle`` time that readers in other processes need. ``reader``: an open reader of the bag (its owner
+        closes it), else the replayer opens one."""
         self.node = node
         self._on_frame = on_frame
         self._local_nodes = [node, *[n for n in local_nodes if n is not node]] if local_nodes else []
         self.path = Path(bag_path)
         self.config = config.validated(f"replay {self.path}")
         self.summary = ReplaySummary(str(self.path))
-        self._reader = open_reader(self.path)
+        # an open reader of the bag given by the caller, who closes it (opening parses the bag's metadata, ~30 ms)
+        self._owns_reader = reader is None
+        self._reader = open_reader(self.path) if reader is None else reader
         try:
             self._setup()
         except BaseException:
-            self._reader.close()
+            self._release()
             raise
 
     # -- set-up -------------------------------------------------------------------------------
@@ -377,7 +382,12 @@ class Replayer:
                 pub.wait_for_all_acked(Duration(nanoseconds=int(remaining * 1e9)))
         self.summary.stopped = stopped
         self.summary.duration_s = time.monotonic() - self._started
-        self._reader.close()
+        self._release()
+
+    def _release(self) -> None:
+        """Close the bag's reader if this replayer opened it."""
+        if self._owns_reader:
+            self._reader.close()
 
     def step(self) -> bool:
         """Publish what is due now; False once the replay is over (``summary`` then final)."""
