@@ -385,7 +385,11 @@ class Replayer:
         self._release()
 
     def _release(self) -> None:
-        """Close the bag's reader if this replayer opened it."""
+        """End the reading of the bag's messages (a replay stopped early leaves none half read in the reader),
+        and close the reader if this replayer opened it."""
+        batches = getattr(self, "_batches", None)
+        if batches is not None:
+            batches.close()
         if self._owns_reader:
             self._reader.close()
 
