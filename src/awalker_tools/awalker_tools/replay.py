@@ -264,9 +264,9 @@ class Replayer:
         self.path = Path(bag_path)
         self.config = config.validated(f"replay {self.path}")
         self.summary = ReplaySummary(str(self.path))
-        # an open reader of the bag given by the caller, who closes it (opening parses the bag's metadata, ~30 ms)
-        self._owns_reader = reader is None
+        self._owns_reader = reader is None        # (opening a bag parses its metadata: ~30 ms)
         self._reader = open_reader(self.path) if reader is None else reader
+        self._batches: Iterator[Batch] | None = None
         try:
             self._setup()
         except BaseException:
@@ -387,9 +387,8 @@ class Replayer:
     def _release(self) -> None:
         """End the reading of the bag's messages (a replay stopped early leaves none half read in the reader),
         and close the reader if this replayer opened it."""
-        batches = getattr(self, "_batches", None)
-        if batches is not None:
-            batches.close()
+        if self._batches is not None:
+            self._batches.close()
         if self._owns_reader:
             self._reader.close()
 

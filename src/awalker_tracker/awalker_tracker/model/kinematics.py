@@ -938,11 +938,11 @@ def _leg_pose(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarra
     _turn(frames, thigh, 2, c_rot, s_rot)
     for k in range(3):
         points[_KNEE + side, k] = points[_HIP + side, k] - (scale[i] * g.upper_leg_length) * frames[thigh, k, 2]
-    _lower_leg(g, legs, dofs, scale, i, side, frames, points, turns, c_knee, s_knee)
+    _lower_leg(g, dofs, scale, i, side, frames, points, turns, c_knee, s_knee)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _lower_leg(g: _Geometry, legs: np.ndarray, dofs: np.ndarray, scale: np.ndarray, i: int, side: int,
+def _lower_leg(g: _Geometry, dofs: np.ndarray, scale: np.ndarray, i: int, side: int,
                frames: np.ndarray, points: np.ndarray, turns: np.ndarray, c_knee: float, s_knee: float) -> None:
     """Shank frame, ankle position and foot frame of leg ``side`` of body i below its thigh and knee
     (knee flexion, then ankle flexion and inversion from ``dofs`` (N, 13); the shank ``scale[i]`` x its length).
