@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 from dataclasses import fields, is_dataclass
 
 import numpy as np
@@ -15,20 +16,24 @@ from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEFT
 
 
-@pytest.mark.parametrize("n, threads", [(0, 2), (999, 4), (1999, 2), (2000, 2), (5000, 2), (5001, 3), (9000, 1)])
-def test_blocks_cover_the_batch_once_in_order(n: int, threads: int):
-    bounds = blocks.block_bounds(n, threads)
+@pytest.mark.parametrize("n, threads, per_thread",
+                         [(0, 2, 1), (999, 4, 1), (1999, 2, 1), (2000, 2, 1), (5000, 2, 1), (5001, 3, 1), (9000, 1, 1),
+                          (1999, 2, 4), (2000, 2, 4), (5000, 2, 4), (5001, 3, 4), (9000, 1, 4)])
+def test_blocks_cover_the_batch_once_in_order(n: int, threads: int, per_thread: int):
+    bounds = blocks.block_bounds(n, threads, per_thread)
     assert bounds[0][0] == 0 and bounds[-1][1] == n
     assert all(stop == start for (_, stop), (start, _) in zip(bounds, bounds[1:]))
-    assert len(bounds) == max(1, min(threads, n // blocks.MIN_BLOCK))
+    cut = max(1, min(threads, n // blocks.MIN_BLOCK))
+    assert len(bounds) == (cut * per_thread if cut > 1 else 1)
     if len(bounds) > 1:
-        assert min(stop - start for start, stop in bounds) >= blocks.MIN_BLOCK
+        sizes = [stop - start for start, stop in bounds]
+        assert min(sizes) * per_thread >= blocks.MIN_BLOCK - per_thread and max(sizes) - min(sizes) <= 1
 
 
 def test_blocks_run_on_several_threads_and_come_back_in_order(monkeypatch):
     monkeypatch.setenv("AWALKER_THREADS", "3")
     seen: list[tuple[int, str]] = []
-    together = threading.Barrier(3, timeout=10)     # broken unless the three blocks run at once
+    together = threading.Barrier(3, timeout=10)     # broken unless three blocks at a time run at once
 
     def work(rows: slice) -> int:
         seen.append((rows.start, threading.current_thread().name))
@@ -37,26 +42,61 @@ def test_blocks_run_on_several_threads_and_come_back_in_order(monkeypatch):
         return rows.stop
 
     n = 3 * blocks.MIN_BLOCK + 7
-    assert blocks.over_blocks(n, work) == [stop for _, stop in blocks.block_bounds(n, 3)]
-    names = dict(seen)
-    assert names[0] == threading.current_thread().name          # the first block in the calling thread
-    assert len(set(names.values())) == 3
+    expected = blocks.block_bounds(n, 3, blocks.BLOCKS_PER_THREAD)
+    assert len(expected) == 3 * blocks.BLOCKS_PER_THREAD
+    assert blocks.over_blocks(n, work) == [stop for _, stop in expected]
+    assert sorted(start for start, _ in seen) == [start for start, _ in expected]      # each block once
+    names = {name for _, name in seen}
+    assert threading.current_thread().name in names and len(names) == 3
     monkeypatch.setenv("AWALKER_THREADS", "1")
     together = None
     assert blocks.over_blocks(n, work) == [n]
 
 
+def test_a_thread_held_off_its_core_holds_the_batch_up_by_one_block(monkeypatch):
+    """A worker that is slow in its first block (as if the process's other threads kept it off its core):
+    the calling thread takes every other block meanwhile."""
+    monkeypatch.setenv("AWALKER_THREADS", "2")
+    caller = threading.current_thread()
+    by_thread: dict[str, int] = {}
+    slow_once = threading.Event()
+
+    def work(rows: slice) -> int:
+        me = threading.current_thread()
+        if me is not caller and not slow_once.is_set():
+            slow_once.set()
+            time.sleep(0.5)
+        by_thread[me.name] = by_thread.get(me.name, 0) + 1
+        return rows.stop
+
+    n = 2 * blocks.MIN_BLOCK
+    total = len(blocks.block_bounds(n, 2, blocks.BLOCKS_PER_THREAD))
+    assert total == 2 * blocks.BLOCKS_PER_THREAD
+    assert blocks.over_blocks(n, work)[-1] == n
+    assert by_thread[caller.name] >= total - 1 and sum(by_thread.values()) == total
+
+
 def test_an_error_in_a_worker_block_reaches_the_caller(monkeypatch):
     monkeypatch.setenv("AWALKER_THREADS", "2")
     n = 2 * blocks.MIN_BLOCK
+    caller = threading.current_thread()
+    met = threading.Barrier(2, timeout=10)      # both threads take a block before any raises
+    started: set[threading.Thread] = set()
+    done: list[int] = []
 
     def work(rows: slice) -> int:
-        if rows.start > 0:
+        me = threading.current_thread()
+        if me not in started:
+            started.add(me)
+            met.wait()
+        if me is not caller:
             raise FloatingPointError(f"block at {rows.start}")
+        done.append(rows.start)
         return rows.stop
 
-    with pytest.raises(FloatingPointError, match=f"block at {blocks.MIN_BLOCK}"):
+    with pytest.raises(FloatingPointError, match="block at"):
         blocks.over_blocks(n, work)
+    assert done        # the caller's blocks still ran: every block is finished before the error is raised
 
 
 def _cut_in_child(n: int, result) -> None:
@@ -70,7 +110,8 @@ def test_a_forked_child_cuts_its_batches_too(monkeypatch):
 
     monkeypatch.setenv("AWALKER_THREADS", "2")
     n = 2 * blocks.MIN_BLOCK
-    assert blocks.over_blocks(n, lambda rows: rows.stop) == [blocks.MIN_BLOCK, n]     # the parent's pool exists
+    stops = [stop for _, stop in blocks.block_bounds(n, 2, blocks.BLOCKS_PER_THREAD)]
+    assert blocks.over_blocks(n, lambda rows: rows.stop) == stops     # the parent's pool exists
     context = multiprocessing.get_context("fork")
     result = context.Queue()
     child = context.Process(target=_cut_in_child, args=(n, result))
@@ -78,7 +119,7 @@ def test_a_forked_child_cuts_its_batches_too(monkeypatch):
     child.join(timeout=20)
     if child.is_alive():
         child.kill()
-    assert child.exitcode == 0 and result.get(timeout=1) == [blocks.MIN_BLOCK, n]
+    assert child.exitcode == 0 and result.get(timeout=1) == stops
 
 
 @pytest.mark.parametrize("value", ["0", "two", "-1"])
