@@ -82,21 +82,25 @@ def test_an_error_in_a_worker_block_reaches_the_caller(monkeypatch):
     caller = threading.current_thread()
     met = threading.Barrier(2, timeout=10)      # both threads take a block before any raises
     started: set[threading.Thread] = set()
-    done: list[int] = []
+    entered: list[int] = []
+    raised: list[int] = []
 
     def work(rows: slice) -> int:
         me = threading.current_thread()
         if me not in started:
             started.add(me)
             met.wait()
+        entered.append(rows.start)
         if me is not caller:
+            raised.append(rows.start)
             raise FloatingPointError(f"block at {rows.start}")
-        done.append(rows.start)
         return rows.stop
 
-    with pytest.raises(FloatingPointError, match="block at"):
+    with pytest.raises(FloatingPointError, match=r"block at \d+") as error:
         blocks.over_blocks(n, work)
-    assert done        # the caller's blocks still ran: every block is finished before the error is raised
+    assert str(error.value) == f"block at {raised[0]}"           # the first error, from the worker's block
+    starts = [start for start, _ in blocks.block_bounds(n, 2, blocks.BLOCKS_PER_THREAD)]
+    assert sorted(entered) == starts and len(raised) < len(starts)   # every block done before it is raised
 
 
 def _cut_in_child(n: int, result) -> None:

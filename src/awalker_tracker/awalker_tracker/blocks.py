@@ -23,7 +23,7 @@ from typing import TypeVar
 MIN_BLOCK = 1000     # particles: smaller batches are not cut
 # blocks per thread: with one per thread, a thread kept off its core by the process's other work (the
 # features beside the tracker) held the batch up by half of it (5000 particles, `awalker track` on a
-# 300-frame walk: 30.3 -> 31.3 frames/s, a median of 3 alternate pairs; 8 gained no more)
+# 300-frame walk, 3 alternate pairs: medians 30.1 -> 30.9 frames/s, every pair faster; 8 gained no more)
 BLOCKS_PER_THREAD = 4
 
 T = TypeVar("T")
