@@ -35,7 +35,7 @@ from dataclasses import fields
 from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-MOCAP_DIR = REPO_ROOT / "test" / "data" / "mocap"
+MOCAP_DIR = REPO_ROOT / "test" / "data" / "mocap" / "cmu_subject07"
 sys.path.insert(0, str(REPO_ROOT / "test" / "tools"))
 
 from accuracy_helpers import speed_error  # noqa: E402  (shared with test/tools/test_accuracy.py)

@@ -55,7 +55,7 @@ from pathlib import Path
 import numpy as np
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-MOCAP_DIR = REPO_ROOT / "test" / "data" / "mocap"
+MOCAP_DIR = REPO_ROOT / "test" / "data" / "mocap" / "cmu_subject07"
 sys.path.insert(0, str(REPO_ROOT / "benchmarks"))
 
 from awalker_tools.evaluation import OFFSET_AXES, OFFSET_GROUPS, group_offsets  # noqa: E402

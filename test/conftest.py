@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-MOCAP_DIR = REPO_ROOT / "test" / "data" / "mocap"  # copy of ../shared/data/mocap/cmu_subject07 (07.asf, 07_01.amc)
+MOCAP_DIR = REPO_ROOT / "test" / "data" / "mocap"  # CMU motion capture (test/data/mocap/README.md)
+MOCAP_07 = MOCAP_DIR / "cmu_subject07"          # subject 7: 07.asf, 07_01.amc, 07_02.amc, 07_04.amc
 
 
 def _worker_domain() -> int:

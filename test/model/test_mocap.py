@@ -5,13 +5,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import MOCAP_DIR
+from conftest import MOCAP_07
 
 from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import MARKER_NAMES, BodyDescription
 from awalker_tracker.model.mocap import MOCAP_RATE, body_from_markers, load_mocap, segments_from_markers
 
-ASF, AMC = MOCAP_DIR / "07.asf", MOCAP_DIR / "07_01.amc"
+ASF, AMC = MOCAP_07 / "07.asf", MOCAP_07 / "07_01.amc"
 M = {n: i for i, n in enumerate(MARKER_NAMES)}
 
 

@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import yaml
-from conftest import MOCAP_DIR
+from conftest import MOCAP_07
 
 from awalker_tools import cli
 from awalker_tools.bagio import SequenceReader, occlusion_mask_topic
@@ -131,7 +131,7 @@ def test_occluder_hides_the_legs_for_a_stretch_only(tmp_path):
 
 
 def test_from_mocap(tmp_path):
-    assert synth(tmp_path, "--from-mocap", str(MOCAP_DIR / "07.asf"), str(MOCAP_DIR / "07_01.amc"),
+    assert synth(tmp_path, "--from-mocap", str(MOCAP_07 / "07.asf"), str(MOCAP_07 / "07_01.amc"),
                  "--rate", "60") == 0
     cameras, frames, stamps, markers, start_text, _ = read(tmp_path)
     assert np.allclose(np.diff(stamps), 1e9 / 60, atol=1)
@@ -142,7 +142,7 @@ def test_from_mocap(tmp_path):
     # More frames than the walk holds: the walk is repeated from a matching frame, moving on
     assert cli.main(["synth", "--out", str(tmp_path / "long"), "--size", "80", "60",
                      "--frames", "200", "--background-frames", "0",
-                     "--from-mocap", str(MOCAP_DIR / "07.asf"), str(MOCAP_DIR / "07_01.amc")]) == 0
+                     "--from-mocap", str(MOCAP_07 / "07.asf"), str(MOCAP_07 / "07_01.amc")]) == 0
     _, _, _, long, _, _ = read(tmp_path / "long")
     assert long.shape == (200, 13, 3)
     pelvis_speed = np.linalg.norm(np.diff(long[:, M["pelvis"], :2], axis=0), axis=1) * 30
@@ -172,7 +172,7 @@ def test_existing_bag_is_not_overwritten(tmp_path, capsys):
     assert "exists already" in capsys.readouterr().err
 
 
-MOCAP = ["--from-mocap", str(MOCAP_DIR / "07.asf"), str(MOCAP_DIR / "07_01.amc")]
+MOCAP = ["--from-mocap", str(MOCAP_07 / "07.asf"), str(MOCAP_07 / "07_01.amc")]
 
 
 def test_dressed_person_is_not_the_model_body(tmp_path):
@@ -210,7 +210,7 @@ def test_dressed_shoes_stand_on_the_floor_while_the_foot_lies_flat(tmp_path):
     from awalker_tools.synth import SynthConfig, make_cameras, mocap_motion
     from awalker_tracker.model.mocap import flat_foot_frames
 
-    config = SynthConfig(tmp_path, frames=40, mocap=(MOCAP_DIR / "07.asf", MOCAP_DIR / "07_01.amc"),
+    config = SynthConfig(tmp_path, frames=40, mocap=(MOCAP_07 / "07.asf", MOCAP_07 / "07_01.amc"),
                          person="dressed", width=960, height=720)
     motion = mocap_motion(config, np.zeros(2), 0.0)
     camera = make_cameras(1, 960, 720, motion.markers[20, M["pelvis"], :2])[0]
@@ -364,7 +364,7 @@ def test_start_heading_is_the_walking_direction_over_strides(tmp_path):
     for walk in ("07_01", "07_02"):
         out = tmp_path / walk
         assert cli.main(["synth", "--out", str(out), "--size", "80", "60", "--frames", "64", "--background-frames",
-                         "0", "--from-mocap", str(MOCAP_DIR / "07.asf"), str(MOCAP_DIR / f"{walk}.amc")]) == 0
+                         "0", "--from-mocap", str(MOCAP_07 / "07.asf"), str(MOCAP_07 / f"{walk}.amc")]) == 0
         _, _, _, markers, _, _ = read(out)
         start = yaml.safe_load((out / "start.yaml").read_text())["start"]
         path = markers[60, M["pelvis"], :2] - markers[0, M["pelvis"], :2]
