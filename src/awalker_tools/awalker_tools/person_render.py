@@ -611,13 +611,29 @@ class PersonRenderer:
         return image, np.where(person, distance * self.depth_per_t, np.inf)
 
     def _shadow(self, points: np.ndarray) -> np.ndarray:
-        """(H, W) floor darkening factor: soft dark spots under the feet and a wide faint one under the body."""
+        """(H, W) floor darkening factor: soft dark spots under the feet and a wide faint one under the body
+        (each a Gaussian over the floor, computed only within 4 of its widths: beyond, it darkens by < 1e-7)."""
         factor = np.ones(self.rays.shape[:2])
         # a foot in the air casts a weaker, wider spot
         spots = [(points[_P[n], :2], 0.1 + 0.5 * max(points[_P[n], 2], 0.0), 0.5 * np.exp(-max(points[_P[n], 2], 0.0) / 0.1))
                  for n in ("left_heel", "left_toe", "right_heel", "right_toe")]
         spots.append((points[_P["pelvis"], :2], 0.35, 0.3))
         for centre, width, strength in spots:
-            d2 = np.sum(np.square(self.floor_xy - centre), axis=-1)
-            factor *= 1.0 - strength * np.exp(-d2 / (width * width))
+            v0, v1, u0, u1 = self._floor_box(centre, 4.0 * width)
+            if v0 >= v1 or u0 >= u1:
+                continue
+            d2 = np.sum(np.square(self.floor_xy[v0:v1, u0:u1] - centre), axis=-1)
+            factor[v0:v1, u0:u1] *= 1.0 - strength * np.exp(-d2 / (width * width))
         return np.where(self.sees_floor, factor, 1.0)
+
+    def _floor_box(self, centre: np.ndarray, reach: float) -> tuple[int, int, int, int]:
+        """Pixel rows and columns (v0, v1, u0, u1) that hold the floor within ``reach`` m of ``centre`` (the whole
+        image if part of that square lies behind the camera)."""
+        h, w = self.rays.shape[:2]
+        corners = np.array([[centre[0] + dx, centre[1] + dy, 0.0] for dx in (-reach, reach) for dy in (-reach, reach)])
+        uv, depth = self.camera.project(corners)
+        if np.any(depth <= 0.05) or not np.all(np.isfinite(uv)):
+            return 0, h, 0, w
+        u0, v0 = np.floor(uv.min(axis=0)).astype(int) - 2
+        u1, v1 = np.ceil(uv.max(axis=0)).astype(int) + 3
+        return max(v0, 0), min(v1, h), max(u0, 0), min(u1, w)

@@ -162,10 +162,11 @@ def _value_noise(rng: np.random.Generator, shape: tuple[int, int], cell: int) ->
     return cv2.resize(coarse, (shape[1], shape[0]), interpolation=cv2.INTER_CUBIC).clip(0, 1)
 
 
-def make_textures(rng: np.random.Generator) -> dict[str, np.ndarray]:
-    """Floor and wall textures (float32 RGB 0-255) at ``TEXEL`` m per pixel: floor tiles with
-    stains, walls covered with random shelves, posters and boxes (clutter)."""
-    size = int(2 * ROOM_HALF_SIZE / TEXEL)
+def make_textures(rng: np.random.Generator, half_size: float = ROOM_HALF_SIZE) -> dict[str, np.ndarray]:
+    """Floor and wall textures (float32 RGB 0-255) at ``TEXEL`` m per pixel for a room spanning
+    [-half_size, half_size] m both ways: floor tiles with stains, walls covered with random shelves,
+    posters and boxes (clutter)."""
+    size = int(2 * half_size / TEXEL)
     floor = np.empty((size, size, 3), np.float32)
     floor[:] = (150, 140, 120)
     tiles = (np.add.outer(np.arange(size) // 50, np.arange(size) // 50) % 2).astype(np.float32)  # 0.5 m tiles
@@ -213,8 +214,9 @@ def _sample(texture: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
                      borderMode=cv2.BORDER_REPLICATE)
 
 
-def render_room(camera: Camera, textures: dict[str, np.ndarray]) -> np.ndarray:
-    """The empty room seen by ``camera``: float32 RGB (H, W, 3), 0-255."""
+def render_room(camera: Camera, textures: dict[str, np.ndarray], half_size: float = ROOM_HALF_SIZE) -> np.ndarray:
+    """The empty room (spanning [-half_size, half_size] m both ways, ``textures`` made for it) seen by
+    ``camera``: float32 RGB (H, W, 3), 0-255."""
     d = _world_rays(camera)
     c = camera.position
     out = np.zeros(d.shape, np.float32)
@@ -224,20 +226,20 @@ def render_room(camera: Camera, textures: dict[str, np.ndarray]) -> np.ndarray:
         t_walls = []
         for axis in (0, 1):
             for sign in (-1.0, 1.0):
-                t_walls.append(np.where(d[..., axis] * sign > 0, (sign * ROOM_HALF_SIZE - c[axis]) / d[..., axis], np.inf))
+                t_walls.append(np.where(d[..., axis] * sign > 0, (sign * half_size - c[axis]) / d[..., axis], np.inf))
     t_wall = np.min(t_walls, axis=0)
     wall_index = np.argmin(t_walls, axis=0)
     floor_hit = t_floor <= t_wall
     p = c + np.where(floor_hit, t_floor, 0.0)[..., None] * d
-    u = (p[..., 0] + ROOM_HALF_SIZE) / TEXEL
-    v = (p[..., 1] + ROOM_HALF_SIZE) / TEXEL
+    u = (p[..., 0] + half_size) / TEXEL
+    v = (p[..., 1] + half_size) / TEXEL
     floor_rgb = _sample(textures["floor"], u, v)
     out[floor_hit] = floor_rgb[floor_hit]
     q = c + np.where(np.isfinite(t_wall), t_wall, 0)[..., None] * d
     for k in range(4):
         sel = ~floor_hit & (wall_index == k) & (q[..., 2] <= ROOM_HEIGHT)
         along = q[..., 1] if k < 2 else q[..., 0]
-        wu = (along + ROOM_HALF_SIZE) / TEXEL
+        wu = (along + half_size) / TEXEL
         wv = (ROOM_HEIGHT - q[..., 2]) / TEXEL
         rgb = _sample(textures["walls"][k], wu, wv)
         out[sel] = rgb[sel]
@@ -459,6 +461,129 @@ def walker_motion(config: SynthConfig, start_xy: np.ndarray, heading: float, rng
 
 
 # ---- writing ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Lighting:
+    """The light and sensor of a recording: ``exposure`` (overall gain), a colour ``tint`` (per-channel
+    gains), a slow ``change`` (the light dims by this fraction and recovers over the sequence, with a slight
+    colour drift of +-4 %) and per-pixel sensor noise of ``noise_sigma`` grey levels (0-255)."""
+
+    exposure: float = 1.0
+    tint: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    change: float = 0.25
+    noise_sigma: float = 3.0
+
+    def channel_gains(self, total: int) -> np.ndarray:
+        """(total, 3) RGB gains of each frame."""
+        phase = np.arange(total) / max(total - 1, 1)
+        gain = 1.0 - self.change * 0.5 * (1 - np.cos(2 * np.pi * phase))
+        drift = np.stack([1 + 0.04 * np.sin(2 * np.pi * phase), np.ones(total), 1 - 0.04 * np.sin(2 * np.pi * phase)], 1)
+        return self.exposure * np.asarray(self.tint, float)[None, :] * gain[:, None] * drift
+
+
+@dataclass
+class Scene:
+    """What the cameras see besides the person: the empty room per camera (float32 RGB 0-255), box
+    occluders' depth per camera (inf where none), a second person (``Motion``), the painters of both people
+    (``PersonRenderer`` per camera; None: the tracker's own body model draws the person) and a lens blur."""
+
+    cameras: list[Camera]
+    rooms: list[np.ndarray]
+    occluders: dict[str, np.ndarray] = field(default_factory=dict)
+    painters: dict[str, PersonRenderer] | None = None
+    other: Motion | None = None
+    other_painters: dict[str, PersonRenderer] | None = None
+    blur_px: float = 0.0          # lens blur (Gaussian sigma, pixels) of every frame, the empty ones too
+
+
+def _frame_images(scene: Scene, motion: Motion, person: int, gains: np.ndarray, noise_sigma: float,
+                  rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """uint8 RGB image per camera of one frame (``person`` < 0: the empty room)."""
+    images = {}
+    for cam, room in zip(scene.cameras, scene.rooms):
+        base = room
+        if person >= 0 and scene.painters:
+            behind = room
+            if scene.other is not None:       # the second person first, then the first in front where nearer
+                behind, other_depth = scene.other_painters[cam.name].render(scene.other.points[person], room)
+            base, depth = scene.painters[cam.name].render(motion.points[person], behind)
+            if scene.other is not None:
+                nearer = other_depth < depth
+                base[nearer] = behind[nearer]
+            if cam.name in scene.occluders:
+                hidden = scene.occluders[cam.name] < depth
+                base[hidden] = room[hidden]
+        elif person >= 0:
+            segments = BodySegments(motion.segments.origin[person][None], motion.segments.rotation[person][None])
+            result = render(motion.body, segments, cam)
+            if cam.name in scene.occluders:
+                hidden = scene.occluders[cam.name] < result.depth
+                result.labels[hidden] = -1
+                result.depth[hidden] = np.inf
+            base = render_rgb(motion.body, segments, cam, np.clip(room, 0, 255).astype(np.uint8),
+                              result=result).astype(np.float32)
+        if scene.blur_px > 0:
+            base = cv2.GaussianBlur(base, (0, 0), scene.blur_px)
+        noisy = base * gains.astype(np.float32) + np.float32(noise_sigma) * rng.standard_normal(base.shape, np.float32)
+        images[cam.name] = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+    return images
+
+
+def _csv_rows(frame: int, stamp: int, markers: np.ndarray) -> list[str]:
+    return [f"{frame},{stamp},{name},{p[0]:.6f},{p[1]:.6f},{p[2]:.6f}" for name, p in zip(MARKER_NAMES, markers)]
+
+
+def write_sequence(out: Path, name: str, motion: Motion, scene: Scene, lighting: Lighting, rate: float,
+                   background_frames: int, rng: np.random.Generator, start_text: str | None = None,
+                   body_text: str | None = None, storage: str = "mcap", compressed: bool = True,
+                   image_format: str = "jpeg", progress: bool = True) -> dict[str, Path]:
+    """Render and write ``out/<name>.bag``: ``background_frames`` frames of the empty scene, then one frame per
+    row of ``motion`` at ``rate`` Hz, lit by ``lighting`` (noise drawn from ``rng``), with the ground truth, the
+    start and body descriptions as latched topics when given, and occlusion masks; ``out/ground_truth.csv``
+    (and ``second_person.csv``), ``overlay_<cam>.png`` (the truth over the middle frame). Returns the paths."""
+    bag_path = out / f"{name}.bag"
+    person_frames = len(motion.markers)
+    total = background_frames + person_frames
+    stamps = FIRST_STAMP_NS + np.round(np.arange(total) * 1e9 / rate).astype(np.int64)
+    gains = lighting.channel_gains(total)
+    csv_lines = ["frame,stamp_ns,marker,x,y,z"]
+    other_lines = list(csv_lines)
+    overlays: dict[str, Path] = {}
+    with bagio.SequenceWriter(bag_path, scene.cameras, storage=storage, compressed=compressed,
+                              image_format=image_format) as writer:
+        if start_text is not None:
+            writer.write_text(bagio.START_DESCRIPTION_TOPIC, int(stamps[0]), start_text)
+        if body_text is not None:
+            writer.write_text(bagio.BODY_DESCRIPTION_TOPIC, int(stamps[0]), body_text)
+        for frame in range(total):
+            person = frame - background_frames
+            images = _frame_images(scene, motion, person, gains[frame], lighting.noise_sigma, rng)
+            writer.write_frame(int(stamps[frame]), images)
+            if person == person_frames // 2:  # a look at the ground truth over the frames
+                for cam in scene.cameras:
+                    segments = BodySegments(motion.segments.origin[person][None], motion.segments.rotation[person][None])
+                    overlays[cam.name] = save_overlay_png(out / f"overlay_{cam.name}.png", images[cam.name],
+                                                          motion.markers[person], cam, segments, motion.body)
+            for cam_name, depth in scene.occluders.items():
+                writer.write_occlusion_mask(int(stamps[frame]), cam_name, np.isfinite(depth))
+            if person >= 0:
+                markers = motion.markers[person]
+                if motion.joint_angles is not None:
+                    writer.write_ground_truth(int(stamps[frame]), markers, list(JOINT_NAMES), motion.joint_angles[person])
+                else:
+                    writer.write_ground_truth(int(stamps[frame]), markers)
+                csv_lines += _csv_rows(frame, int(stamps[frame]), markers)
+                if scene.other is not None:
+                    other_lines += _csv_rows(frame, int(stamps[frame]), scene.other.markers[person])
+            if progress and (frame % 20 == 0 or frame == total - 1):
+                print(f"synth: frame {frame + 1}/{total}", file=sys.stderr, flush=True)
+    (out / "ground_truth.csv").write_text("\n".join(csv_lines) + "\n")
+    paths = {"bag": bag_path, "ground_truth": out / "ground_truth.csv"}
+    if scene.other is not None:
+        (out / "second_person.csv").write_text("\n".join(other_lines) + "\n")
+        paths["second person's truth"] = out / "second_person.csv"
+    return {**paths, **{f"overlay {cam}": path for cam, path in overlays.items()}}
+
+
 def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
     """Make the sequence; returns the paths written (bag, calibration, body, start, ground_truth)."""
     out = Path(config.out_dir)
@@ -485,101 +610,39 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
         far_end = np.array([motion.markers[-1, 0, 0], start_xy[1] + SECOND_PERSON_BEHIND_M])
         other = mocap_motion(replace(config, variant="straight"), far_end, heading + np.pi)
     textures = make_textures(rng)
-    rooms = [render_room(cam, textures) for cam in cameras]
-    occluders = {}
+    scene = Scene(cameras, [render_room(cam, textures) for cam in cameras], other=other)
     if config.occluder:
         box = make_occluder(motion, cameras[0], config.occluder)
-        for cam, room in zip(cameras, rooms):
+        for cam, room in zip(cameras, scene.rooms):
             depth = box.depth(cam)
             seen = np.isfinite(depth)
             wood = np.array([120, 80, 45], np.float32) * (0.85 + 0.3 * _value_noise(rng, depth.shape, 12))[..., None]
             room[seen] = wood[seen]
-            occluders[cam.name] = depth
-
-    person_frames = len(motion.markers)
-    total = config.background_frames + person_frames
-    stamps = FIRST_STAMP_NS + np.round(np.arange(total) * 1e9 / config.rate).astype(np.int64)
-    phase = np.arange(total) / max(total - 1, 1)
-    gain = 1.0 - config.lighting_change * 0.5 * (1 - np.cos(2 * np.pi * phase))
-    tint = np.stack([1 + 0.04 * np.sin(2 * np.pi * phase), np.ones(total), 1 - 0.04 * np.sin(2 * np.pi * phase)], 1)
+            scene.occluders[cam.name] = depth
 
     given_body = tape_measured(motion.body, rng) if config.tape_measure else motion.body
     given_start = user_start(motion.start, rng) if config.user_start else motion.start
-    painters = {}
     if config.person == "dressed":
         outfit = Outfit.random(rng, carry=config.carry)
-        painters = {cam.name: PersonRenderer(cam, outfit) for cam in cameras}
+        scene.painters = {cam.name: PersonRenderer(cam, outfit) for cam in cameras}
     if other is not None:
         other_outfit = Outfit.random(rng)
-        other_painters = {cam.name: PersonRenderer(cam, other_outfit) for cam in cameras}
+        scene.other_painters = {cam.name: PersonRenderer(cam, other_outfit) for cam in cameras}
     save_calibration(cameras, out / "calibration.yaml")
     start_text = yaml.safe_dump(given_start, sort_keys=False)
     if config.descriptions:
         (out / "body.yaml").write_text(given_body.to_yaml_text())
         (out / "start.yaml").write_text(start_text)
-    csv_lines = ["frame,stamp_ns,marker,x,y,z"]
-    other_lines = list(csv_lines)
-    overlays: dict[str, Path] = {}
-    with bagio.SequenceWriter(bag_path, cameras, storage=config.storage, compressed=config.compressed,
-                              image_format=config.image_format) as writer:
-        if config.descriptions:
-            writer.write_text(bagio.START_DESCRIPTION_TOPIC, int(stamps[0]), start_text)
-            writer.write_text(bagio.BODY_DESCRIPTION_TOPIC, int(stamps[0]), given_body.to_yaml_text())
-        for frame in range(total):
-            person = frame - config.background_frames
-            images = {}
-            for cam, room in zip(cameras, rooms):
-                base = room
-                if person >= 0 and painters:
-                    behind = room
-                    if other is not None:       # the second person first, then the first in front where nearer
-                        behind, other_depth = other_painters[cam.name].render(other.points[person], room)
-                    base, depth = painters[cam.name].render(motion.points[person], behind)
-                    if other is not None:
-                        nearer = other_depth < depth
-                        base[nearer] = behind[nearer]
-                    if cam.name in occluders:
-                        hidden = occluders[cam.name] < depth
-                        base[hidden] = room[hidden]
-                elif person >= 0:
-                    segments = BodySegments(motion.segments.origin[person][None], motion.segments.rotation[person][None])
-                    result = render(motion.body, segments, cam)
-                    if cam.name in occluders:
-                        hidden = occluders[cam.name] < result.depth
-                        result.labels[hidden] = -1
-                        result.depth[hidden] = np.inf
-                    base = render_rgb(motion.body, segments, cam, np.clip(room, 0, 255).astype(np.uint8),
-                                      result=result).astype(np.float32)
-                lit = base * (gain[frame] * tint[frame])[None, None, :]
-                noisy = lit + rng.normal(0.0, config.noise_sigma, lit.shape).astype(np.float32)
-                images[cam.name] = np.clip(np.round(noisy), 0, 255).astype(np.uint8)
-            writer.write_frame(int(stamps[frame]), images)
-            if person == person_frames // 2:  # a look at the ground truth over the frames
-                for cam in cameras:
-                    segments = BodySegments(motion.segments.origin[person][None], motion.segments.rotation[person][None])
-                    overlays[cam.name] = save_overlay_png(out / f"overlay_{cam.name}.png", images[cam.name],
-                                                          motion.markers[person], cam, segments, motion.body)
-            for name, depth in occluders.items():
-                writer.write_occlusion_mask(int(stamps[frame]), name, np.isfinite(depth))
-            if person >= 0:
-                markers = motion.markers[person]
-                if motion.joint_angles is not None:
-                    writer.write_ground_truth(int(stamps[frame]), markers, list(JOINT_NAMES), motion.joint_angles[person])
-                else:
-                    writer.write_ground_truth(int(stamps[frame]), markers)
-                for name, point in zip(MARKER_NAMES, markers):
-                    csv_lines.append(f"{frame},{stamps[frame]},{name},{point[0]:.6f},{point[1]:.6f},{point[2]:.6f}")
-                if other is not None:
-                    for name, point in zip(MARKER_NAMES, other.markers[person]):
-                        other_lines.append(f"{frame},{stamps[frame]},{name},{point[0]:.6f},{point[1]:.6f},{point[2]:.6f}")
-            if progress and (frame % 20 == 0 or frame == total - 1):
-                print(f"synth: frame {frame + 1}/{total}", file=sys.stderr, flush=True)
-    (out / "ground_truth.csv").write_text("\n".join(csv_lines) + "\n")
+    written = write_sequence(out, config.name, motion, scene,
+                             Lighting(change=config.lighting_change, noise_sigma=config.noise_sigma), config.rate,
+                             config.background_frames, rng,
+                             start_text=start_text if config.descriptions else None,
+                             body_text=given_body.to_yaml_text() if config.descriptions else None,
+                             storage=config.storage, compressed=config.compressed,
+                             image_format=config.image_format, progress=progress)
     (out / "ground_truth_body.yaml").write_text(motion.body.to_yaml_text())
     descriptions = {"body": out / "body.yaml", "start": out / "start.yaml"} if config.descriptions else {}
-    if other is not None:
-        (out / "second_person.csv").write_text("\n".join(other_lines) + "\n")
-        descriptions["second person's truth"] = out / "second_person.csv"
-    return {"bag": bag_path, "calibration": out / "calibration.yaml", **descriptions, "ground_truth": out / "ground_truth.csv",
-            "ground_truth_body": out / "ground_truth_body.yaml",
-            **{f"overlay {name}": path for name, path in overlays.items()}}
+    overlays = {k: v for k, v in written.items() if k.startswith("overlay")}
+    second = {k: v for k, v in written.items() if k == "second person's truth"}
+    return {"bag": bag_path, "calibration": out / "calibration.yaml", **descriptions, **second,
+            "ground_truth": out / "ground_truth.csv", "ground_truth_body": out / "ground_truth_body.yaml", **overlays}
