@@ -637,3 +637,47 @@ class SequenceReader:
             if stamps:
                 result[cam] = (np.asarray(stamps, np.int64), np.stack(masks))
         return result
+
+
+def copy_bag(source: str | Path, destination: str | Path, cameras: Iterable[str], start_ns: int | None = None,
+             descriptions: bool = True, storage: str = "mcap") -> int:
+    """Copy a sequence bag's messages as they are stored (no decoding): per-camera topics (``/<cam>/...``) of
+    ``cameras`` only, every other topic but the start and body descriptions unless ``descriptions``; from
+    ``start_ns`` on (None: all), latched topics whatever their stamp (moved to ``start_ns`` if earlier).
+    Returns the number of messages written; InputError naming the bags on a missing camera or a bad bag."""
+    source, destination = Path(source), Path(destination)
+    keep = set(cameras)
+    with SequenceReader(source) as reader:
+        known = set(reader.camera_names)
+        if not keep <= known:
+            raise InputError(f"{source}: no camera {', '.join(sorted(keep - known))}; cameras are {sorted(known)}")
+        if destination.exists():
+            raise InputError(f"{destination}: output bag exists already; choose a new path or remove it")
+
+        def wanted(connection: Connection) -> bool:
+            owner = connection.topic.split("/")[1] if connection.topic.count("/") >= 2 else ""
+            if owner in known and owner not in keep:
+                return False
+            return descriptions or connection.topic not in (START_DESCRIPTION_TOPIC, BODY_DESCRIPTION_TOPIC)
+
+        connections = [c for c in reader.reader.connections if wanted(c)]
+        writer = Writer(destination, version=9, storage_plugin=STORAGES[storage])
+        written = 0
+        try:
+            writer.open()
+            out = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=typestore(),
+                                               offered_qos_profiles=list(c.ext.offered_qos_profiles))
+                   for c in connections}
+            for connection, stamp, raw in iter_messages(reader.reader, source, connections):
+                if start_ns is not None and stamp < start_ns:
+                    if not is_latched(connection):
+                        continue
+                    stamp = start_ns
+                writer.write(out[connection.id], stamp, raw)
+                written += 1
+        except BaseException:
+            writer.abort()
+            shutil.rmtree(destination, ignore_errors=True)
+            raise
+        writer.close()
+    return written

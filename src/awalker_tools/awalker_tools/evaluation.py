@@ -296,9 +296,42 @@ def pelvis_speed(track: PoseTrack, frame_rate: float, window_s: float = 1.0) -> 
     return speed
 
 
-def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarray] | None = None
-             ) -> dict[str, object]:
-    """All metrics as a JSON-ready dict (per-frame series included)."""
+def largest_step_speed(track: PoseTrack, marker: str = "pelvis") -> float:
+    """The fastest horizontal move of ``marker`` from one frame of ``track`` to the next (m/s; 0 for fewer
+    than two frames): a person's pelvis stays under ~3 m/s, so a faster step is a jump of the path."""
+    if len(track.stamps_ns) < 2:
+        return 0.0
+    moved = np.linalg.norm(np.diff(track.marker(marker)[:, :2], axis=0), axis=1)
+    seconds = np.diff(track.stamps_ns) * 1e-9
+    return float(np.max(moved / np.maximum(seconds, 1e-9)))
+
+
+def live_track_from_bag(path: Path) -> PoseTrack | None:
+    """The pose the tracker published frame by frame (``/awalker/posterior``'s ``map_pose``: the joint states and
+    markers a live user sees) from a run's result bag; None if the bag has no posteriors."""
+    from awalker_tools.bagio import SequenceReader, stamp_ns_of
+
+    with SequenceReader(path) as reader:
+        if "/awalker/posterior" not in reader.topics:
+            return None
+        stamps, frames, markers, names = [], [], [], None
+        for _, _, _, msg in reader.messages(["/awalker/posterior"]):
+            pose = msg.map_pose
+            names = tuple(pose.marker_names)
+            stamps.append(stamp_ns_of(msg.header))
+            frames.append(int(msg.frame_index))
+            markers.append([[p.x, p.y, p.z] for p in pose.markers])
+    if not stamps:
+        return None
+    order = np.argsort(stamps, kind="stable")
+    return PoseTrack(np.array(frames)[order], np.array(stamps, np.int64)[order], names,
+                     np.array(markers, float)[order])
+
+
+def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarray] | None = None,
+             live: PoseTrack | None = None) -> dict[str, object]:
+    """All metrics as a JSON-ready dict (per-frame series included); ``live``: the pose published frame by
+    frame (``live_track_from_bag``), whose continuity is scored beside the MAP trajectory's."""
     errors = marker_errors(estimate, truth)
     stance_left = replaced = None
     if summary is not None:
@@ -316,6 +349,8 @@ def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarra
         "truth_feet": foot_plausibility(truth),
         "walk": walk_quality(estimate, truth),
         "gait": gait_comparison(estimate, truth, summary),
+        "continuity": {"map_max_step_m_s": largest_step_speed(estimate), "truth_max_step_m_s": largest_step_speed(truth),
+                       **({"live_max_step_m_s": largest_step_speed(live)} if live is not None else {})},
         "per_frame": {"frame": errors["frames"].tolist(), "stamp_ns": errors["stamps_ns"].tolist(),
                       "absolute_mm": errors["absolute_mm"].round(3).tolist(),
                       "relative_mm": errors["relative_mm"].round(3).tolist()},

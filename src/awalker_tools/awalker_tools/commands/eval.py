@@ -52,7 +52,9 @@ def run(args: argparse.Namespace) -> int:
     truth = load_truth(truth_path)
     summary_path = run_dir / "summary.csv"
     summary = evaluation.read_summary_csv(summary_path) if summary_path.is_file() else None
-    result = evaluation.evaluate(estimate, truth, summary)
+    result_bag = run_dir / "result.bag"
+    live = evaluation.live_track_from_bag(result_bag) if result_bag.exists() else None
+    result = evaluation.evaluate(estimate, truth, summary, live)
     result["truth_source"] = str(truth_path)
     out = Path(args.json) if args.json else run_dir / "eval.json"
     out.write_text(json.dumps(result, indent=1))
