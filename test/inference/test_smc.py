@@ -194,3 +194,49 @@ def test_bad_likelihood_is_reported():
 
     with pytest.raises(ValueError, match="shape"):
         ParticleFilter(Broken(), SMCConfig(num_particles=10, lookahead=0)).push(0.0)
+
+
+@dataclass
+class CopiedStates(ScalarStates):
+    continues: np.ndarray | None = None      # the row each particle continues (smc module doc)
+
+    def take(self, idx: np.ndarray) -> "CopiedStates":
+        return CopiedStates(self.x[idx], self.path[idx])
+
+
+class Rejuvenating(LinearGaussian):
+    """Copies random particles over other random ones every third frame, saying which row each copy continues."""
+
+    def initial(self, n, rng):
+        s = super().initial(n, rng)
+        return CopiedStates(s.x, s.path)
+
+    def transition(self, states, rng):
+        s, info = super().transition(states, rng)
+        return CopiedStates(s.x, s.path), info
+
+    def rejuvenate(self, frame, log_weights, parent, states, obs, rng):
+        if parent is None or frame % 3:
+            return states
+        rows = rng.choice(len(states.x), size=60, replace=False)
+        sources = rng.choice(len(states.x), size=rows.size)
+        x, path = states.x.copy(), states.path.copy()
+        x[rows], path[rows] = x[sources], path[sources]
+        continues = np.arange(len(x))
+        continues[rows] = sources
+        return CopiedStates(x, path, continues)
+
+
+def test_ancestry_follows_the_rows_a_rejuvenation_copies():
+    """A copied particle continues its source's lineage: the lineage rebuilt from the ancestry still equals the
+    path each particle carried (without ``continues`` it would be the overwritten row's)."""
+    model = Rejuvenating(r=0.01)
+    zs = model.simulate(24, np.random.default_rng(3))
+    pf = ParticleFilter(model, SMCConfig(num_particles=200, lookahead=2, seed=5))
+    history = AncestryHistory(prune_every=0)
+    steps = pf.run(zs)
+    for step in steps:
+        history.append(None if step.frame == 0 else step.ancestors, {"x": step.states.x})
+    final = steps[-1]
+    for index in range(0, 200, 7):
+        assert np.array_equal(history.trajectory(index)["x"], final.states.path[index])

@@ -11,7 +11,10 @@ A model provides, for N particles held as arrays (a "states" object with ``take(
   move made after the transition (``parent`` -> ``states``; ``parent`` None at the first frame) and
   before the likelihood of frame ``frame`` (e.g. re-seeding particles at a person detected in
   ``obs``); ``log_weights`` are the particles' weights before this frame.
-  Its proposals are not weight-corrected: a robustness device outside the exact filter.
+  Its proposals are not weight-corrected: a robustness device outside the exact filter. States it
+  returns may carry ``continues`` (N,): for each particle, the row of the ``states`` it was given whose
+  walk it continues (a particle copied from another continues that one's lineage); the frame's ancestry
+  then follows it.
 
 The filter keeps S_{t-1} = {s_{t-1}, w_{t-1}} and a window of simulated futures
 s_t .. s_{t+tau} (one per particle) with their likelihoods. Before moving to frame t it forms
@@ -159,6 +162,7 @@ class _Future:
     info: Any
     obs: Any
     log_likelihood: np.ndarray
+    continues: np.ndarray | None = None   # rejuvenate's row map (module doc), None: each row its own
 
 
 class ParticleFilter(Generic[States]):
@@ -197,13 +201,15 @@ class ParticleFilter(Generic[States]):
         else:
             states, info = self.model.transition(parent, self.rng)
         rejuvenate = getattr(self.model, "rejuvenate", None)
+        continues = None
         if rejuvenate is not None:
             # the particles' weights as they stand before this frame: w_{t-1} times the window's likelihoods
             log_weights = self._prev_log_weights + sum((f.log_likelihood for f in self._window),
                                                        np.zeros(self.num_particles))
             states = rejuvenate(self._next_frame + len(self._window), log_weights, parent, states, obs, self.rng)
+            continues = getattr(states, "continues", None)
         loglik = self._checked_loglik(parent, states, obs)
-        self._window.append(_Future(states, info, obs, loglik))
+        self._window.append(_Future(states, info, obs, loglik, continues))
 
     def _checked_loglik(self, parent: States | None, states: States, obs: Any) -> np.ndarray:
         loglik = np.asarray(self.model.log_likelihood(parent, states, obs), float)
@@ -256,6 +262,8 @@ class ParticleFilter(Generic[States]):
             resampled = True
             self.num_resamples += 1
         current = self._window.popleft()
+        if current.continues is not None:
+            ancestors = ancestors[current.continues]
         # log p(z_t | z_1:t-1) is the log of the sum that normalises w_{t-1} p(z_t | s_t)
         log_w, log_evidence = _normalized_and_log_sum(self._prev_log_weights + current.log_likelihood)
         step = FilterStep(

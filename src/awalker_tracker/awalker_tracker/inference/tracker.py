@@ -262,6 +262,12 @@ class TrackerStates:
     speed: np.ndarray             # (N,) walking speed (m/s): pelvis ground speed averaged over ~one step
     fallen: np.ndarray            # (N,) bool, the walker fell at some point (and was not re-seeded)
     reseeded: np.ndarray          # (N,) int8: re-seeded this frame: 0 no, 1 after a fall, 2 at the detected person
+    # (N,) row of the states the frame's re-seeding started from whose walk each particle continues (itself,
+    # but for a moved copy: the particle it copies; ``smc`` module doc, ``continues``)
+    continues: np.ndarray
+    # (N, 3) how far the re-seeding moved each particle this frame beyond its walk: pelvis dx, dy (m) and turn
+    # (rad) about the vertical through the pelvis; zeros for particles not re-seeded (``smooth_jumps``)
+    jump: np.ndarray
 
     def __len__(self) -> int:
         return len(self.walker)
@@ -270,10 +276,55 @@ class TrackerStates:
         pose = BodyPoseBatch(self.pose.markers[indices], self.pose.joint_angles[indices],
                              self.pose.segments.take(indices))
         return TrackerStates(self.walker.take(indices), self.control.take(indices), self.kin.take(indices),
-                             pose, self.speed[indices], self.fallen[indices], self.reseeded[indices])
+                             pose, self.speed[indices], self.fallen[indices], self.reseeded[indices],
+                             np.arange(len(indices)), self.jump[indices])
 
 
 LikelihoodFn = Callable[[TrackerStates | None, TrackerStates, Any], np.ndarray]
+
+
+def pose_jump(before: TrackerStates, after: TrackerStates) -> np.ndarray:
+    """(N, 3) how far re-seeding moved each particle from ``before`` to ``after`` (the same rows): pelvis dx, dy
+    (m) and the turn of the heading (rad, wrapped to +-pi)."""
+    pelvis = MARKER_NAMES.index("pelvis")
+    moved = after.pose.markers[:, pelvis, :2] - before.pose.markers[:, pelvis, :2]
+    turn = np.angle(np.exp(1j * (after.kin.heading - before.kin.heading)))
+    return np.column_stack([moved, turn])
+
+
+#: A re-seeding's jump is spread over the MAP trajectory's frames before it (``smooth_jumps``) at this speed
+#: (m/s), over at least ``JUMP_SPREAD_MIN_S``: the published path then moves no faster than the walk plus this.
+JUMP_SPREAD_M_S = 1.0
+JUMP_SPREAD_MIN_S = 0.5
+
+
+def smooth_jumps(markers: np.ndarray, joint_angles: np.ndarray, jumps: np.ndarray, dt: float,
+                 joint_names: tuple[str, ...] = JOINT_NAMES) -> tuple[np.ndarray, np.ndarray]:
+    """A lineage's markers (F, M, 3) and joint angles (F, J) with each re-seeding's jump (``jumps`` (F, 3): dx,
+    dy, turn at the frame it happened) spread over the frames before it: a frame ``k`` s before a jump of
+    ``d`` m is moved by ``(1 - k / T) d`` and turned about its pelvis by as much of the turn, over T =
+    max(``JUMP_SPREAD_MIN_S``, |d| / ``JUMP_SPREAD_M_S``). The walk the lineage had before a re-acquisition was
+    not the person's; spread so, the trajectory reaches the person without teleporting (issue: the MAP path
+    stays physically possible)."""
+    frames = len(markers)
+    shift = np.zeros((frames, 3))
+    for j in np.flatnonzero(np.any(jumps != 0.0, axis=1)):
+        spread = max(JUMP_SPREAD_MIN_S, float(np.hypot(*jumps[j, :2])) / JUMP_SPREAD_M_S)
+        before = np.arange(j)
+        weight = np.clip(1.0 - (j - before) * dt / spread, 0.0, 1.0)
+        shift[before] += weight[:, None] * jumps[j]
+    if not shift.any():
+        return markers, joint_angles
+    pelvis = markers[:, MARKER_NAMES.index("pelvis"), None, :2]
+    c, s = np.cos(shift[:, 2])[:, None], np.sin(shift[:, 2])[:, None]
+    d = markers[..., :2] - pelvis
+    out = markers.copy()
+    out[..., 0] = pelvis[..., 0] + c * d[..., 0] - s * d[..., 1] + shift[:, 0, None]
+    out[..., 1] = pelvis[..., 1] + s * d[..., 0] + c * d[..., 1] + shift[:, 1, None]
+    angles = joint_angles.copy()
+    if "torso_yaw" in joint_names:
+        angles[:, joint_names.index("torso_yaw")] += shift[:, 2]
+    return out, angles
 
 
 class TrackerModel:
@@ -352,7 +403,8 @@ class TrackerModel:
             joint_spread=spread.joint_rad, leg_scale_spread=self.config.leg_scale_spread,
             posture_spread=self.posture_spread, pelvis_ceiling_spread=self.pelvis_ceiling_spread)
         pose = self._kin.pose_body(self.body, self.params, walker, kin, self.kin_config)
-        return TrackerStates(walker, control, kin, pose, speed.copy(), np.zeros(n, bool), np.zeros(n, np.int8))
+        return TrackerStates(walker, control, kin, pose, speed.copy(), np.zeros(n, bool), np.zeros(n, np.int8),
+                             np.arange(n), np.zeros((n, 3)))
 
     def _gait_known(self, speed: np.ndarray, step: np.ndarray) -> np.ndarray:
         """True where the gait table's lookup has converged corners with weight (a margin above what lookup needs)."""
@@ -416,7 +468,8 @@ class TrackerModel:
         fallen = states.fallen | np.asarray(events.fallen, bool)
         # a fall is not walking: a fallen walker keeps its speed (re-seeding starts it on that speed's gait)
         speed = np.where(fallen, states.speed, states.speed + gain * (moved / self.config.dt - states.speed))
-        new = TrackerStates(walker, control, kin, pose, speed, fallen, np.zeros(len(states), np.int8))
+        new = TrackerStates(walker, control, kin, pose, speed, fallen, np.zeros(len(states), np.int8),
+                            np.arange(len(states)), np.zeros((len(states), 3)))
         if self.config.recovery.reseed_fallen and fallen.any():
             new = self._reseed_fallen(new, np.flatnonzero(fallen), rng)
         return new, events
@@ -431,6 +484,7 @@ class TrackerModel:
                             self._gaits.preferred_step_length(self.params, speed), states.walker.stance_leg[rows],
                             rng, still)
         fresh.reseeded[:] = RESEEDED_FALLEN
+        fresh.jump[:] = pose_jump(states.take(rows), fresh)
         self.reseeded_fallen += rows.size
         return put_rows(states, rows, fresh)
 
@@ -450,7 +504,8 @@ class TrackerModel:
         self._depth_band_centre = self.monitor.depth_band_centre(frame)
         if parent is not None and self.monitor.still(frame):
             # the person stands still: the frame's walkers are the previous frame's, not moving
-            states = replace(parent, speed=np.zeros(len(parent)), reseeded=np.full(len(parent), HELD, np.int8))
+            states = replace(parent, speed=np.zeros(len(parent)), reseeded=np.full(len(parent), HELD, np.int8),
+                             continues=np.arange(len(parent)), jump=np.zeros((len(parent), 3)))
         if order is None:
             return states
         n = len(states)
@@ -460,7 +515,8 @@ class TrackerModel:
         # phase, stance leg and joints (often still right: a turn or a depth error lost the body, not the
         # step); half: fresh walkers there at any phase
         half = rows.size // 2
-        copies = states.take(rng.choice(n, size=half, p=w))
+        sources = rng.choice(n, size=half, p=w)
+        copies = states.take(sources)
         pelvis_xy = copies.pose.markers[:, MARKER_NAMES.index("pelvis"), :2]
         target = order.position + r.position_spread_m * rng.standard_normal((half, 2))
         turn = (np.angle(np.exp(1j * (order.heading - copies.kin.heading))) if order.heading is not None
@@ -469,6 +525,7 @@ class TrackerModel:
         moved = replace(copies, kin=kin, pose=self._kin.pose_body(self.body, self.params, copies.walker, kin,
                                                                    self.kin_config),
                         reseeded=np.full(half, REACQUIRED, np.int8))
+        moved.jump[:] = pose_jump(copies, moved)
         k = rows.size - half
         # without a ground track long enough: the particles' heading, the start's speed, both spread wide
         heading = order.heading if order.heading is not None else float(np.angle(np.sum(w * np.exp(1j * states.kin.heading))))
@@ -480,8 +537,13 @@ class TrackerModel:
                             self._gaits.preferred_step_length(self.params, np.full(k, speed)),
                             np.where(rng.random(k) < left, LEFT, RIGHT).astype(np.int8), rng, spread)
         fresh.reseeded[:] = REACQUIRED
+        fresh.jump[:] = pose_jump(states.take(rows[half:]), fresh)
         states = put_rows(states, rows[:half], moved)
-        return put_rows(states, rows[half:], fresh)
+        states = put_rows(states, rows[half:], fresh)
+        # a moved copy continues the walk of the particle it copies (its lineage), a fresh walker its row's
+        continues = np.arange(n)
+        continues[rows[:half]] = sources
+        return replace(states, continues=continues)
 
     def log_likelihood(self, prev: TrackerStates | None, states: TrackerStates, obs: Any) -> np.ndarray:
         penalty = self.config.fallen_log_penalty * states.fallen
@@ -545,6 +607,34 @@ class MapTrajectory:
     joint_names: tuple[str, ...] = JOINT_NAMES
 
 
+class PublishedPath:
+    """Where the pose published frame by frame stands: the filtering MAP (the frame's highest-weight particle)
+    shifted over the ground so that the live path does not jump when the MAP moves to another particle or a
+    particle is re-seeded. Each frame the published pelvis moves as the MAP particle's own walk moved over the
+    frame (from its parent a frame ago, less any re-seeding jump); the offset that leaves between the published
+    and the MAP pelvis shrinks by ``settle_m_s`` x dt, so the published path moves at most that much faster than
+    the walk and catches up with the MAP within |offset| / ``settle_m_s`` s."""
+
+    def __init__(self, dt: float, settle_m_s: float = JUMP_SPREAD_M_S) -> None:
+        self.dt = float(dt)
+        self.settle_m_s = float(settle_m_s)
+        self._pelvis: np.ndarray | None = None       # (N, 2) the last frame's particles' pelvis
+        self._published: np.ndarray | None = None    # (2,) the last published pelvis
+        self.offset = np.zeros(2)                    # MAP pelvis minus published pelvis (m)
+
+    def update(self, pelvis_xy: np.ndarray, ancestors: np.ndarray, jump: np.ndarray, best: int) -> np.ndarray:
+        """The offset (2,) m to take from the MAP pose of this frame: ``pelvis_xy`` (N, 2) of the frame's particles,
+        their ``ancestors`` among the last frame's, re-seeding ``jump`` (N, 3), the MAP particle ``best``."""
+        if self._pelvis is not None:
+            walked_from = self._pelvis[int(ancestors[best])] + jump[best, :2]
+            offset = walked_from - self._published
+            size = float(np.linalg.norm(offset))
+            self.offset = offset * max(0.0, 1.0 - self.settle_m_s * self.dt / size) if size > 0 else offset
+        self._pelvis = np.array(pelvis_xy, float)
+        self._published = self._pelvis[best] - self.offset
+        return self.offset.copy()
+
+
 class Tracker:
     """Online tracker: push one observation per frame, get posterior summaries (lag tau frames)."""
 
@@ -555,6 +645,7 @@ class Tracker:
         self.history = AncestryHistory()
         self._frames: list[tuple[int, int]] = []   # (frame index, stamp) in push order
         self._last_step: FilterStep | None = None
+        self.published = PublishedPath(self.config.dt)
 
     def push(self, frame_index: int, stamp_ns: int, obs: Any) -> list[PosteriorSummary]:
         """Add the observation of one frame; returns the summaries completed (in frame order)."""
@@ -572,22 +663,31 @@ class Tracker:
         out = self.model.outputs(step.states, step.info)
         payload = {"markers": out.markers.astype(np.float32), "joint_angles": out.joint_angles.astype(np.float32),
                    "stance_leg": out.stance_leg.copy(), "heel_strike": out.heel_strike.copy(),
-                   "strike_fraction": out.strike_fraction.astype(np.float32)}
+                   "strike_fraction": out.strike_fraction.astype(np.float32), "jump": step.states.jump.astype(np.float32)}
         self.history.append(None if step.frame == 0 else step.ancestors, payload)
         self._last_step = step
-        return summarize(frame_index, stamp_ns, step.log_weights, out, MARKER_NAMES, JOINT_NAMES,
-                         step.resampled, cloud_size=self.config.cloud_size)
+        summary = summarize(frame_index, stamp_ns, step.log_weights, out, MARKER_NAMES, JOINT_NAMES,
+                            step.resampled, cloud_size=self.config.cloud_size)
+        offset = self.published.update(out.markers[:, MARKER_NAMES.index("pelvis"), :2], step.ancestors,
+                                       step.states.jump, step.best_index)
+        if not offset.any():
+            return summary
+        shift = np.append(offset, 0.0)
+        return replace(summary, map_markers=summary.map_markers - shift,
+                       map_torso_position=summary.map_torso_position - shift)
 
     def map_trajectory(self) -> MapTrajectory:
-        """Lineage of the highest-weight particle of the last completed frame."""
+        """Lineage of the highest-weight particle of the last completed frame, re-seedings' jumps spread over the
+        frames before them (``smooth_jumps``)."""
         if self._last_step is None:
             raise ValueError("no frame has been completed yet")
         traj = self.history.trajectory(self._last_step.best_index)
         count = len(self.history)
         frames = np.array([f for f, _ in self._frames[:count]], np.int64)
         stamps = np.array([s for _, s in self._frames[:count]], np.int64)
-        return MapTrajectory(frames, stamps, traj["markers"].astype(float), traj["joint_angles"].astype(float),
-                             traj["stance_leg"], traj["heel_strike"].astype(bool),
+        markers, angles = smooth_jumps(traj["markers"].astype(float), traj["joint_angles"].astype(float),
+                                       traj["jump"].astype(float), self.model.config.dt)
+        return MapTrajectory(frames, stamps, markers, angles, traj["stance_leg"], traj["heel_strike"].astype(bool),
                              traj["strike_fraction"].astype(float))
 
 
