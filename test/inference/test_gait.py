@@ -1,6 +1,8 @@
 """Gait analytics (inference/gait.py) on walks with known heel strikes and step geometry."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -38,9 +40,9 @@ def stylised_walk(step_length=0.7, step_frames=15, width=0.2, steps=6, heading=0
 
 def test_heel_strikes_and_steps_of_a_known_walk():
     markers, stance, strikes = stylised_walk()
-    found = gait.stance_from_heels(markers)
-    assert np.array_equal(found, stance)
     frames = np.arange(len(markers))
+    found, fraction = gait.stance_from_heels(markers, frames / RATE)
+    assert np.array_equal(found, stance) and np.isnan(fraction).all()     # the heels land at rest on the frames
     stamps = 1_000_000_000 + np.round(frames * 1e9 / RATE).astype(np.int64)
     walk = gait.steps(frames, stamps, markers, found)
     assert [s.frame for s in walk] == strikes
@@ -62,29 +64,33 @@ def test_heel_strikes_and_steps_of_a_known_walk():
     assert gait.summary(walk, sides_known=False)["sides_note"] == gait.SIDES_NOTE
 
 
-def test_steps_from_markers_lie_where_the_heel_comes_to_rest():
-    """A heel found striking by its height may still slide in low over the floor (motion capture: within
-    2 cm of it at 4 m/s): the step of marker data lies where the heel stops, not where it was found."""
+def test_a_heel_skimming_in_strikes_where_it_has_slowed_and_its_step_lies_where_it_stops():
+    """Motion capture's heel skims the last centimetres over the floor still moving forward at several m/s: the
+    strike is where it is both low and slow (GAIT.md; height alone fires ~0.08 s early), timed where its speed
+    crossed 1 m/s, and the step lies where the heel stops."""
     markers, stance, strikes = stylised_walk(heading=0.0)
     sliding = markers.copy()
     for strike in strikes:
         side = "left" if stance[strike] == 0 else "right"
         heel = M[f"{side}_heel"]
         rest = markers[strike, heel, 0]
-        for lag, short in enumerate((0.3, 0.15, 0.05)):       # 0.3 m short at the frame found, then slowing
+        # 0.6 and 0.45 m short while coming down, then low and sliding in: 0.3, 0.15, 0.05 m short
+        for lag, (short, height) in enumerate(((0.6, 0.1), (0.45, 0.06), (0.3, 0.01), (0.15, 0.01), (0.05, 0.01)), -2):
             sliding[strike + lag, heel, 0] = rest - short
-            sliding[strike + lag, heel, 2] = 0.01
-    found = gait.stance_from_heels(sliding)
-    assert np.array_equal(found, stance)
+            sliding[strike + lag, heel, 2] = height
     frames = np.arange(len(markers))
     stamps = 1_000_000_000 + np.round(frames * 1e9 / RATE).astype(np.int64)
-    at_rest = gait.steps(frames, stamps, sliding, found, at_rest=True)
-    at_strike = gait.steps(frames, stamps, sliding, found)
+    found, fraction = gait.stance_from_heels(sliding, frames / RATE)
+    # central differences: 4.5, 3.75, 2.25 then 0.75 m/s three frames after the heel came low: 1 m/s crossed
+    # 0.83 of the way into that frame's period
+    slowed = [f + 3 for f in strikes]
+    assert [int(f) for f in np.flatnonzero(np.diff(found)) + 1] == slowed
+    np.testing.assert_allclose(fraction[slowed], (2.25 - 1.0) / (2.25 - 0.75))
+    at_rest = gait.steps(frames, stamps, sliding, found, fraction, at_rest=True)
     rest_x = [markers[f, M["left_heel" if stance[f] == 0 else "right_heel"], 0] for f in strikes]
     assert [s.x for s in at_rest] == pytest.approx(rest_x, abs=1e-9)
-    assert [s.x for s in at_strike] == pytest.approx(np.array(rest_x) - 0.3, abs=1e-9)
     assert all(s.step_length_m == pytest.approx(0.7, abs=1e-6) for s in at_rest[2:])
-    assert [s.frame for s in at_rest] == [s.frame for s in at_strike] == strikes     # the times are the strikes'
+    assert [s.time_s for s in at_rest] == pytest.approx([(f + 2 + 0.8333333) / RATE for f in strikes], abs=1e-6)
 
 
 def test_asymmetry_and_comparison_with_the_truth():
@@ -130,8 +136,8 @@ def test_strikes_are_timed_within_the_frame_when_the_walker_says_when():
 
 def test_the_walkers_strike_is_dated_early_by_a_share_of_the_step():
     """The walker passes support from foot to foot in one instant, a person over a double support (10 %
-    of the stride): the heel struck ``WALKER_STRIKE_DELAY`` x the step time (measured: about a double
-    support and a half) before the walker's strike. Step times and lengths are the walker's; steps from
+    of the stride, 20 % of the step time): the heel struck half a double support, ``WALKER_STRIKE_DELAY`` =
+    0.1 x the step time, before the walker's strike. Step times and lengths are the walker's; steps from
     heel markers are not shifted."""
     markers, stance, strikes = stylised_walk()
     frames = np.arange(len(markers))
@@ -139,7 +145,7 @@ def test_the_walkers_strike_is_dated_early_by_a_share_of_the_step():
     plain = gait.steps(frames, stamps, markers, stance)
     walker = gait.steps(frames, stamps, markers, stance, double_support=gait.WALKER_STRIKE_DELAY)
     delay = gait.WALKER_STRIKE_DELAY
-    assert gait.HUMAN_DOUBLE_SUPPORT == pytest.approx(0.1) and 0.1 < delay < 0.5
+    assert delay == pytest.approx(0.5 * 2 * gait.HUMAN_DOUBLE_SUPPORT) and gait.HUMAN_DOUBLE_SUPPORT == pytest.approx(0.1)
     # the first step has no step time yet: a typical one (0.55 s)
     assert walker[0].time_s == pytest.approx(plain[0].time_s - delay * gait.TYPICAL_STEP_TIME_S)
     assert all(w.time_s == pytest.approx(p.time_s - delay * 0.5) for w, p in zip(walker[1:], plain[1:]))
@@ -148,3 +154,41 @@ def test_the_walkers_strike_is_dated_early_by_a_share_of_the_step():
     # against heel-marker truth the walker's events are now on time but for the shift itself
     result = gait.compare(walker, plain)
     assert result["timing_error_s_median"] == pytest.approx(delay * 0.5, abs=1e-6)
+
+
+def test_strikes_are_matched_one_to_one_and_swapped_feet_are_counted():
+    """GAIT.md's scoring: each true strike matched once to an estimated strike of the same foot within 0.25 s;
+    the rest are missed or extra, and a missed strike met by the other foot's counts as swapped."""
+    markers, stance, _ = stylised_walk()
+    frames = np.arange(len(markers))
+    stamps = 1_000_000_000 + np.round(frames * 1e9 / RATE).astype(np.int64)
+    truth = gait.steps(frames, stamps, markers, stance)
+    doubled = sorted(truth + [replace(s, time_s=s.time_s + 0.1) for s in truth[:2]], key=lambda s: s.time_s)
+    result = gait.compare(doubled, truth)
+    assert (result["matched_strikes"], result["missed_strikes"], result["extra_strikes"]) == (6, 0, 2)
+    assert result["timing_error_s_median"] == pytest.approx(0.0)
+    swapped = [replace(s, foot="left" if s.foot == "right" else "right") for s in truth]
+    result = gait.compare(swapped, truth)
+    assert (result["matched_strikes"], result["missed_strikes"], result["swapped_strikes"]) == (0, 6, 6)
+
+
+def test_the_live_steps_follow_the_posteriors_stance_foot():
+    """PosteriorSteps: a step each time the stance-left probability crosses 0.5 and settles past 0.7 / 0.3,
+    timed at the crossing (less the walker's strike delay), one step per change however slowly the particles
+    strike; no step for a wobble that does not settle."""
+    steps = gait.PosteriorSteps()
+    contacts = {0: np.array([0.0, 0.1]), 1: np.array([0.7, -0.1])}
+    # left stands, then the particles strike with the right over 4 frames (never a majority within one frame),
+    # a wobble to 0.45 and back, then the left strikes
+    p = [0.95] * 5 + [0.8, 0.6, 0.4, 0.2] + [0.1] * 6 + [0.45, 0.2] + [0.1] * 3 + [0.5, 0.9] + [0.95] * 3
+    out = []
+    for frame, left in enumerate(p):
+        step = steps.add(frame, frame * 33_333_333, frame / RATE, left, contacts)
+        if step is not None:
+            out.append((frame, step))
+    assert [s.foot for _, s in out] == ["right", "left"]
+    assert [f for f, _ in out] == [8, 21]                       # confirmed past 0.3 / 0.7
+    # the right's strike crossed 0.5 halfway between frames 6 and 7; no step time yet: a typical one
+    assert out[0][1].time_s == pytest.approx(6.5 / RATE - gait.WALKER_STRIKE_DELAY * gait.TYPICAL_STEP_TIME_S)
+    assert out[1][1].time_s == pytest.approx(20 / RATE - gait.WALKER_STRIKE_DELAY * (20 / RATE - 6.5 / RATE))
+    assert (out[0][1].x, out[1][1].x) == (0.7, 0.0)

@@ -11,14 +11,15 @@ from awalker_tracker.inference.posterior import LEFT, RIGHT, WALKER_FIELDS, Foot
 from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription
 
 
-def make_summary(stamp_ns: int, frame: int, rng, contacts=None) -> PosteriorSummary:
+def make_summary(stamp_ns: int, frame: int, rng, contacts=None, left_probability: float = 0.2) -> PosteriorSummary:
     markers = rng.normal(size=(13, 3)) + [0, 0, 1]
     return PosteriorSummary(
         frame_index=frame, stamp_ns=stamp_ns, marker_names=MARKER_NAMES, joint_names=JOINT_NAMES,
         map_markers=markers, mean_markers=markers + 0.01, map_joint_angles=rng.normal(size=len(JOINT_NAMES)),
         map_torso_position=markers[0], map_torso_orientation=np.array([0, 0, np.sin(0.2), np.cos(0.2)]),
         map_stance_leg=RIGHT, map_walker={k: float(i) for i, k in enumerate(WALKER_FIELDS)},
-        speed=1.3, speed_std=0.1, stance_left_probability=0.2, effective_sample_size=321.0, num_particles=500,
+        speed=1.3, speed_std=0.1, stance_left_probability=left_probability, effective_sample_size=321.0,
+        num_particles=500,
         resampled=True,
         contacts=contacts if contacts is not None else (
             FootContactEstimate(LEFT, np.array([0.1, 0.2, 0.0]), 0.2, False),
@@ -201,8 +202,8 @@ def test_bad_body_description_is_reported(ros_context, tmp_path):
 
 
 def test_heel_strikes_become_gait_steps(ros_context):
-    """A strike every 15 frames (0.5 s), alternate feet 0.7 m apart along x and 0.2 m across: GaitStep
-    messages at those frames with the step geometry and timing."""
+    """The posterior's stance foot changes every 15 frames (0.5 s), alternate feet 0.7 m apart along x and 0.2 m
+    across: GaitStep messages at those frames with the step geometry and timing (inference.gait.PosteriorSteps)."""
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
@@ -232,7 +233,7 @@ def test_heel_strikes_become_gait_steps(ros_context):
             foot = (k // 15) % 2                     # 0 left, 1 right
             spot = np.array([0.7 * (k // 15), 0.1 if foot == LEFT else -0.1, 0.0])
             contacts = (FootContactEstimate(foot, spot, 0.9, strike), FootContactEstimate(1 - foot, spot, 0.1, False))
-            pub.publish(summary_to_msg(make_summary(stamp, k, rng, contacts)))
+            pub.publish(summary_to_msg(make_summary(stamp, k, rng, contacts, 0.9 if foot == LEFT else 0.1)))
             for _ in range(3):                        # the node keeps up (its queue holds 10 summaries)
                 executor.spin_once(timeout_sec=0.01)
         while len(got) < 4 and time.monotonic() < deadline + 5:

@@ -295,7 +295,7 @@ def test_walk_variants_turn_and_change_speed_without_foot_skate(tmp_path, varian
     # turning pivots on the stance foot's contact (its lower end, heel or toe): that point does not slide
     # more than in the recorded walk
     def slide(points):
-        stance = stance_from_heels(points)
+        stance, _ = stance_from_heels(points, np.arange(len(points)) / 30.0)
         moves = []
         for f in range(1, len(points)):
             if stance[f] != stance[f - 1]:

@@ -384,15 +384,16 @@ def track_steps(track: PoseTrack, stance_leg: np.ndarray | None = None,
                 strike_fraction: np.ndarray | None = None) -> list:
     """The steps of a pose track (``inference.gait``): from its stance legs (0 left / 1 right per frame)
     when given (the tracker's own strikes, timed within the frame by ``strike_fraction``, the heel strike
-    ``gait.WALKER_STRIKE_DELAY`` x the step time before), else from its heel markers (each step where its heel
-    comes to rest: ``gait.heel_at_rest``)."""
+    ``gait.WALKER_STRIKE_DELAY`` x the step time before), else from its heel markers (``gait.heel_strikes``;
+    each step where its heel comes to rest: ``gait.heel_at_rest``)."""
     from awalker_tracker.inference import gait
 
     from awalker_tracker.model.body import MARKER_NAMES
 
     markers = _select(track, list(MARKER_NAMES), np.arange(len(track.frames)), "pose track")   # inference.gait's order
     if stance_leg is None:
-        return gait.steps(track.frames, track.stamps_ns, markers, gait.stance_from_heels(markers), at_rest=True)
+        stance, fraction = gait.stance_from_heels(markers, (track.stamps_ns - track.stamps_ns[0]) * 1e-9)
+        return gait.steps(track.frames, track.stamps_ns, markers, stance, fraction, at_rest=True)
     return gait.steps(track.frames, track.stamps_ns, markers, np.asarray(stance_leg), strike_fraction,
                       gait.WALKER_STRIKE_DELAY)
 

@@ -127,7 +127,7 @@ def bend(points: np.ndarray, rate: float, angle: float, start: float, duration: 
     t = np.arange(len(points)) / rate
     ramp = np.clip((t - start) / max(duration, 1e-9), 0.0, 1.0)
     heading = angle * (0.5 - 0.5 * np.cos(np.pi * ramp))     # smooth start and end
-    stance = stance_from_heels(points[:, : len(MARKER_NAMES)])
+    stance, _ = stance_from_heels(points[:, : len(MARKER_NAMES)], t)
     out = np.empty_like(points)
     pivot = offset = None          # T_f(p) = R(heading_f) (p - pivot_f) + offset_f
     for f in range(len(points)):

@@ -2,8 +2,9 @@
 
 A step ends at a heel strike: the frame where the stance leg changes to the other foot (the
 walker's own event for the tracker's MAP trajectory, timed within the frame where the walker's
-strike time is given; for marker data without stance labels, the frame a heel comes down after a
-swing: ``stance_from_heels``). Per step: time (s),
+strike time is given; for marker data without stance labels, where a heel comes down after a
+swing and stops: ``heel_strikes``; live, where the posterior's stance foot changes: ``PosteriorSteps``).
+Per step: time (s),
 foot, ground position (the striking heel's xy, m; for marker data where that heel comes to rest,
 ``heel_at_rest``); step length = the displacement from the
 previous strike along the walking direction (the stride from the same foot's previous strike,
@@ -17,15 +18,12 @@ reporting a measured proportion.
 
 Heel-strike time of a walker's step: a person's support passes from foot to foot over a double
 support (heel strike to the other foot's toe-off, ``HUMAN_DOUBLE_SUPPORT`` = 10 % of the stride each
-time in normal walking; Perry and Burnfield, *Gait Analysis*), the walker's in one instant, which the
-tracked walker places after the person's heel strike: the heel struck ``WALKER_STRIKE_DELAY`` = 0.28 x
-the step time before it (``StepCounter(double_support=...)``; the first step, with no step time yet,
-uses ``TYPICAL_STEP_TIME_S``). Measured on the real-walks benchmark (``benchmarks/bench_realwalks.py``,
-hand-started, tracker seeds 0-4), with the body's feet landing where the walker's do (``kinematics``
-*Knees*): the median over runs of each run's median timing error is least at 0.28 on the walk 07_01
-(60 runs, one and two cameras: 0.016 s; 0.2, a whole double support, 0.049 s and 0.16 0.069 s, the
-strikes late; 0.36, 0.041 s, early). Held out, 07_02: 0.012 s (0.2: 0.050 s). Steps from heel markers
-are not shifted.
+time in normal walking; Perry and Burnfield, *Gait Analysis*), the walker's in one instant. Fitted to a
+person's images, the walker's transfer falls within that double support; the tracker dates the heel strike
+half a double support before it (``WALKER_STRIKE_DELAY`` = 0.10 of the step time, which is half the stride;
+``StepCounter(double_support=...)``; the first step, with no step time yet, uses ``TYPICAL_STEP_TIME_S``).
+This is a fact about walking, not a constant fitted to walks: it holds for slow and fast walkers alike as a
+share of their own step time. Steps from heel markers (``heel_strikes``) are not shifted.
 """
 from __future__ import annotations
 
@@ -40,7 +38,7 @@ _M = {n: i for i, n in enumerate(MARKER_NAMES)}
 _FOOT = {0: ("left_heel", "left_toe"), 1: ("right_heel", "right_toe")}
 
 HUMAN_DOUBLE_SUPPORT = 0.10    # each double support, share of the stride (normal walking)
-WALKER_STRIKE_DELAY = 0.28     # share of the step time (half a stride): the walker's strike after the heel's (above)
+WALKER_STRIKE_DELAY = HUMAN_DOUBLE_SUPPORT   # share of the step time: half a double support, the walker's strike after the heel's
 TYPICAL_STEP_TIME_S = 0.55     # s, 110 steps/min: the first step's, before one is measured
 
 
@@ -63,29 +61,51 @@ class Step:
     speed_m_s: float
 
 
-def stance_from_heels(markers: np.ndarray, contact_m: float = 0.02, swing_m: float = 0.05) -> np.ndarray:
-    """(F,) stance foot (LEFT 0 / RIGHT 1) of marker data (F, 13, 3) without stance labels (e.g. motion
-    capture): a foot strikes when its heel comes down to within ``contact_m`` of its lowest height after
-    having been ``swing_m`` above it; the stance passes to it at that frame."""
-    heels = markers[:, [_M["left_heel"], _M["right_heel"]], 2]
-    ground = np.percentile(heels, 5, axis=0)
+def heel_strikes(markers: np.ndarray, times_s: np.ndarray, contact_m: float = 0.03, swing_m: float = 0.05,
+                 slow_m_s: float = 1.0) -> list[tuple[float, int, int]]:
+    """Heel strikes of marker data without stance labels (e.g. motion capture) as gait labs time them from
+    markers (``../shared/design/GAIT.md``): after a swing (the heel ``swing_m`` above its own low level, the
+    5th percentile of its height over the walk, so that an uneven capture floor does not matter), the first
+    frame where the heel is within ``contact_m`` of that level *and* its speed over the ground has dropped
+    below ``slow_m_s``, the time interpolated where the speed crossed it. Height alone fires ~0.08 s early:
+    the heel skims the last centimetres still moving forward at 3-4 m/s. Markers (F, 13, 3), times (F,) s;
+    returns (time s, first frame at or after it, foot LEFT 0 / RIGHT 1) in time order."""
+    heels = markers[:, [_M["left_heel"], _M["right_heel"]]]
+    height = heels[..., 2] - np.percentile(heels[..., 2], 5, axis=0)
+    times = np.asarray(times_s, float)
+    speed = (np.linalg.norm(np.gradient(heels[..., :2], times, axis=0), axis=2) if len(times) > 1
+             else np.zeros(height.shape))
     events = []
     for foot in (0, 1):
-        h = heels[:, foot] - ground[foot]
         swinging = False
-        for f in range(len(h)):
-            if h[f] > swing_m:
+        for f in range(len(times)):
+            if height[f, foot] > swing_m:
                 swinging = True
-            elif swinging and h[f] < contact_m:
-                events.append((f, foot))
+            elif swinging and height[f, foot] < contact_m and speed[f, foot] < slow_m_s:
+                when = times[f]
+                before = speed[f - 1, foot] if f > 0 else 0.0
+                if before > slow_m_s:          # the heel slowed down within this frame's period
+                    when = times[f - 1] + (before - slow_m_s) / (before - speed[f, foot]) * (times[f] - times[f - 1])
+                events.append((float(when), f, foot))
                 swinging = False
-    events.sort()
-    # before the first strike: the foot that is lower
-    first = 0 if heels[0, 0] - ground[0] <= heels[0, 1] - ground[1] else 1
-    stance = np.full(len(markers), first, np.int8)
-    for f, foot in events:
+    return sorted(events)
+
+
+def stance_from_heels(markers: np.ndarray, times_s: np.ndarray, **strike_options: float) -> tuple[np.ndarray, np.ndarray]:
+    """(stance (F,) LEFT 0 / RIGHT 1, strike fraction (F,)) of marker data from its ``heel_strikes``: the stance
+    passes to a foot at the first frame at or after its strike, which happened that share of the period before
+    the frame (NaN where no strike; the ``strike_fraction`` of ``steps``). Before the first strike: the foot
+    whose heel is lower."""
+    times = np.asarray(times_s, float)
+    heels = markers[:, [_M["left_heel"], _M["right_heel"]], 2]
+    ground = np.percentile(heels, 5, axis=0)
+    stance = np.full(len(markers), 0 if heels[0, 0] - ground[0] <= heels[0, 1] - ground[1] else 1, np.int8)
+    fraction = np.full(len(markers), np.nan)
+    for when, f, foot in heel_strikes(markers, times, **strike_options):
         stance[f:] = foot
-    return stance
+        if f > 0 and times[f - 1] < when < times[f]:
+            fraction[f] = (when - times[f - 1]) / (times[f] - times[f - 1])
+    return stance, fraction
 
 
 class StepCounter:
@@ -168,6 +188,44 @@ SIDES_NOTE = ("one camera and no stance leg in the start: which foot is the left
               "runs); name the standing foot in a start description (stance_leg) or add a camera to be sure")
 
 
+class PosteriorSteps:
+    """Steps as the live tracker sees them, one per change of the posterior's stance foot: the probability that
+    the left foot stands crosses 0.5 and goes on past ``confirm`` (or 1 - ``confirm``): a heel strike of the new
+    stance foot, timed where the probability crossed 0.5 (interpolated between frames: when half the particles
+    had struck), placed at that foot's contact estimate at the confirming frame, and dated
+    ``WALKER_STRIKE_DELAY`` x the step time earlier like the MAP trajectory's steps (``StepCounter``). The
+    posterior's majority follows the MAP trajectory's stance, so these are the steps gait.csv has, at the
+    look-ahead lag; a majority of particles striking within one frame (what a per-frame vote needs) is rare
+    when their strikes spread over a few frames."""
+
+    def __init__(self, confirm: float = 0.7) -> None:
+        if not 0.5 < confirm < 1.0:
+            raise ValueError(f"PosteriorSteps: confirm must lie in (0.5, 1), got {confirm}")
+        self.confirm = float(confirm)
+        self.counter = StepCounter(WALKER_STRIKE_DELAY)
+        self.foot: int | None = None                       # the stance foot the posterior settled on
+        self._last: tuple[float, float] | None = None      # (time s, left probability) of the last frame
+        self._crossed: tuple[float, int, int] | None = None  # (time s, frame, stamp) of the last 0.5 crossing
+
+    def add(self, frame: int, stamp_ns: int, time_s: float, left_probability: float,
+            contacts: dict[int, np.ndarray]) -> Step | None:
+        """The step this frame completes, if any; ``contacts``: foot (LEFT 0 / RIGHT 1) -> its contact xy (m)."""
+        p = float(left_probability)
+        if self._last is not None and (self._last[1] - 0.5) * (p - 0.5) <= 0.0 and self._last[1] != p:
+            t0, p0 = self._last
+            self._crossed = (t0 + (0.5 - p0) / (p - p0) * (time_s - t0), int(frame), int(stamp_ns))
+        self._last = (float(time_s), p)
+        side = LEFT if p >= self.confirm else (1 - LEFT if p <= 1.0 - self.confirm else None)
+        if side is None or side == self.foot:
+            return None
+        first, self.foot = self.foot is None, side
+        where = contacts.get(side)
+        if first or where is None or not np.all(np.isfinite(where)):
+            return None
+        when, at_frame, at_stamp = self._crossed if self._crossed is not None else (time_s, frame, stamp_ns)
+        return self.counter.add(at_frame, at_stamp, when, side, np.asarray(where, float))
+
+
 def summary(walk: list[Step], sides_known: bool = True) -> dict[str, object]:
     """Medians over steps, left/right symmetry (left / right medians) and the stance/swing note; with
     ``sides_known`` False (one camera, no stance leg given) also ``sides_note``: left and right may be swapped."""
@@ -199,23 +257,38 @@ def as_rows(walk: list[Step]) -> list[dict[str, object]]:
     return [asdict(s) for s in walk]
 
 
-def compare(estimate: list[Step], truth: list[Step], max_offset_s: float = 0.2) -> dict[str, object]:
-    """Each true heel strike matched to the nearest estimated strike of the same foot within ``max_offset_s``:
-    timing error (s; its median size, and the median signed, later than the truth > 0), step length error (m)
-    of matched steps, and the median speeds' difference (m/s)."""
-    timing, length = [], []
-    for s in truth:
-        same = [e for e in estimate if e.foot == s.foot]
-        if not same:
+def compare(estimate: list[Step], truth: list[Step], window_s: float = 0.25) -> dict[str, object]:
+    """The estimate's heel strikes against the truth's (``../shared/design/GAIT.md``): each true strike matched one
+    to one to an estimated strike of the same foot within ``window_s``, nearest pairs first; matched, missed
+    (true strikes left over) and extra (estimated ones left over) counts; of the missed, how many match an
+    unmatched strike of the other foot (left and right swapped); the median size and the median signed timing
+    error (s, later than the truth > 0) and the median step length error (m) of the matched strikes; the median
+    speeds' difference (m/s)."""
+    pairs = sorted((abs(e.time_s - t.time_s), i, j) for i, t in enumerate(truth) for j, e in enumerate(estimate)
+                   if e.foot == t.foot and abs(e.time_s - t.time_s) <= window_s)
+    matched: dict[int, int] = {}
+    used: set[int] = set()
+    for _, i, j in pairs:
+        if i not in matched and j not in used:
+            matched[i] = j
+            used.add(j)
+    timing = [estimate[j].time_s - truth[i].time_s for i, j in matched.items()]
+    length = [estimate[j].step_length_m - truth[i].step_length_m for i, j in matched.items()
+              if np.isfinite(estimate[j].step_length_m) and np.isfinite(truth[i].step_length_m)]
+    spare = [j for j in range(len(estimate)) if j not in used]
+    swapped = 0
+    for i, t in enumerate(truth):
+        if i in matched:
             continue
-        best = min(same, key=lambda e: abs(e.time_s - s.time_s))
-        if abs(best.time_s - s.time_s) <= max_offset_s:
-            timing.append(best.time_s - s.time_s)
-            if np.isfinite(best.step_length_m) and np.isfinite(s.step_length_m):
-                length.append(best.step_length_m - s.step_length_m)
+        other = [j for j in spare if estimate[j].foot != t.foot and abs(estimate[j].time_s - t.time_s) <= window_s]
+        if other:
+            spare.remove(min(other, key=lambda j: abs(estimate[j].time_s - t.time_s)))
+            swapped += 1
     est_speed, true_speed = summary(estimate)["speed_m_s"], summary(truth)["speed_m_s"]
     return {
-        "true_strikes": len(truth), "matched_strikes": len(timing),
+        "true_strikes": len(truth), "estimated_strikes": len(estimate), "matched_strikes": len(matched),
+        "missed_strikes": len(truth) - len(matched), "extra_strikes": len(estimate) - len(matched),
+        "swapped_strikes": swapped,
         "timing_error_s_median": float(np.median(np.abs(timing))) if timing else None,
         "timing_bias_s_median": float(np.median(timing)) if timing else None,     # > 0: reported late
         "step_length_error_m_median": float(np.median(np.abs(length))) if length else None,

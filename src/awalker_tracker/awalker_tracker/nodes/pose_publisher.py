@@ -9,10 +9,9 @@ the image stamp of each summary:
   strikes larger);
 - ``/awalker/particles`` sensor_msgs/PointCloud2 in the world frame: the heaviest samples of the
   posterior's head/pelvis/knee/ankle clouds, fields x, y, z, weight, marker (``convert.PARTICLE_POINT``);
-- ``/awalker/gait_steps`` awalker_msgs/GaitStep at every heel strike the posterior reports (the foot
-  whose strike carries more than half the weight): where the heel came down, step length and width,
-  step and stride time, cadence and speed (``inference.gait.StepCounter``; online, from the filter at
-  its look-ahead lag, so it can differ from gait.csv, which follows the final MAP trajectory);
+- ``/awalker/gait_steps`` awalker_msgs/GaitStep at every heel strike: each change of the posterior's stance
+  foot (``inference.gait.PosteriorSteps``): where the heel came down, step length and width, step and
+  stride time, cadence and speed; online, at the filter's look-ahead lag, the steps gait.csv has;
 - tf ``world -> <body_id>_pelvis`` when ``tf2_ros`` can be imported (not on PyPI; optional).
 """
 from __future__ import annotations
@@ -27,7 +26,7 @@ from sensor_msgs.msg import JointState, PointCloud2
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from awalker_tracker.inference.gait import WALKER_STRIKE_DELAY, Step, StepCounter
+from awalker_tracker.inference.gait import PosteriorSteps, Step
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.nodes.base import AwalkerNode
 from awalker_tracker.nodes.convert import POSTERIOR_DEPTH, particles_to_pointcloud2, points_from_msg, stamp_to_ns
@@ -183,7 +182,7 @@ class PosePublisherNode(AwalkerNode):
         self.marker_pub = self.create_publisher(MarkerArray, "/awalker/markers", qos)
         self.particles_pub = self.create_publisher(PointCloud2, "/awalker/particles", qos)
         self.gait_pub = self.create_publisher(GaitStep, "/awalker/gait_steps", qos)
-        self.steps = StepCounter(WALKER_STRIKE_DELAY)       # the walker's strike comes after the heel's: dated earlier
+        self.steps = PosteriorSteps()          # a step whenever the posterior's stance foot changes
         self._first_stamp_ns: int | None = None
         self.tf_broadcaster = _tf_broadcaster(self)
         self.count = 0
@@ -203,11 +202,11 @@ class PosePublisherNode(AwalkerNode):
         stamp = stamp_to_ns(msg.header.stamp)
         if self._first_stamp_ns is None:
             self._first_stamp_ns = stamp
-        for contact in msg.contacts:
-            if contact.heel_strike and np.isfinite(contact.position.x):
-                step = self.steps.add(msg.frame_index, stamp, (stamp - self._first_stamp_ns) * 1e-9, int(contact.foot),
-                                      np.array([contact.position.x, contact.position.y]))
-                self.gait_pub.publish(gait_step_to_msg(step, msg.header))
+        step = self.steps.add(msg.frame_index, stamp, (stamp - self._first_stamp_ns) * 1e-9,
+                              msg.stance_left_probability,
+                              {int(c.foot): np.array([c.position.x, c.position.y]) for c in msg.contacts})
+        if step is not None:
+            self.gait_pub.publish(gait_step_to_msg(step, msg.header))
         if self.tf_broadcaster is not None:
             from geometry_msgs.msg import TransformStamped
 
