@@ -68,3 +68,78 @@ def test_the_live_pose_follows_a_map_that_swaps_between_particles_without_jumpin
     still = PublishedPath(DT)
     for frame in range(5):
         assert not still.update(np.array([[0.1 * frame, 0.0]]), np.array([0]), np.zeros((1, 3)), 0).any()
+
+
+def _walking_particles(n: int, frames: int, seed: int = 0):
+    """Tracker particles walked ``frames`` frames by the prior (no images)."""
+    from awalker_tracker.inference.tracker import StartDescription, TrackerConfig, TrackerModel, marker_likelihood
+    from awalker_tracker.model.body import BodyDescription
+
+    model = TrackerModel(BodyDescription.default(), StartDescription(0, (0.0, 0.0), 0.7, 1.3, None, None),
+                         marker_likelihood(), TrackerConfig())
+    rng = np.random.default_rng(seed)
+    states = model.initial(n, rng)
+    out = [states]
+    for _ in range(frames - 1):
+        states, _ = model.transition(states, rng)
+        out.append(states)
+    return model, out
+
+
+def _mirror(markers: np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """Markers (N, M, 3) reflected about each body's sagittal plane (through its pelvis along ``heading``) with
+    left and right rows swapped."""
+    side = np.stack([-np.sin(heading), np.cos(heading)], axis=1)[:, None, :]
+    out = markers.copy()
+    out[..., :2] -= 2 * np.sum((markers[..., :2] - markers[:, PELVIS, None, :2]) * side, axis=-1, keepdims=True) * side
+    swap = [MARKER_NAMES.index(n.replace("left", "#").replace("right", "left").replace("#", "right")) for n in MARKER_NAMES]
+    return out[:, swap]
+
+
+def test_a_body_with_its_legs_named_the_other_way_is_its_mirror_image():
+    from awalker_tracker.model import kinematics
+
+    model, walk = _walking_particles(40, 9)
+    s = walk[-1]
+    walker, kin = kinematics.mirrored_legs(s.walker, s.kin, s.pose.markers[:, PELVIS, :2], model.body, model.params,
+                                           model.kin_config)
+    posed = kinematics.pose_body(model.body, model.params, walker, kin, model.kin_config).markers
+    np.testing.assert_allclose(posed, _mirror(s.pose.markers, s.kin.heading), atol=1e-12)
+    assert np.array_equal(walker.stance_leg, 1 - s.walker.stance_leg)
+
+
+def test_a_lineage_that_renamed_its_legs_is_named_throughout_as_it_ends():
+    """A walk whose particle renamed its legs at frame 6: the lineage's earlier frames are mirrored and renamed
+    too, so its feet do not swap sides at the flip, and the frames after it are left as they are."""
+    from awalker_tracker.inference.tracker import relabel_lineage
+    from awalker_tracker.model import kinematics
+
+    model, walk = _walking_particles(1, 12, seed=3)
+    markers = np.array([s.pose.markers[0] for s in walk])
+    angles = np.array([s.pose.joint_angles[0] for s in walk])
+    stance = np.array([s.walker.stance_leg[0] for s in walk])
+    # the same walk, its legs renamed from frame 6 on
+    renamed = [kinematics.pose_body(model.body, model.params, *kinematics.mirrored_legs(
+        s.walker, s.kin, s.pose.markers[:, PELVIS, :2], model.body, model.params, model.kin_config),
+        model.kin_config) for s in walk[6:]]
+    lineage = markers.copy()
+    lineage[6:] = [r.markers[0] for r in renamed]
+    lineage_angles = angles.copy()
+    lineage_angles[6:] = [r.joint_angles[0] for r in renamed]
+    lineage_stance = stance.copy()
+    lineage_stance[6:] = 1 - stance[6:]
+    flipped = np.zeros(12, bool)
+    flipped[6] = True
+    left_ankle = MARKER_NAMES.index("left_ankle")
+    assert np.linalg.norm(lineage[6, left_ankle, :2] - lineage[5, left_ankle, :2]) > 0.05     # the raw lineage: a jump
+    out, out_angles, out_stance = relabel_lineage(lineage, lineage_angles, lineage_stance, flipped)
+    expected = np.concatenate([_mirror(markers[:6], angles[:6, JOINT_NAMES.index("torso_yaw")]), lineage[6:]])
+    np.testing.assert_allclose(out, expected, atol=1e-9)
+    assert np.array_equal(out_stance, 1 - stance) and np.array_equal(out[6:], lineage[6:])
+    assert np.linalg.norm(out[6, left_ankle, :2] - out[5, left_ankle, :2]) < 0.05
+    # two flips cancel: the frames before both are named as they were
+    twice = flipped.copy()
+    twice[9] = True
+    again, _, again_stance = relabel_lineage(lineage, lineage_angles, lineage_stance, twice)
+    np.testing.assert_allclose(again[:6], lineage[:6])
+    np.testing.assert_array_equal(again_stance[:6], stance[:6])

@@ -204,6 +204,11 @@ class TrackerConfig:
     # no ceilings) 63.1 -> 61.4 (per run -0.8, within noise, 33 of 60); one camera 73.5 -> 75.9 and worst runs
     # 88-100 mm (seeds 0-2), so one camera keeps the chord's angle.
     hip_over_ankle_min_cameras: int = 2
+    # Which leg is which (kinematics.mirrored_legs): seen from one side the near and the far leg look alike, so
+    # each particle names its legs the other way round at this rate (per second, a Poisson process): both namings
+    # stay in the posterior until the images tell them apart, and a wrong one is replaced when they do; the MAP
+    # trajectory names its whole lineage as it ends (``relabel_lineage``). 0: each particle keeps its naming.
+    label_flip_rate_hz: float = 0.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -220,6 +225,9 @@ class TrackerConfig:
             raise ValueError(f"TrackerConfig: posture_spread must lie in 0-0.3 rad, posture_drift in 0-0.02 rad and "
                              f"posture_min_cameras be >= 1, got {self.posture_spread}, {self.posture_drift}, "
                              f"{self.posture_min_cameras}")
+        if not (np.isfinite(self.label_flip_rate_hz) and 0.0 <= self.label_flip_rate_hz * self.dt < 0.5):
+            raise ValueError(f"TrackerConfig.label_flip_rate_hz must be >= 0 and below half a flip per frame, got "
+                             f"{self.label_flip_rate_hz}")
         if self.hip_over_ankle_min_cameras < 1:
             raise ValueError(f"TrackerConfig.hip_over_ankle_min_cameras must be >= 1, got "
                              f"{self.hip_over_ankle_min_cameras}")
@@ -268,6 +276,8 @@ class TrackerStates:
     # (N, 3) how far the re-seeding moved each particle this frame beyond its walk: pelvis dx, dy (m) and turn
     # (rad) about the vertical through the pelvis; zeros for particles not re-seeded (``smooth_jumps``)
     jump: np.ndarray
+    # (N,) bool: the particle's legs were named the other way round this frame (``TrackerConfig.label_flip_rate_hz``)
+    flipped: np.ndarray
 
     def __len__(self) -> int:
         return len(self.walker)
@@ -277,7 +287,7 @@ class TrackerStates:
                              self.pose.segments.take(indices))
         return TrackerStates(self.walker.take(indices), self.control.take(indices), self.kin.take(indices),
                              pose, self.speed[indices], self.fallen[indices], self.reseeded[indices],
-                             np.arange(len(indices)), self.jump[indices])
+                             np.arange(len(indices)), self.jump[indices], self.flipped[indices])
 
 
 LikelihoodFn = Callable[[TrackerStates | None, TrackerStates, Any], np.ndarray]
@@ -404,7 +414,7 @@ class TrackerModel:
             posture_spread=self.posture_spread, pelvis_ceiling_spread=self.pelvis_ceiling_spread)
         pose = self._kin.pose_body(self.body, self.params, walker, kin, self.kin_config)
         return TrackerStates(walker, control, kin, pose, speed.copy(), np.zeros(n, bool), np.zeros(n, np.int8),
-                             np.arange(n), np.zeros((n, 3)))
+                             np.arange(n), np.zeros((n, 3)), np.zeros(n, bool))
 
     def _gait_known(self, speed: np.ndarray, step: np.ndarray) -> np.ndarray:
         """True where the gait table's lookup has converged corners with weight (a margin above what lookup needs)."""
@@ -469,10 +479,25 @@ class TrackerModel:
         # a fall is not walking: a fallen walker keeps its speed (re-seeding starts it on that speed's gait)
         speed = np.where(fallen, states.speed, states.speed + gain * (moved / self.config.dt - states.speed))
         new = TrackerStates(walker, control, kin, pose, speed, fallen, np.zeros(len(states), np.int8),
-                            np.arange(len(states)), np.zeros((len(states), 3)))
+                            np.arange(len(states)), np.zeros((len(states), 3)), np.zeros(len(states), bool))
         if self.config.recovery.reseed_fallen and fallen.any():
             new = self._reseed_fallen(new, np.flatnonzero(fallen), rng)
+        if self.config.label_flip_rate_hz > 0:
+            new = self._flip_labels(new, np.flatnonzero(rng.random(len(new)) < self.config.label_flip_rate_hz
+                                                        * self.config.dt))
         return new, events
+
+    def _flip_labels(self, states: TrackerStates, rows: np.ndarray) -> TrackerStates:
+        """The particles ``rows`` with their legs named the other way round (``kinematics.mirrored_legs``: each body
+        its own mirror image, pelvis kept): the prior's jump between the two namings a side view cannot tell apart."""
+        if rows.size == 0:
+            return states
+        chosen = states.take(rows)
+        pelvis = chosen.pose.markers[:, MARKER_NAMES.index("pelvis"), :2]
+        walker, kin = self._kin.mirrored_legs(chosen.walker, chosen.kin, pelvis, self.body, self.params, self.kin_config)
+        pose = self._kin.pose_body(self.body, self.params, walker, kin, self.kin_config)
+        flipped = replace(chosen, walker=walker, kin=kin, pose=pose, flipped=np.ones(rows.size, bool))
+        return put_rows(states, rows, flipped)
 
     def _reseed_fallen(self, states: TrackerStates, rows: np.ndarray, rng: np.random.Generator) -> TrackerStates:
         """Replace fallen walkers by walkers on the cyclic gait of their recent speed, standing where their
@@ -505,7 +530,8 @@ class TrackerModel:
         if parent is not None and self.monitor.still(frame):
             # the person stands still: the frame's walkers are the previous frame's, not moving
             states = replace(parent, speed=np.zeros(len(parent)), reseeded=np.full(len(parent), HELD, np.int8),
-                             continues=np.arange(len(parent)), jump=np.zeros((len(parent), 3)))
+                             continues=np.arange(len(parent)), jump=np.zeros((len(parent), 3)),
+                             flipped=np.zeros(len(parent), bool))
         if order is None:
             return states
         n = len(states)
@@ -607,6 +633,36 @@ class MapTrajectory:
     joint_names: tuple[str, ...] = JOINT_NAMES
 
 
+#: Marker and joint rows that name the other leg (left <-> right).
+_OTHER_SIDE = {name: name.replace("left", "#").replace("right", "left").replace("#", "right") for name in
+               MARKER_NAMES + JOINT_NAMES}
+
+
+def relabel_lineage(markers: np.ndarray, joint_angles: np.ndarray, stance_leg: np.ndarray, flipped: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A lineage (markers (F, M, 3), joint angles (F, J), stance legs (F,)) whose particle renamed its legs at the
+    frames ``flipped`` (F,) (``TrackerModel._flip_labels``), named throughout as at its last frame: every frame
+    before an odd number of later flips mirrored about its own sagittal plane (through the pelvis along the
+    heading, ``torso_yaw``) with left and right swapped, as the flip did to the frames after it. The naming is
+    then one walk's, and no foot jumps to the other side at a flip."""
+    later = np.cumsum(np.asarray(flipped, int)[::-1])[::-1] - np.asarray(flipped, int)   # flips after each frame
+    odd = later % 2 == 1
+    if not odd.any():
+        return markers, joint_angles, stance_leg
+    markers, joint_angles, stance_leg = markers.copy(), joint_angles.copy(), np.array(stance_leg).copy()
+    pelvis = markers[odd, MARKER_NAMES.index("pelvis"), None, :2]
+    heading = joint_angles[odd, JOINT_NAMES.index("torso_yaw")]
+    side = np.stack([-np.sin(heading), np.cos(heading)], axis=1)[:, None, :]      # the body's left, (F', 1, 2)
+    reflected = markers[odd].copy()
+    reflected[..., :2] -= 2.0 * np.sum((reflected[..., :2] - pelvis) * side, axis=-1, keepdims=True) * side
+    markers[odd] = reflected[:, [MARKER_NAMES.index(_OTHER_SIDE[n]) for n in MARKER_NAMES]]
+    angles = joint_angles[odd][:, [JOINT_NAMES.index(_OTHER_SIDE[n]) for n in JOINT_NAMES]]
+    angles[:, JOINT_NAMES.index("torso_roll")] *= -1.0
+    joint_angles[odd] = angles
+    stance_leg[odd] = 1 - stance_leg[odd]
+    return markers, joint_angles, stance_leg
+
+
 class PublishedPath:
     """Where the pose published frame by frame stands: the filtering MAP (the frame's highest-weight particle)
     shifted over the ground so that the live path does not jump when the MAP moves to another particle or a
@@ -663,7 +719,8 @@ class Tracker:
         out = self.model.outputs(step.states, step.info)
         payload = {"markers": out.markers.astype(np.float32), "joint_angles": out.joint_angles.astype(np.float32),
                    "stance_leg": out.stance_leg.copy(), "heel_strike": out.heel_strike.copy(),
-                   "strike_fraction": out.strike_fraction.astype(np.float32), "jump": step.states.jump.astype(np.float32)}
+                   "strike_fraction": out.strike_fraction.astype(np.float32), "jump": step.states.jump.astype(np.float32),
+                   "flipped": step.states.flipped.copy()}
         self.history.append(None if step.frame == 0 else step.ancestors, payload)
         self._last_step = step
         summary = summarize(frame_index, stamp_ns, step.log_weights, out, MARKER_NAMES, JOINT_NAMES,
@@ -677,17 +734,18 @@ class Tracker:
                        map_torso_position=summary.map_torso_position - shift)
 
     def map_trajectory(self) -> MapTrajectory:
-        """Lineage of the highest-weight particle of the last completed frame, re-seedings' jumps spread over the
-        frames before them (``smooth_jumps``)."""
+        """Lineage of the highest-weight particle of the last completed frame, its legs named throughout as at its end
+        (``relabel_lineage``), re-seedings' jumps spread over the frames before them (``smooth_jumps``)."""
         if self._last_step is None:
             raise ValueError("no frame has been completed yet")
         traj = self.history.trajectory(self._last_step.best_index)
         count = len(self.history)
         frames = np.array([f for f, _ in self._frames[:count]], np.int64)
         stamps = np.array([s for _, s in self._frames[:count]], np.int64)
-        markers, angles = smooth_jumps(traj["markers"].astype(float), traj["joint_angles"].astype(float),
-                                       traj["jump"].astype(float), self.model.config.dt)
-        return MapTrajectory(frames, stamps, markers, angles, traj["stance_leg"], traj["heel_strike"].astype(bool),
+        markers, angles, stance = relabel_lineage(traj["markers"].astype(float), traj["joint_angles"].astype(float),
+                                                  traj["stance_leg"], traj["flipped"])
+        markers, angles = smooth_jumps(markers, angles, traj["jump"].astype(float), self.model.config.dt)
+        return MapTrajectory(frames, stamps, markers, angles, stance, traj["heel_strike"].astype(bool),
                              traj["strike_fraction"].astype(float))
 
 

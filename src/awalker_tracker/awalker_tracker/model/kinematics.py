@@ -156,7 +156,7 @@ kinematics, rolling contact, heel strike, swing-foot clearance and the posed bod
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import NamedTuple
 
 import numba
@@ -497,6 +497,35 @@ def moved_on_ground(kin: KinematicState, centre_xy: np.ndarray, new_centre_xy: n
     moved.contact_point = carried(kin.contact_point)
     moved.plane_origin = carried(kin.plane_origin)
     return moved
+
+
+#: DOF pairs [left, right] of ``DOF_NAMES`` that a mirror swaps, and the torso roll it negates (``mirrored_legs``)
+_MIRROR_ORDER = np.array([DOF_NAMES.index(n.replace("left_", "#").replace("right_", "left_").replace("#", "right_"))
+                          for n in DOF_NAMES])
+_ROLL = DOF_NAMES.index("torso_roll")
+
+
+def mirrored_legs(walker: WalkerState, kin: KinematicState, pelvis_xy: np.ndarray, body: BodyDescription,
+                  params: WalkerParams, config: KinematicConfig | None = None) -> tuple[WalkerState, KinematicState]:
+    """The bodies of ``walker``/``kin`` with left and right named the other way round: the walker stands on the
+    other leg's name, the legs' DOFs swap sides and the torso's roll changes sign, so that each body is its own
+    mirror image about its sagittal plane, with its pelvis kept at ``pelvis_xy`` (N, 2) (m). Seen from one side
+    the near and the far leg look alike: the two namings are the ambiguity the tracker's posterior keeps
+    (``TrackerConfig.label_flip_rate_hz``). Joint angles, rates, the heading and the turn rate are kept."""
+    mirrored_walker = walker.copy()
+    mirrored_walker.stance_leg = (1 - walker.stance_leg).astype(np.int8)
+    dofs, previous = kin.dofs()[:, _MIRROR_ORDER], kin.previous[:, _MIRROR_ORDER]
+    dofs[:, _ROLL] *= -1.0
+    previous[:, _ROLL] *= -1.0
+    named = KinematicState.unpack(dofs)
+    mirrored = replace(kin.copy(), torso_lean=named["torso_lean"], hip_abduction=named["hip_abduction"],
+                       hip_rotation=named["hip_rotation"], knee=named["knee"], ankle=named["ankle"], previous=previous,
+                       contact_leg=(1 - kin.contact_leg).astype(np.int8))
+    moved = pose_body(body, params, mirrored_walker, mirrored, config).markers[:, MARKER_NAMES.index("pelvis"), :2]
+    shift = np.asarray(pelvis_xy, float) - moved
+    mirrored.contact_point = mirrored.contact_point + shift
+    mirrored.plane_origin = mirrored.plane_origin + shift
+    return mirrored_walker, mirrored
 
 
 def initial_kinematics(
