@@ -143,3 +143,21 @@ def test_a_lineage_that_renamed_its_legs_is_named_throughout_as_it_ends():
     again, _, again_stance = relabel_lineage(lineage, lineage_angles, lineage_stance, twice)
     np.testing.assert_allclose(again[:6], lineage[:6])
     np.testing.assert_array_equal(again_stance[:6], stance[:6])
+
+
+def test_walkers_replaced_after_a_fall_or_renamed_continue_their_own_lineage_and_record_the_jump():
+    """A fallen walker's replacement (and a particle that renamed its legs) stays in its row's lineage
+    (``continues`` is each row itself) and records how far it moved (the MAP trajectory spreads it)."""
+    from dataclasses import replace
+
+
+    model, walk = _walking_particles(30, 5)
+    model.config = replace(model.config, label_flip_rate_hz=10.0)    # a third of the particles each frame
+    states = walk[-1]
+    fallen = np.zeros(30, bool)
+    fallen[::3] = True
+    states = replace(states, fallen=fallen)
+    moved, _ = model.transition(states, np.random.default_rng(1))
+    np.testing.assert_array_equal(moved.continues, np.arange(30))
+    assert np.all(np.linalg.norm(moved.jump[fallen, :2], axis=1) > 0) and not moved.fallen.any()
+    assert 0 < moved.flipped.sum() < 30

@@ -485,7 +485,8 @@ class TrackerModel:
         if self.config.label_flip_rate_hz > 0:
             new = self._flip_labels(new, np.flatnonzero(rng.random(len(new)) < self.config.label_flip_rate_hz
                                                         * self.config.dt))
-        return new, events
+        # each particle continues its own walk (the rows put above came with their own, meaningless here)
+        return replace(new, continues=np.arange(len(new))), events
 
     def _flip_labels(self, states: TrackerStates, rows: np.ndarray) -> TrackerStates:
         """The particles ``rows`` with their legs named the other way round (``kinematics.mirrored_legs``: each body
