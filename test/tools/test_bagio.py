@@ -12,7 +12,6 @@ from awalker_tools.bagio import (
     START_DESCRIPTION_TOPIC,
     SequenceReader,
     SequenceWriter,
-    decode_image,
     torso_quaternion,
 )
 from awalker_tools.typestore import typestore
@@ -196,24 +195,6 @@ def test_bag_without_camera_info_or_pose(tmp_path: Path) -> None:
     with SequenceReader(only_text) as reader:
         with pytest.raises(InputError, match=r"no camera found: expected /<cam>/camera_info"):
             reader.cameras
-
-
-def test_unknown_encoding_names_the_topic() -> None:
-    types = typestore().types
-    header = types["std_msgs/msg/Header"](types["builtin_interfaces/msg/Time"](0, 0), "f")
-    msg = types["sensor_msgs/msg/Image"](header, 2, 2, "32FC1", 0, 8, np.zeros(16, np.uint8))
-    with pytest.raises(InputError, match=r"/cam0/image_raw: unsupported image encoding '32FC1'"):
-        decode_image(msg, "sensor_msgs/msg/Image", "/cam0/image_raw")
-    bgr = types["sensor_msgs/msg/Image"](header, 1, 2, "bgr8", 0, 8, np.array([1, 2, 3, 4, 5, 6, 0, 0], np.uint8))
-    np.testing.assert_array_equal(decode_image(bgr, "sensor_msgs/msg/Image", "t"), [[[3, 2, 1], [6, 5, 4]]])
-    mono = types["sensor_msgs/msg/Image"](header, 1, 2, "mono8", 0, 2, np.array([9, 200], np.uint8))
-    np.testing.assert_array_equal(decode_image(mono, "sensor_msgs/msg/Image", "t"), [[[9] * 3, [200] * 3]])
-    comp = types["sensor_msgs/msg/CompressedImage"](header, "tiff", np.zeros(4, np.uint8))
-    with pytest.raises(InputError, match="/c: unsupported compressed image format 'tiff'"):
-        decode_image(comp, "sensor_msgs/msg/CompressedImage", "/c")
-    short = types["sensor_msgs/msg/Image"](header, 4, 4, "rgb8", 0, 12, np.zeros(10, np.uint8))
-    with pytest.raises(InputError, match="too short"):
-        decode_image(short, "sensor_msgs/msg/Image", "/s")
 
 
 def test_typestore_hashes_match_rclpy_generated_types() -> None:

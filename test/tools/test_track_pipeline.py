@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -551,3 +552,65 @@ def test_a_start_without_stance_leg_has_it_fitted_in_a_first_pass(synth_bag: Pat
                  "--start", str(unknown), "--no-fit-body"]) == 0
     assert not (plain / "first_pass").exists() and "body_fit" not in yaml.safe_load((plain / "run.yaml").read_text())
     assert StartDescription.from_yaml(plain / "start.yaml").stance_leg is None
+
+
+def _rewrite_images(source: Path, target: Path, image: Any) -> None:
+    """``source`` copied to ``target`` message for message, each camera image replaced by ``image(rgb, msg)`` (a
+    (topic suffix, message type, message) triple: the same camera, another encoding or format string)."""
+    from rosbags.rosbag2 import Writer
+
+    from awalker_tools.bagio import COMPRESSED_IMAGE, IMAGE, SequenceReader, iter_messages
+    from awalker_tools.typestore import typestore
+    from awalker_tracker.vision.decode import decode_image
+
+    store = typestore()
+    with SequenceReader(source) as reader, Writer(target, version=9) as writer:
+        made: dict[str, Any] = {}
+        for conn, stamp, raw in iter_messages(reader.reader, source, reader.reader.connections):
+            topic, msgtype, msg = conn.topic, conn.msgtype, None
+            if msgtype in (IMAGE, COMPRESSED_IMAGE) and "/image_raw" in topic:
+                old = store.deserialize_cdr(raw, msgtype)
+                suffix, msgtype, msg = image(decode_image(old, topic), old)
+                topic = topic.split("/image_raw")[0] + "/image_raw" + suffix
+            if topic not in made:
+                made[topic] = writer.add_connection(topic, msgtype, typestore=store,
+                                                    offered_qos_profiles=conn.ext.offered_qos_profiles)
+            writer.write(made[topic], stamp, raw if msg is None else store.serialize_cdr(msg, msgtype))
+
+
+def test_rgba8_and_unnamed_jpeg_bags_track_with_overlays(synth_bag: Path, tmp_path: Path):
+    """Images the tracker reads as the bag reader reads them (one decoder, vision.decode): an rgba8 bag and a JPEG
+    bag whose format string names no codec both track to the end, overlays drawn and run.yaml written."""
+    import cv2
+
+    from awalker_tools.bagio import COMPRESSED_IMAGE, IMAGE
+    from awalker_tools.typestore import typestore
+
+    types = typestore().types
+
+    def rgba8(rgb: np.ndarray, old: Any) -> tuple[str, str, Any]:
+        pixels = np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=2)
+        h, w = rgb.shape[:2]
+        return "", IMAGE, types[IMAGE](old.header, h, w, "rgba8", 0, 4 * w, pixels.reshape(-1))
+
+    def unnamed_jpeg(rgb: np.ndarray, old: Any) -> tuple[str, str, Any]:
+        data = cv2.imencode(".jpg", rgb[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 95])[1].reshape(-1)
+        return "/compressed", COMPRESSED_IMAGE, types[COMPRESSED_IMAGE](old.header, "rgb8", data)
+
+    for name, image in (("rgba8", rgba8), ("jpeg", unnamed_jpeg)):
+        bag = tmp_path / name / "walk.bag"
+        bag.parent.mkdir()
+        _rewrite_images(synth_bag, bag, image)
+        out = tmp_path / f"run_{name}"
+        assert main(["track", str(bag), "--out", str(out), "--particles", "100"]) == 0, name
+        run = yaml.safe_load((out / "run.yaml").read_text())
+        assert run["posteriors"] == FRAMES and run["features"]["cam0"]["foreground_labels"] == "start pose", name
+        overlays = sorted((out / "overlay").glob("frame_*.png"))
+        assert len(overlays) == FRAMES and (out / "overlay.mp4").stat().st_size > 0, name
+        assert cv2.imread(str(overlays[0])).shape == (120, 160, 3)
+    from awalker_tools.bagio import SequenceReader
+
+    with SequenceReader(tmp_path / "rgba8" / "walk.bag") as reader:
+        assert reader.topics["/cam0/image_raw"] == IMAGE
+    with SequenceReader(tmp_path / "jpeg" / "walk.bag") as reader:
+        assert next(m for _, _, _, m in reader.messages(["/cam0/image_raw/compressed"])).format == "rgb8"
