@@ -197,6 +197,27 @@ def test_bag_without_camera_info_or_pose(tmp_path: Path) -> None:
             reader.cameras
 
 
+def test_a_bad_calibration_in_the_bag_names_the_bag_and_topic(tmp_path: Path) -> None:
+    """The bag reader builds its cameras with the one validated builder (vision.camera.camera_from_info)."""
+    good = two_cameras()[0]
+    for name, cam, where, message in (
+            ("nan_k", Camera(good.name, good.width, good.height, good.K * np.array([[np.nan, 1, 1], [1, 1, 1], [1, 1, 1]]),
+                             good.distortion, good.rotation, good.position),
+             "/cam0/camera_info: k", "NaN or infinity"),
+            ("three_d", Camera(good.name, good.width, good.height, good.K, np.array([0.1, 0.0, 0.0]), good.rotation,
+                               good.position),
+             "/cam0/camera_info", "distortion model 'plumb_bob' takes 0 or 4 or 5 finite coefficients"),
+            ("nan_position", Camera(good.name, good.width, good.height, good.K, good.distortion, good.rotation,
+                                    np.array([np.nan, 0.0, 1.0])),
+             "/tf_static (world -> cam0_optical_frame): position", "NaN or infinity")):
+        bag = tmp_path / name
+        write_sequence(bag, [cam], frames=1)
+        with SequenceReader(bag) as reader:
+            with pytest.raises(InputError) as err:
+                reader.cameras
+        assert str(err.value).startswith(f"{bag}: {where}: ") and message in str(err.value), str(err.value)
+
+
 def test_typestore_hashes_match_rclpy_generated_types() -> None:
     import json
     import sys

@@ -34,7 +34,7 @@ from rosbags.rosbag2.errors import ReaderError, WriterError
 from scipy.spatial.transform import Rotation
 
 from awalker_tracker.errors import InputError
-from awalker_tracker.vision.camera import Camera, camera_from_dict
+from awalker_tracker.vision.camera import Camera, camera_from_info
 from awalker_tracker.vision.decode import decode_image, decode_mono8
 
 from awalker_tools.typestore import typestore
@@ -397,20 +397,15 @@ def iter_messages(
         raise InputError(f"{path}: corrupt or truncated bag ({type(exc).__name__}: {exc})") from None
 
 
-def camera_from_messages(info: Any, transform: Any | None, name: str) -> Camera:
-    """A Camera from a CameraInfo (intrinsics) and a world -> optical-frame TransformStamped."""
+def camera_from_messages(info: Any, transform: Any | None, name: str, source: str = "") -> Camera:
+    """A validated Camera (``vision.camera.camera_from_info``) from a CameraInfo and the world -> optical-frame
+    TransformStamped of /tf_static; errors name ``source`` (the bag) and the topic."""
+    prefix = f"{source}: " if source else ""
     if transform is None:
-        raise InputError(f"{TF_STATIC_TOPIC}: no transform {WORLD_FRAME} -> {name}_optical_frame (camera pose)")
+        raise InputError(f"{prefix}{TF_STATIC_TOPIC}: no transform {WORLD_FRAME} -> {name}_optical_frame (camera pose)")
     t, q = transform.transform.translation, transform.transform.rotation
-    entry = {
-        "name": name,
-        "width": int(info.width),
-        "height": int(info.height),
-        "K": np.asarray(info.k, float).reshape(3, 3).tolist(),
-        "distortion": np.asarray(info.d, float).tolist(),
-        "pose": {"position": [t.x, t.y, t.z], "orientation": [q.x, q.y, q.z, q.w]},
-    }
-    return camera_from_dict(entry, camera_info_topic(name))
+    return camera_from_info(name, info, (t.x, t.y, t.z), (q.x, q.y, q.z, q.w), f"{prefix}{camera_info_topic(name)}",
+                            f"{prefix}{TF_STATIC_TOPIC} ({WORLD_FRAME} -> {name}_optical_frame)")
 
 
 class SequenceReader:
@@ -515,7 +510,7 @@ class SequenceReader:
                 if self.image_topic_of(name) is None:
                     raise InputError(f"{self.path}: camera {name} has no images: expected {image_topic(name, False)} "
                                      f"({IMAGE}) or {image_topic(name, True)} ({COMPRESSED_IMAGE})")
-                cameras.append(camera_from_messages(info, tf, name))
+                cameras.append(camera_from_messages(info, tf, name, str(self.path)))
             self._cameras = cameras
         return self._cameras
 

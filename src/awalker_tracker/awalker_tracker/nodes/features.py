@@ -263,7 +263,11 @@ class FeatureNode(AwalkerNode):
         if not (self.use_start_pose and self._labels is None and self.extractor.learns_foreground_next
                 and self._start is not None and self._info is not None and self._pose is not None):
             return None
-        camera = camera_from_msgs(self.camera_name, self._info, self._pose)
+        try:
+            camera = camera_from_msgs(self.camera_name, self._info, self._pose)
+        except InputError as exc:
+            self.get_logger().error(f"{exc}; learning the foreground from height bands")
+            return None
         if (camera.height, camera.width) != rgb.shape[:2]:
             self.get_logger().error(f"/{self.camera_name}/camera_info says {camera.width}x{camera.height}, images are "
                                     f"{rgb.shape[1]}x{rgb.shape[0]}; learning the foreground from height bands")

@@ -188,6 +188,7 @@ class TrackerNode(AwalkerNode):
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self._infos: dict[str, CameraInfo] = {}
         self._poses: dict[str, PoseStamped] = {}
+        self._camera_errors: dict[str, str] = {}    # camera -> the last error its camera_info + camera_pose gave
         if not self.cameras:
             for cam in self.camera_names:
                 self.create_subscription(CameraInfo, f"/{cam}/camera_info",
@@ -220,7 +221,12 @@ class TrackerNode(AwalkerNode):
             return
         for cam in self.camera_names:
             if cam in self._infos and cam in self._poses and cam not in self.cameras:
-                self.cameras[cam] = camera_from_msgs(cam, self._infos[cam], self._poses[cam])
+                try:
+                    self.cameras[cam] = camera_from_msgs(cam, self._infos[cam], self._poses[cam])
+                except InputError as exc:           # logged once per distinct error; the next message may do
+                    if self._camera_errors.get(cam) != str(exc):
+                        self._camera_errors[cam] = str(exc)
+                        self.get_logger().error(f"{exc}; camera {cam} not used until a valid calibration arrives")
         self._process_pending()
 
     def _on_start(self, msg: String) -> None:
