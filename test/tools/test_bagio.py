@@ -8,7 +8,6 @@ import pytest
 
 from awalker_tools.bagio import (
     GROUND_TRUTH_TOPIC,
-    MARKER_NAMES,
     START_DESCRIPTION_TOPIC,
     SequenceReader,
     SequenceWriter,
@@ -16,6 +15,7 @@ from awalker_tools.bagio import (
 )
 from awalker_tools.typestore import typestore
 from awalker_tracker.errors import InputError
+from awalker_tracker.model.body import MARKER_NAMES
 from awalker_tracker.vision.camera import Camera
 from scipy.spatial.transform import Rotation
 

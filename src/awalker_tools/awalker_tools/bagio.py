@@ -34,6 +34,7 @@ from rosbags.rosbag2.errors import ReaderError, WriterError
 from scipy.spatial.transform import Rotation
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.model.body import MARKER_NAMES
 from awalker_tracker.vision.camera import Camera, camera_from_info
 from awalker_tracker.vision.decode import decode_image, decode_mono8
 
@@ -45,10 +46,6 @@ GROUND_TRUTH_TOPIC = "/awalker/ground_truth"
 START_DESCRIPTION_TOPIC = "/awalker/start_description"
 BODY_DESCRIPTION_TOPIC = "/awalker/body_description"
 LATCHED_TOPICS = (TF_STATIC_TOPIC, START_DESCRIPTION_TOPIC, BODY_DESCRIPTION_TOPIC)
-MARKER_NAMES = (
-    "pelvis", "thorax", "head", "left_hip", "right_hip", "left_knee", "right_knee",
-    "left_ankle", "right_ankle", "left_heel", "right_heel", "left_toe", "right_toe",
-)  # fmt: skip
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
