@@ -431,15 +431,74 @@ def test_track_fit_body_option_reaches_the_pipeline(tmp_path: Path, monkeypatch)
         assert seen[-1].fit_body is expected
     # --depth-band reaches the pipeline too (None: the tracker node's default, RecoveryConfig's)
     assert seen[-1].depth_band_m is None
-    # without --particles the run gets the one default (awalker_tools.TRACK_PARTICLES), as TrackOptions has it
-    from awalker_tools import TRACK_PARTICLES
-    assert seen[-1].particles == TRACK_PARTICLES == pipeline.TrackOptions(Path("b"), Path("o")).particles
     assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--depth-band", "0"]) == 0
     assert seen[-1].depth_band_m == 0.0
     # --pelvis-ceiling too (None: the tracker's default by camera count)
     assert seen[-1].pelvis_ceiling is None
     assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--pelvis-ceiling", "0.97"]) == 0
     assert seen[-1].pelvis_ceiling == 0.97
+
+
+def test_node_and_command_line_read_one_set_of_defaults(tmp_path: Path, monkeypatch, ros_context, capsys):
+    """`awalker track` (its options, TrackOptions) and the tracker node (its parameters) take their defaults from
+    one profile of inference.profiles: the default one, or the one named (--profile / profile:=)."""
+    from rclpy.parameter import Parameter
+
+    from awalker_tools import pipeline
+    from awalker_tracker.errors import InputError
+    from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES
+    from awalker_tracker.nodes.tracker import TrackerNode
+
+    def of_options(options: pipeline.TrackOptions) -> dict:
+        return {"num_particles": options.particles, "lookahead": options.lookahead, "trust": options.trust,
+                "seed": options.seed, "likelihood_scale": options.likelihood_scale,
+                "leg_scale_spread": options.leg_scale_spread, "recovery": options.recovery}
+
+    def of_node(node: TrackerNode) -> dict:
+        smc, recovery = node.smc_config, node.recovery
+        return {"num_particles": smc.num_particles, "lookahead": smc.lookahead, "trust": smc.trust,
+                "resample_fraction": smc.resample_fraction, "resampling": smc.resampling, "seed": smc.seed,
+                "likelihood_scale": node.likelihood_scale, "leg_scale_spread": node.leg_scale_spread,
+                "reseed_fallen": recovery.reseed_fallen, "reacquire": recovery.reacquire,
+                "hold_still": recovery.hold_still, "depth_band_m": recovery.depth_band_m}
+
+    def of_profile(name: str, keys: dict) -> dict:
+        profile = PROFILES[name]
+        return {k: getattr(profile, k) for k in keys}
+
+    seen = []
+    monkeypatch.setattr(pipeline, "run_tracking", lambda options: seen.append(options))
+    assert DEFAULT_PROFILE == "accurate" and PROFILES["accurate"].num_particles == 15000
+    assert PROFILES["realtime"].num_particles == 5000
+    default_options = of_options(pipeline.TrackOptions(Path("b"), Path("o")))
+    assert default_options == of_profile(DEFAULT_PROFILE, default_options)
+    for profile in PROFILES:
+        extra = [] if profile == DEFAULT_PROFILE else ["--profile", profile]
+        assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), *extra]) == 0
+        assert seen[-1].profile == profile and of_options(seen[-1]) == of_profile(profile, default_options)
+        overrides = [] if profile == DEFAULT_PROFILE else [Parameter("profile", value=profile)]
+        node = TrackerNode(context=ros_context, parameter_overrides=[Parameter("cameras", value=["cam0"]), *overrides])
+        try:
+            assert of_node(node) == of_profile(profile, of_node(node))
+        finally:
+            node.destroy_node()
+    # an option or parameter given wins over the profile
+    assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--profile", "realtime",
+                 "--particles", "700", "--no-recovery"]) == 0
+    assert seen[-1].particles == 700 and not seen[-1].recovery and seen[-1].lookahead == PROFILES["realtime"].lookahead
+    node = TrackerNode(context=ros_context, parameter_overrides=[
+        Parameter("cameras", value=["cam0"]), Parameter("profile", value="realtime"), Parameter("num_particles", value=700)])
+    try:
+        assert node.smc_config.num_particles == 700
+    finally:
+        node.destroy_node()
+    # an unknown profile is refused, naming it and the choices
+    with pytest.raises(InputError, match=r"parameter 'profile': unknown profile 'fast'; expected one of accurate, realtime"):
+        TrackerNode(context=ros_context, parameter_overrides=[Parameter("cameras", value=["cam0"]),
+                                                              Parameter("profile", value="fast")])
+    with pytest.raises(SystemExit):
+        main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--profile", "fast"])
+    assert "invalid choice: 'fast'" in capsys.readouterr().err
 
 
 JUNK_PUBLISHER = """
