@@ -9,7 +9,9 @@ import numpy as np
 from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import MARKER_NAMES, SKELETON_EDGES, BodyDescription, BodySegments
 from awalker_tracker.vision.camera import Camera
-from awalker_tracker.vision.render import DEFAULT_COLOURS, render_labels
+from awalker_tracker.vision.render import render_labels
+
+from awalker_tools.model_render import DEFAULT_COLOURS
 
 _INDEX = {n: i for i, n in enumerate(MARKER_NAMES)}
 _LEFT_COLOUR = (60, 220, 60)
