@@ -121,7 +121,7 @@ class TrackOptions:
     auto_start: bool = False        # ignore any start description and find the walking person (also when none exists)
     follow_near: tuple[float, float] | None = None   # automatic start: follow the person first seen near this ground point (m)
     recovery: bool = DEFAULTS.recovery   # re-seed fallen walkers, re-acquire a lost track, hold still (recovery.py)
-    depth_band_m: float | None = None   # one camera: the feet row's depth band (None: RecoveryConfig's, 0.3 m); off without recovery
+    depth_band_m: float | None = None   # one camera: the feet row's depth band (None: the profile's); off without recovery
     overlays: bool = True
     # two passes, the second with the leg length fitted to the first one's images (module docstring);
     # None: when no body description is found, so that the body would only be scaled to the seen height
@@ -524,7 +524,8 @@ def _track_once(options: TrackOptions, reader: Any, body_fit: dict | None = None
     result.seconds_pictures = time.monotonic() - started - result.seconds
     (out / RUN_FILE).write_text(yaml.safe_dump({
         "input": str(bag.resolve()), "start_source": start_src, "body_source": body_src,
-        "profile": options.profile, "particles": options.particles, "lookahead": options.lookahead, "trust": options.trust, "seed": options.seed,
+        "profile": options.profile, "particles": options.particles, "lookahead": options.lookahead,
+        "trust": options.trust, "seed": options.seed,
         "likelihood_scale": options.likelihood_scale, "leg_scale_spread": options.leg_scale_spread,
         "pelvis_ceiling": (options.pelvis_ceiling if options.pelvis_ceiling is not None
                            else TrackerConfig().pelvis_ceiling_for(len(cameras))[0]),

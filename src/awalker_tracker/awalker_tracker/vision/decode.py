@@ -71,9 +71,9 @@ def decode_raw(encoding: str, width: int, height: int, step: int, data: Any, whe
     return np.ascontiguousarray(rows[..., :3])
 
 
-def decode_compressed(data: Any, where: str, format: str = "") -> np.ndarray:
+def decode_compressed(data: Any, where: str, fmt: str = "") -> np.ndarray:
     """(H, W, 3) uint8 RGB from the data of a sensor_msgs/CompressedImage, JPEG or PNG by its bytes
-    (``format`` is only quoted in errors)."""
+    (``fmt``, the message's format string, is only quoted in errors)."""
     raw = _bytes(data)
     head = raw[:8].tobytes()
     if head.startswith(JPEG_MAGIC):
@@ -81,12 +81,12 @@ def decode_compressed(data: Any, where: str, format: str = "") -> np.ndarray:
     elif head.startswith(PNG_MAGIC):
         kind = "PNG"
     else:
-        raise InputError(f"{where}: compressed image data ({raw.size} bytes, format {format!r}) is neither JPEG "
+        raise InputError(f"{where}: compressed image data ({raw.size} bytes, format {fmt!r}) is neither JPEG "
                          f"nor PNG: it starts {head.hex(' ') or 'with nothing'}; expected ff d8 ff (JPEG) or "
                          f"89 50 4e 47 0d 0a 1a 0a (PNG)")
     rgb = cv2.imdecode(raw, cv2.IMREAD_COLOR_RGB)
     if rgb is None:
-        raise InputError(f"{where}: corrupt or truncated {kind} data ({raw.size} bytes, format {format!r})")
+        raise InputError(f"{where}: corrupt or truncated {kind} data ({raw.size} bytes, format {fmt!r})")
     return rgb
 
 
