@@ -15,7 +15,8 @@ Prints ONE JSON document on stdout; progress and a summary table go to stderr. E
 pelvis, thorax, hips, knees and ankles (absolute, and relative = pelvis-aligned), statistics over
 frames. Stance leg: `stance_leg_correct_fraction` is `awalker eval`'s (true stance = the
 planted foot, double support not scored). Speed: medians and the mean
-per-frame |estimated - true| (true = pelvis ground speed over ~1 stride).
+per-frame |estimated - true| (true = the truth's pelvis by the tracker's definition, inference.speed:
+horizontal displacement per frame averaged over about one step).
 
     .venv/bin/python benchmarks/bench_accuracy.py                  # 90 frames, 640x480, tracker default particles
     .venv/bin/python benchmarks/bench_accuracy.py --quick          # 40 frames, 320x240, 500 particles

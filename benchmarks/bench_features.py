@@ -25,8 +25,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test" / "vision"))
 from vision_scene import BODY, background_image, noisy, render_frames, side_camera, walking_poses  # noqa: E402
 
 from awalker_tracker.nodes.convert import header  # noqa: E402
-from awalker_tracker.nodes.features import features_to_msg, image_from_msg  # noqa: E402
+from awalker_tracker.nodes.features import features_to_msg  # noqa: E402
 from awalker_tracker.vision.background import measurements  # noqa: E402
+from awalker_tracker.vision.decode import decode_image  # noqa: E402
 from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor  # noqa: E402
 from awalker_tracker.vision.flow import GridFlow, to_grey  # noqa: E402
 from awalker_tracker.vision.render import render  # noqa: E402
@@ -199,7 +200,7 @@ def main() -> None:
     started, cpu_started = time.perf_counter(), time.process_time()
     for k in range(args.frames):
         t0 = time.perf_counter()
-        rgb = image_from_msg(msgs[k % len(msgs)])
+        rgb = decode_image(msgs[k % len(msgs)], "/cam/image_raw")
         t1 = time.perf_counter()
         feats = extractor.process(rgb)
         t2 = time.perf_counter()

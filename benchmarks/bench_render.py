@@ -28,7 +28,9 @@ from awalker_tracker.model.kinematics import (
 )
 from awalker_tracker.model.walker import LEFT
 from awalker_tracker.vision.camera import Camera
-from awalker_tracker.vision.render import render_labels, render_rgb
+from awalker_tracker.vision.render import render_labels
+
+from awalker_tools.model_render import render_rgb
 
 BODY = BodyDescription.default()
 PARAMS = BODY.walker_params()

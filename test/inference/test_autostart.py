@@ -118,7 +118,8 @@ def test_a_person_standing_still_does_not_start_it(frames):
 def two_walking():
     """The side camera's features of two people walking along +x: A from x = -0.8 m as in ``frames``, B from
     x = 0.2 m and 0.8 m nearer the camera (its blob the larger)."""
-    from awalker_tracker.vision.render import render, render_rgb
+    from awalker_tools.model_render import render_rgb
+    from awalker_tracker.vision.render import render
 
     camera, background, rng, extractor = side_scene()
     a, b = walking(30, x0=-0.8), walking(30, x0=0.2)

@@ -161,7 +161,8 @@ def test_a_second_larger_person_does_not_count_as_losing_the_first():
     at x = -0.5 m. The track on the first is not lost; a track on neither is."""
     from awalker_tracker.vision.detection import person_blobs
     from awalker_tracker.vision.features import FeatureExtractor
-    from awalker_tracker.vision.render import render, render_rgb
+    from awalker_tools.model_render import render_rgb
+    from awalker_tracker.vision.render import render
     from test_detection import CONFIG
     from vision_scene import background_image, noisy
 

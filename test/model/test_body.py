@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from awalker_tracker.errors import InputError
-from awalker_tracker.model.body import MARKER_NAMES, PART_CLASSES, PART_NAMES, BodyDescription
+from awalker_tracker.model.body import MARKER_NAMES, PART_CLASSES, PART_NAMES, SKELETON_EDGES, BodyDescription
 from awalker_tracker.model.walker import WalkerParams
 
 
@@ -63,3 +63,17 @@ def test_bad_yaml_names_the_file_and_the_problem(tmp_path, text, message):
 def test_missing_file_is_an_input_error(tmp_path):
     with pytest.raises(InputError, match="cannot read body description"):
         BodyDescription.from_yaml(tmp_path / "nope.yaml")
+
+
+def test_the_skeleton_joins_every_marker_once_per_edge():
+    assert all(a in MARKER_NAMES and b in MARKER_NAMES and a != b for a, b in SKELETON_EDGES)
+    assert len({frozenset(e) for e in SKELETON_EDGES}) == len(SKELETON_EDGES) == 14
+    reached, frontier = {"pelvis"}, ["pelvis"]           # one connected figure
+    while frontier:
+        here = frontier.pop()
+        for a, b in SKELETON_EDGES:
+            for near, far in ((a, b), (b, a)):
+                if near == here and far not in reached:
+                    reached.add(far)
+                    frontier.append(far)
+    assert reached == set(MARKER_NAMES)

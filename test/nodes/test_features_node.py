@@ -56,32 +56,6 @@ def image_msg(rgb: np.ndarray, stamp_ns: int, encoding: str = "rgb8"):
     return msg
 
 
-def test_image_conversion_and_errors():
-    from sensor_msgs.msg import CompressedImage
-
-    from awalker_tracker.nodes.features import image_from_msg
-
-    rng = np.random.default_rng(1)
-    rgb = rng.integers(0, 255, (6, 5, 3), dtype=np.uint8)
-    assert np.array_equal(image_from_msg(image_msg(rgb, 1)), rgb)
-    assert np.array_equal(image_from_msg(image_msg(rgb, 1, "bgr8")), rgb)
-    png = CompressedImage(format="png")
-    png.data = cv2.imencode(".png", rgb[..., ::-1])[1].tobytes()
-    assert np.array_equal(image_from_msg(png), rgb)
-    bad = image_msg(rgb, 1)
-    bad.encoding = "yuv422"
-    with pytest.raises(InputError, match=r"/cam/image_raw: unsupported encoding 'yuv422'; expected one of rgb8"):
-        image_from_msg(bad, "/cam/image_raw")
-    short = image_msg(rgb, 1)
-    short.height = 9
-    with pytest.raises(InputError, match="bytes"):
-        image_from_msg(short, "/cam/image_raw")
-    junk = CompressedImage(format="jpeg")
-    junk.data = b"not an image"
-    with pytest.raises(InputError, match="cannot decode"):
-        image_from_msg(junk, "/cam/image_raw/compressed")
-
-
 def test_features_message_roundtrip():
     from awalker_tracker.nodes.convert import header
     from awalker_tracker.nodes.features import features_from_msg, features_to_msg

@@ -250,3 +250,20 @@ def test_heel_strikes_become_gait_steps(ros_context):
         executor.shutdown()
         node.destroy_node()
         probe.destroy_node()
+
+
+def test_the_skeleton_lines_are_the_body_models_edges():
+    """The pose publisher's skeleton lines join the MAP markers along model.body.SKELETON_EDGES, as the overlays
+    draw them (one edge list)."""
+    from visualization_msgs.msg import Marker
+
+    from awalker_tracker.model.body import SKELETON_EDGES
+    from awalker_tracker.nodes.convert import summary_to_msg
+    from awalker_tracker.nodes.pose_publisher import MarkerBuilder, body_cylinders
+
+    s = make_summary(10, 0, np.random.default_rng(2))
+    array = MarkerBuilder(body_cylinders(BodyDescription.default())).build(summary_to_msg(s))
+    lines, = [m for m in array.markers if m.type == Marker.LINE_LIST]
+    got = np.array([[p.x, p.y, p.z] for p in lines.points])
+    want = np.array([s.map_markers[MARKER_NAMES.index(name)] for edge in SKELETON_EDGES for name in edge])
+    np.testing.assert_allclose(got, want)

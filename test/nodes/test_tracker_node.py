@@ -178,3 +178,58 @@ def test_a_start_without_stance_leg_takes_the_fitted_one_at_its_frame(ros_contex
         assert used == RIGHT and StartDescription.from_yaml(tracker_files / "used.yaml").stance_leg == RIGHT
     else:
         assert used is None and not (tracker_files / "used.yaml").exists()
+
+
+def test_a_bad_camera_info_is_logged_and_not_used(ros_context):
+    """Cameras from /<cam>/camera_info + /<cam>/camera_pose go through the one validated builder
+    (vision.camera.camera_from_info): a NaN in K is refused (the node carries on) until a valid one comes."""
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import CameraInfo
+
+    from awalker_tracker.nodes.tracker import TrackerNode
+
+    node = TrackerNode(context=ros_context, parameter_overrides=[Parameter("cameras", value=["cam0"]),
+                                                                 Parameter("num_particles", value=50)])
+    probe = Node("probe", context=ros_context)
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    info_pub = probe.create_publisher(CameraInfo, "/cam0/camera_info", QoSProfile(depth=10))
+    pose_pub = probe.create_publisher(PoseStamped, "/cam0/camera_pose", latched)
+    errors: list[str] = []
+    node.get_logger().error = lambda text, **_: errors.append(text)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(probe)
+
+    def spin_until(done, timeout: float = 5.0) -> None:
+        deadline = time.monotonic() + timeout
+        while not done() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+
+    try:
+        pose = PoseStamped()
+        pose.header.frame_id = "world"
+        pose.pose.position.y, pose.pose.position.z = -5.0, 1.5
+        pose.pose.orientation.x, pose.pose.orientation.w = -0.70710678, 0.70710678
+        pose_pub.publish(pose)
+        bad = CameraInfo(width=80, height=64, distortion_model="plumb_bob")
+        bad.k = [float("nan"), 0.0, 40.0, 0.0, 60.0, 32.0, 0.0, 0.0, 1.0]
+        spin_until(lambda: info_pub.get_subscription_count() > 0)
+        for _ in range(3):                             # one error logged, however often it comes
+            info_pub.publish(bad)
+            spin_until(lambda: False, 0.3)
+        assert node.cameras == {} and len(errors) == 1
+        assert errors[0].startswith("/cam0/camera_info: k: contains NaN or infinity") and "not used" in errors[0]
+        good = CameraInfo(width=80, height=64, distortion_model="plumb_bob")
+        good.k = [60.0, 0.0, 40.0, 0.0, 60.0, 32.0, 0.0, 0.0, 1.0]
+        info_pub.publish(good)
+        spin_until(lambda: "cam0" in node.cameras)
+        np.testing.assert_allclose(node.cameras["cam0"].position, [0.0, -5.0, 1.5])
+        np.testing.assert_allclose(node.cameras["cam0"].rotation[:, 2], [0.0, 1.0, 0.0], atol=1e-7)  # looks along +y
+    finally:
+        executor.shutdown()
+        probe.destroy_node()
+        node.destroy_node()

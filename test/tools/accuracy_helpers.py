@@ -10,12 +10,11 @@ from awalker_tools.commands.eval import load_truth
 
 
 def speed_error(run_dir: Path, truth_source: Path) -> float:
-    """Mean |estimated - true| walking speed over the tracked frames (m/s); the true speed is the
-    pelvis ground speed over about one stride, as `awalker eval` plots it. Truth: CSV or bag."""
+    """Mean |estimated - true| walking speed over the tracked frames (m/s); the true speed is the truth's
+    pelvis by the tracker's own definition (``inference.speed``), as `awalker eval` plots it. Truth: CSV or bag."""
     truth = load_truth(Path(truth_source))
     summary = evaluation.read_summary_csv(Path(run_dir) / "summary.csv")
-    rate = 1e9 / float(np.median(np.diff(truth.stamps_ns)))
-    true_speed = dict(zip(truth.stamps_ns.tolist(), evaluation.pelvis_speed(truth, rate).tolist()))
+    true_speed = dict(zip(truth.stamps_ns.tolist(), evaluation.track_speed(truth).tolist()))
     errors = [abs(s - true_speed[t]) for t, s in zip(summary["stamp_ns"].tolist(), summary["speed"].tolist())
               if t in true_speed]
     return float(np.mean(errors)) if errors else float("nan")

@@ -8,15 +8,14 @@ import pytest
 
 from awalker_tools.bagio import (
     GROUND_TRUTH_TOPIC,
-    MARKER_NAMES,
     START_DESCRIPTION_TOPIC,
     SequenceReader,
     SequenceWriter,
-    decode_image,
     torso_quaternion,
 )
 from awalker_tools.typestore import typestore
 from awalker_tracker.errors import InputError
+from awalker_tracker.model.body import MARKER_NAMES
 from awalker_tracker.vision.camera import Camera
 from scipy.spatial.transform import Rotation
 
@@ -198,22 +197,25 @@ def test_bag_without_camera_info_or_pose(tmp_path: Path) -> None:
             reader.cameras
 
 
-def test_unknown_encoding_names_the_topic() -> None:
-    types = typestore().types
-    header = types["std_msgs/msg/Header"](types["builtin_interfaces/msg/Time"](0, 0), "f")
-    msg = types["sensor_msgs/msg/Image"](header, 2, 2, "32FC1", 0, 8, np.zeros(16, np.uint8))
-    with pytest.raises(InputError, match=r"/cam0/image_raw: unsupported image encoding '32FC1'"):
-        decode_image(msg, "sensor_msgs/msg/Image", "/cam0/image_raw")
-    bgr = types["sensor_msgs/msg/Image"](header, 1, 2, "bgr8", 0, 8, np.array([1, 2, 3, 4, 5, 6, 0, 0], np.uint8))
-    np.testing.assert_array_equal(decode_image(bgr, "sensor_msgs/msg/Image", "t"), [[[3, 2, 1], [6, 5, 4]]])
-    mono = types["sensor_msgs/msg/Image"](header, 1, 2, "mono8", 0, 2, np.array([9, 200], np.uint8))
-    np.testing.assert_array_equal(decode_image(mono, "sensor_msgs/msg/Image", "t"), [[[9] * 3, [200] * 3]])
-    comp = types["sensor_msgs/msg/CompressedImage"](header, "tiff", np.zeros(4, np.uint8))
-    with pytest.raises(InputError, match="/c: unsupported compressed image format 'tiff'"):
-        decode_image(comp, "sensor_msgs/msg/CompressedImage", "/c")
-    short = types["sensor_msgs/msg/Image"](header, 4, 4, "rgb8", 0, 12, np.zeros(10, np.uint8))
-    with pytest.raises(InputError, match="too short"):
-        decode_image(short, "sensor_msgs/msg/Image", "/s")
+def test_a_bad_calibration_in_the_bag_names_the_bag_and_topic(tmp_path: Path) -> None:
+    """The bag reader builds its cameras with the one validated builder (vision.camera.camera_from_info)."""
+    good = two_cameras()[0]
+    for name, cam, where, message in (
+            ("nan_k", Camera(good.name, good.width, good.height, good.K * np.array([[np.nan, 1, 1], [1, 1, 1], [1, 1, 1]]),
+                             good.distortion, good.rotation, good.position),
+             "/cam0/camera_info: k", "NaN or infinity"),
+            ("three_d", Camera(good.name, good.width, good.height, good.K, np.array([0.1, 0.0, 0.0]), good.rotation,
+                               good.position),
+             "/cam0/camera_info", "distortion model 'plumb_bob' takes 0 or 4 or 5 finite coefficients"),
+            ("nan_position", Camera(good.name, good.width, good.height, good.K, good.distortion, good.rotation,
+                                    np.array([np.nan, 0.0, 1.0])),
+             "/tf_static (world -> cam0_optical_frame): position", "NaN or infinity")):
+        bag = tmp_path / name
+        write_sequence(bag, [cam], frames=1)
+        with SequenceReader(bag) as reader:
+            with pytest.raises(InputError) as err:
+                reader.cameras
+        assert str(err.value).startswith(f"{bag}: {where}: ") and message in str(err.value), str(err.value)
 
 
 def test_typestore_hashes_match_rclpy_generated_types() -> None:

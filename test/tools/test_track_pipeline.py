@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -430,15 +431,74 @@ def test_track_fit_body_option_reaches_the_pipeline(tmp_path: Path, monkeypatch)
         assert seen[-1].fit_body is expected
     # --depth-band reaches the pipeline too (None: the tracker node's default, RecoveryConfig's)
     assert seen[-1].depth_band_m is None
-    # without --particles the run gets the one default (awalker_tools.TRACK_PARTICLES), as TrackOptions has it
-    from awalker_tools import TRACK_PARTICLES
-    assert seen[-1].particles == TRACK_PARTICLES == pipeline.TrackOptions(Path("b"), Path("o")).particles
     assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--depth-band", "0"]) == 0
     assert seen[-1].depth_band_m == 0.0
     # --pelvis-ceiling too (None: the tracker's default by camera count)
     assert seen[-1].pelvis_ceiling is None
     assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--pelvis-ceiling", "0.97"]) == 0
     assert seen[-1].pelvis_ceiling == 0.97
+
+
+def test_node_and_command_line_read_one_set_of_defaults(tmp_path: Path, monkeypatch, ros_context, capsys):
+    """`awalker track` (its options, TrackOptions) and the tracker node (its parameters) take their defaults from
+    one profile of inference.profiles: the default one, or the one named (--profile / profile:=)."""
+    from rclpy.parameter import Parameter
+
+    from awalker_tools import pipeline
+    from awalker_tracker.errors import InputError
+    from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES
+    from awalker_tracker.nodes.tracker import TrackerNode
+
+    def of_options(options: pipeline.TrackOptions) -> dict:
+        return {"num_particles": options.particles, "lookahead": options.lookahead, "trust": options.trust,
+                "seed": options.seed, "likelihood_scale": options.likelihood_scale,
+                "leg_scale_spread": options.leg_scale_spread, "recovery": options.recovery}
+
+    def of_node(node: TrackerNode) -> dict:
+        smc, recovery = node.smc_config, node.recovery
+        return {"num_particles": smc.num_particles, "lookahead": smc.lookahead, "trust": smc.trust,
+                "resample_fraction": smc.resample_fraction, "resampling": smc.resampling, "seed": smc.seed,
+                "likelihood_scale": node.likelihood_scale, "leg_scale_spread": node.leg_scale_spread,
+                "reseed_fallen": recovery.reseed_fallen, "reacquire": recovery.reacquire,
+                "hold_still": recovery.hold_still, "depth_band_m": recovery.depth_band_m}
+
+    def of_profile(name: str, keys: dict) -> dict:
+        profile = PROFILES[name]
+        return {k: getattr(profile, k) for k in keys}
+
+    seen = []
+    monkeypatch.setattr(pipeline, "run_tracking", lambda options: seen.append(options))
+    assert DEFAULT_PROFILE == "accurate" and PROFILES["accurate"].num_particles == 15000
+    assert PROFILES["realtime"].num_particles == 5000
+    default_options = of_options(pipeline.TrackOptions(Path("b"), Path("o")))
+    assert default_options == of_profile(DEFAULT_PROFILE, default_options)
+    for profile in PROFILES:
+        extra = [] if profile == DEFAULT_PROFILE else ["--profile", profile]
+        assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), *extra]) == 0
+        assert seen[-1].profile == profile and of_options(seen[-1]) == of_profile(profile, default_options)
+        overrides = [] if profile == DEFAULT_PROFILE else [Parameter("profile", value=profile)]
+        node = TrackerNode(context=ros_context, parameter_overrides=[Parameter("cameras", value=["cam0"]), *overrides])
+        try:
+            assert of_node(node) == of_profile(profile, of_node(node))
+        finally:
+            node.destroy_node()
+    # an option or parameter given wins over the profile
+    assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--profile", "realtime",
+                 "--particles", "700", "--no-recovery"]) == 0
+    assert seen[-1].particles == 700 and not seen[-1].recovery and seen[-1].lookahead == PROFILES["realtime"].lookahead
+    node = TrackerNode(context=ros_context, parameter_overrides=[
+        Parameter("cameras", value=["cam0"]), Parameter("profile", value="realtime"), Parameter("num_particles", value=700)])
+    try:
+        assert node.smc_config.num_particles == 700
+    finally:
+        node.destroy_node()
+    # an unknown profile is refused, naming it and the choices
+    with pytest.raises(InputError, match=r"parameter 'profile': unknown profile 'fast'; expected one of accurate, realtime"):
+        TrackerNode(context=ros_context, parameter_overrides=[Parameter("cameras", value=["cam0"]),
+                                                              Parameter("profile", value="fast")])
+    with pytest.raises(SystemExit):
+        main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--profile", "fast"])
+    assert "invalid choice: 'fast'" in capsys.readouterr().err
 
 
 JUNK_PUBLISHER = """
@@ -551,3 +611,65 @@ def test_a_start_without_stance_leg_has_it_fitted_in_a_first_pass(synth_bag: Pat
                  "--start", str(unknown), "--no-fit-body"]) == 0
     assert not (plain / "first_pass").exists() and "body_fit" not in yaml.safe_load((plain / "run.yaml").read_text())
     assert StartDescription.from_yaml(plain / "start.yaml").stance_leg is None
+
+
+def _rewrite_images(source: Path, target: Path, image: Any) -> None:
+    """``source`` copied to ``target`` message for message, each camera image replaced by ``image(rgb, msg)`` (a
+    (topic suffix, message type, message) triple: the same camera, another encoding or format string)."""
+    from rosbags.rosbag2 import Writer
+
+    from awalker_tools.bagio import COMPRESSED_IMAGE, IMAGE, SequenceReader, iter_messages
+    from awalker_tools.typestore import typestore
+    from awalker_tracker.vision.decode import decode_image
+
+    store = typestore()
+    with SequenceReader(source) as reader, Writer(target, version=9) as writer:
+        made: dict[str, Any] = {}
+        for conn, stamp, raw in iter_messages(reader.reader, source, reader.reader.connections):
+            topic, msgtype, msg = conn.topic, conn.msgtype, None
+            if msgtype in (IMAGE, COMPRESSED_IMAGE) and "/image_raw" in topic:
+                old = store.deserialize_cdr(raw, msgtype)
+                suffix, msgtype, msg = image(decode_image(old, topic), old)
+                topic = topic.split("/image_raw")[0] + "/image_raw" + suffix
+            if topic not in made:
+                made[topic] = writer.add_connection(topic, msgtype, typestore=store,
+                                                    offered_qos_profiles=conn.ext.offered_qos_profiles)
+            writer.write(made[topic], stamp, raw if msg is None else store.serialize_cdr(msg, msgtype))
+
+
+def test_rgba8_and_unnamed_jpeg_bags_track_with_overlays(synth_bag: Path, tmp_path: Path):
+    """Images the tracker reads as the bag reader reads them (one decoder, vision.decode): an rgba8 bag and a JPEG
+    bag whose format string names no codec both track to the end, overlays drawn and run.yaml written."""
+    import cv2
+
+    from awalker_tools.bagio import COMPRESSED_IMAGE, IMAGE
+    from awalker_tools.typestore import typestore
+
+    types = typestore().types
+
+    def rgba8(rgb: np.ndarray, old: Any) -> tuple[str, str, Any]:
+        pixels = np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=2)
+        h, w = rgb.shape[:2]
+        return "", IMAGE, types[IMAGE](old.header, h, w, "rgba8", 0, 4 * w, pixels.reshape(-1))
+
+    def unnamed_jpeg(rgb: np.ndarray, old: Any) -> tuple[str, str, Any]:
+        data = cv2.imencode(".jpg", rgb[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 95])[1].reshape(-1)
+        return "/compressed", COMPRESSED_IMAGE, types[COMPRESSED_IMAGE](old.header, "rgb8", data)
+
+    for name, image in (("rgba8", rgba8), ("jpeg", unnamed_jpeg)):
+        bag = tmp_path / name / "walk.bag"
+        bag.parent.mkdir()
+        _rewrite_images(synth_bag, bag, image)
+        out = tmp_path / f"run_{name}"
+        assert main(["track", str(bag), "--out", str(out), "--particles", "100"]) == 0, name
+        run = yaml.safe_load((out / "run.yaml").read_text())
+        assert run["posteriors"] == FRAMES and run["features"]["cam0"]["foreground_labels"] == "start pose", name
+        overlays = sorted((out / "overlay").glob("frame_*.png"))
+        assert len(overlays) == FRAMES and (out / "overlay.mp4").stat().st_size > 0, name
+        assert cv2.imread(str(overlays[0])).shape == (120, 160, 3)
+    from awalker_tools.bagio import SequenceReader
+
+    with SequenceReader(tmp_path / "rgba8" / "walk.bag") as reader:
+        assert reader.topics["/cam0/image_raw"] == IMAGE
+    with SequenceReader(tmp_path / "jpeg" / "walk.bag") as reader:
+        assert next(m for _, _, _, m in reader.messages(["/cam0/image_raw/compressed"])).format == "rgb8"

@@ -14,7 +14,7 @@ import numpy as np
 from awalker_tracker.model.body import BodySegments, PartShape
 from awalker_tracker.vision.camera import Camera
 from awalker_tracker.vision.features import FrameFeatures
-from awalker_tracker.vision.flow import STUDENT_T_DOF
+from awalker_tracker.vision.flow import student_t_e2, student_t_log_ratio
 # the look-up tables are prepared once per frame in Python, not in the kernel under test: shared
 from awalker_tracker.vision.likelihood import (LikelihoodConfig, _AppearanceTable, _check_inputs, _FlowTable,
                                                occluder_pairs)
@@ -212,9 +212,9 @@ def _chunk_log_likelihood(parts: tuple[PartShape, ...], sil: "_Silhouettes", pre
         cell = np.where(inside, frow.astype(np.int32) * flow.cols + fcol.astype(np.int32), flow.valid.size - 1)
         du = flow.fx[cell] - mu
         dv = flow.fy[cell] - mv
-        e2 = (du * (flow.i00[cell] * du + 2 * flow.i01[cell] * dv) + flow.i11[cell] * dv * dv) \
-            * np.float32(1 / STUDENT_T_DOF)
-        ratio = np.float32(-0.5 * (STUDENT_T_DOF + 2)) * (np.log1p(e2) - flow.log0[cell])
+        # eq. 9 from vision.flow (its one implementation, tested against scipy in test_flow.py)
+        ratio = student_t_log_ratio(student_t_e2(du, dv, flow.i00[cell], flow.i01[cell], flow.i11[cell]),
+                                    flow.log0[cell])
         ratio = np.where(flow.valid[cell], ratio, np.float32(0))
         total += config.flow_weight / ratio.shape[0] * np.sum(scale * ratio.sum(axis=0), axis=0, dtype=np.float64)
     return total

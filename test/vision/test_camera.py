@@ -139,3 +139,67 @@ def test_skew_is_honoured_both_ways():
     (u1, v1), _ = skewed.project(point)
     assert v1 == pytest.approx(v0) and u1 != pytest.approx(u0)
     assert np.allclose(skewed.pixels_to_normalised(np.array([u1, v1])), cam.pixels_to_normalised(np.array([u0, v0])))
+
+
+def _info(**change):
+    """A CameraInfo as the messages carry it (width, height, k, distortion_model, d), with ``change`` applied."""
+    from types import SimpleNamespace
+
+    fields = dict(width=640, height=480, k=[610.0, 0.0, 322.0, 0.0, 605.0, 241.0, 0.0, 0.0, 1.0],
+                  distortion_model="plumb_bob", d=[-0.2, 0.05, 0.001, -0.002, 0.01])
+    fields.update(change)
+    return SimpleNamespace(**fields)
+
+
+QUAT = Rotation.from_euler("xyz", [-100, 5, 30], degrees=True).as_quat()
+
+
+def test_camera_from_info_builds_what_the_calibration_yaml_builds():
+    from awalker_tracker.vision.camera import camera_from_dict, camera_from_info
+
+    cam = camera_from_info("cam0", _info(), [0.5, -4.0, 1.2], QUAT, "/cam0/camera_info", "/cam0/camera_pose")
+    want = camera_from_dict(make_camera(DISTORTIONS[2]).to_dict(), "yaml")
+    for field in ("K", "distortion", "rotation", "position"):
+        np.testing.assert_allclose(getattr(cam, field), getattr(want, field), atol=1e-12, err_msg=field)
+    assert (cam.name, cam.width, cam.height) == ("cam0", 640, 480)
+    # each model with the coefficient counts it takes
+    for model, d in (("plumb_bob", []), ("plumb_bob", [0.1, 0, 0, 0]), ("rational_polynomial", [0.1] * 8), ("", [])):
+        assert camera_from_info("c", _info(distortion_model=model, d=d), [0, 0, 1], QUAT, "i", "p").distortion.size == len(d)
+    # a quaternion off unit by float rounding is normalised
+    near = camera_from_info("c", _info(), [0, 0, 1], QUAT * 1.0005, "i", "p")
+    np.testing.assert_allclose(near.rotation @ near.rotation.T, np.eye(3), atol=1e-12)
+
+
+NAN, INF = float("nan"), float("inf")
+K_GOOD = [610.0, 0.0, 322.0, 0.0, 605.0, 241.0, 0.0, 0.0, 1.0]
+
+
+@pytest.mark.parametrize(("info", "position", "quat", "where", "message"), [
+    (dict(width=0), None, None, "/cam0/camera_info", "width and height must be positive integers, got 0, 480"),
+    (dict(height=0), None, None, "/cam0/camera_info", "width and height must be positive integers"),
+    (dict(k=[NAN] + K_GOOD[1:]), None, None, "/cam0/camera_info: k", "NaN or infinity"),
+    (dict(k=K_GOOD[:4] + [INF] + K_GOOD[5:]), None, None, "/cam0/camera_info: k", "NaN or infinity"),
+    (dict(k=[0.0] + K_GOOD[1:]), None, None, "/cam0/camera_info: k", "with fx, fy > 0"),
+    (dict(k=K_GOOD[:4] + [-605.0] + K_GOOD[5:]), None, None, "/cam0/camera_info: k", "with fx, fy > 0"),
+    (dict(k=[0.0] * 9), None, None, "/cam0/camera_info: k", "with fx, fy > 0"),        # an uncalibrated driver's
+    (dict(k=K_GOOD[:8]), None, None, "/cam0/camera_info: k", "expected 9 numbers"),
+    (dict(distortion_model="equidistant", d=[0.1, 0, 0, 0]), None, None, "/cam0/camera_info",
+     "distortion model 'equidistant' is not one this camera model takes; expected 'plumb_bob', 'rational_polynomial', ''"),
+    (dict(d=[0.1, 0.0, 0.0]), None, None, "/cam0/camera_info", "'plumb_bob' takes 0 or 4 or 5 finite coefficients"),
+    (dict(distortion_model="rational_polynomial"), None, None, "/cam0/camera_info", "'rational_polynomial' takes 8"),
+    (dict(distortion_model="", d=[0.1] * 5), None, None, "/cam0/camera_info", "model '' takes 0 finite"),
+    (dict(d=[0.1, NAN, 0, 0, 0]), None, None, "/cam0/camera_info", "'plumb_bob' takes 0 or 4 or 5 finite"),
+    ({}, [0.0, NAN, 1.0], None, "/cam0/camera_pose: position", "NaN or infinity"),
+    ({}, [0.0, INF, 1.0], None, "/cam0/camera_pose: position", "NaN or infinity"),
+    ({}, [0.0, 1.0], None, "/cam0/camera_pose: position", "expected 3 numbers"),
+    ({}, None, [0.0, 0.0, 0.0, 0.0], "/cam0/camera_pose: orientation", "a zero quaternion is no rotation"),
+    ({}, None, [0.0, 0.0, 0.0, 2.0], "/cam0/camera_pose: orientation", "must be a unit quaternion [qx, qy, qz, qw], norm is 2.0"),
+    ({}, None, [0.0, 0.0, NAN, 1.0], "/cam0/camera_pose: orientation", "NaN or infinity"),
+])
+def test_camera_from_info_names_the_topic_and_what_was_expected(info, position, quat, where, message):
+    from awalker_tracker.vision.camera import camera_from_info
+
+    with pytest.raises(InputError) as err:
+        camera_from_info("cam0", _info(**info), [0.5, -4.0, 1.2] if position is None else position,
+                         QUAT if quat is None else quat, "/cam0/camera_info", "/cam0/camera_pose")
+    assert str(err.value).startswith(where + ": ") and message in str(err.value), str(err.value)

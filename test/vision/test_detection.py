@@ -77,7 +77,8 @@ def two_people():
     """Two people seen by the side and the front camera: A at x = 0.4 m; B at x = -0.5 m and 0.8 m nearer the
     side camera (so B is the side camera's largest blob, A the front camera's). Features of each camera and
     the two pelvis positions."""
-    from awalker_tracker.vision.render import render, render_rgb
+    from awalker_tools.model_render import render_rgb
+    from awalker_tracker.vision.render import render
 
     a = walking_poses(3, x0=0.4)[-1]
     b = walking_poses(3, x0=-0.5)[-1]

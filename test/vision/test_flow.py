@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_t
 
-from awalker_tracker.vision.flow import FlowConfig, FlowGrid, GridFlow, student_t_log_likelihood, to_grey
+from awalker_tracker.vision.flow import FlowConfig, FlowGrid, GridFlow, student_t_e2, student_t_log_ratio, to_grey
 from awalker_tracker.vision.render import render
 from vision_scene import BODY, background_image, render_frames, side_camera, walking_poses
 
@@ -101,18 +101,30 @@ def test_covariance_follows_the_gradient_tensor():
 
 
 def test_student_t_is_eq9_with_two_degrees_of_freedom():
+    """The functions the likelihood kernel inlines (vision.flow.student_t_e2, student_t_log_ratio) are eq. (9):
+    log p(v | u) up to a constant, and log p(v | u) - log p(v | 0) exactly; called on scalars (as in the
+    kernel) and on arrays (as the flow table and the numpy reference call them) alike."""
     rng = np.random.default_rng(1)
-    offsets = []
+    offsets, ratios = [], []
     for _ in range(20):
         a = rng.normal(size=(2, 2))
         cov = a @ a.T + 0.2 * np.eye(2)
         v, u = rng.normal(size=2) * 2, rng.normal(size=2)
-        ours = student_t_log_likelihood(v, u, np.linalg.inv(cov), np.linalg.slogdet(cov)[1])
-        offsets.append(ours - multivariate_t(loc=u, shape=cov, df=2).logpdf(v))
+        (i00, i01), (_, i11) = np.linalg.inv(cov)
+        e2 = student_t_e2(*(v - u), i00, i01, i11)
+        ours = -0.5 * np.linalg.slogdet(cov)[1] + student_t_log_ratio(e2, 0.0)
+        truth = multivariate_t(loc=u, shape=cov, df=2)
+        offsets.append(ours - truth.logpdf(v))
+        e0 = student_t_e2(*v, i00, i01, i11)
+        ratios.append(student_t_log_ratio(e2, np.log1p(e0)) - (truth.logpdf(v) - multivariate_t(
+            loc=np.zeros(2), shape=cov, df=2).logpdf(v)))
+        # arrays give the scalar results
+        assert student_t_e2(np.array([v[0] - u[0]]), np.array([v[1] - u[1]]), np.array([i00]), np.array([i01]),
+                            np.array([i11]))[0] == e2
     assert np.ptp(offsets) < 1e-9                  # equal up to the constant c
-    info = np.eye(2)
-    assert student_t_log_likelihood(np.zeros(2), np.zeros(2), info, 0.0) > student_t_log_likelihood(
-        np.ones(2), np.zeros(2), info, 0.0)
+    assert np.max(np.abs(ratios)) < 1e-9
+    assert student_t_log_ratio(student_t_e2(0.0, 0.0, 1.0, 0.0, 1.0), 0.0) == 0.0
+    assert student_t_log_ratio(student_t_e2(1.0, 1.0, 1.0, 0.0, 1.0), 0.0) == pytest.approx(-2 * np.log(2.0))
 
 
 def test_empty_grid_and_size_mismatch():

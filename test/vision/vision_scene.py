@@ -10,7 +10,9 @@ from awalker_tracker.model.body import BodyDescription, BodySegments
 from awalker_tracker.model.kinematics import KinematicConfig, KinematicState, initial_kinematics, pose_body
 from awalker_tracker.model.walker import WalkerState
 from awalker_tracker.vision.camera import Camera
-from awalker_tracker.vision.render import render, render_rgb
+from awalker_tracker.vision.render import render
+
+from awalker_tools.model_render import render_rgb
 
 BODY = BodyDescription.default()
 PARAMS = BODY.walker_params()

@@ -2,8 +2,9 @@
 
 Topics (per camera ``<cam>``; common.md "Bag topics"):
 
-- ``/<cam>/image_raw`` sensor_msgs/Image (rgb8, bgr8, mono8) or ``/<cam>/image_raw/compressed``
-  sensor_msgs/CompressedImage (png or jpeg), one per frame; header.stamp = frame stamp;
+- ``/<cam>/image_raw`` sensor_msgs/Image or ``/<cam>/image_raw/compressed`` sensor_msgs/CompressedImage
+  (the encodings and formats ``awalker_tracker.vision.decode`` reads; written: rgb8, or png/jpeg), one per
+  frame; header.stamp = frame stamp;
 - ``/<cam>/camera_info`` sensor_msgs/CameraInfo, one per frame;
 - ``/tf_static`` tf2_msgs/TFMessage, once: ``world`` -> ``<cam>_optical_frame`` for every camera;
 - optional ``/<cam>/occlusion_mask`` (mono8, 255 = occluded), ``/awalker/ground_truth``
@@ -33,7 +34,9 @@ from rosbags.rosbag2.errors import ReaderError, WriterError
 from scipy.spatial.transform import Rotation
 
 from awalker_tracker.errors import InputError
-from awalker_tracker.vision.camera import Camera, camera_from_dict
+from awalker_tracker.model.body import MARKER_NAMES
+from awalker_tracker.vision.camera import Camera, camera_from_info
+from awalker_tracker.vision.decode import decode_image, decode_mono8
 
 from awalker_tools.typestore import typestore
 
@@ -43,10 +46,6 @@ GROUND_TRUTH_TOPIC = "/awalker/ground_truth"
 START_DESCRIPTION_TOPIC = "/awalker/start_description"
 BODY_DESCRIPTION_TOPIC = "/awalker/body_description"
 LATCHED_TOPICS = (TF_STATIC_TOPIC, START_DESCRIPTION_TOPIC, BODY_DESCRIPTION_TOPIC)
-MARKER_NAMES = (
-    "pelvis", "thorax", "head", "left_hip", "right_hip", "left_knee", "right_knee",
-    "left_ankle", "right_ankle", "left_heel", "right_heel", "left_toe", "right_toe",
-)  # fmt: skip
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
@@ -54,7 +53,6 @@ CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 STRING = "std_msgs/msg/String"
 BODY_POSE = "awalker_msgs/msg/BodyPose"
-RAW_ENCODINGS = ("rgb8", "bgr8", "mono8")
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 IMAGE_FORMATS = ("png", "jpeg")
 
@@ -396,48 +394,15 @@ def iter_messages(
         raise InputError(f"{path}: corrupt or truncated bag ({type(exc).__name__}: {exc})") from None
 
 
-def decode_image(msg: Any, msgtype: str, topic: str) -> np.ndarray:
-    """Image or CompressedImage -> HxWx3 uint8 RGB. InputError naming the topic on unknown encodings."""
-    if msgtype == COMPRESSED_IMAGE:
-        fmt = str(msg.format).lower()
-        if not any(k in fmt for k in ("png", "jpeg", "jpg")):
-            raise InputError(f"{topic}: unsupported compressed image format {msg.format!r}; expected png or jpeg")
-        rgb = cv2.imdecode(np.asarray(msg.data, np.uint8), cv2.IMREAD_COLOR_RGB)
-        if rgb is None:
-            raise InputError(f"{topic}: cannot decode {msg.format!r} image data ({len(msg.data)} bytes)")
-        return rgb
-    if msgtype != IMAGE:
-        raise InputError(f"{topic}: expected {IMAGE} or {COMPRESSED_IMAGE}, got {msgtype}")
-    encoding = str(msg.encoding).lower()
-    channels = {"rgb8": 3, "bgr8": 3, "mono8": 1}.get(encoding)
-    if channels is None:
-        raise InputError(f"{topic}: unsupported image encoding {msg.encoding!r}; expected one of {RAW_ENCODINGS}")
-    h, w, step = int(msg.height), int(msg.width), int(msg.step)
-    data = np.asarray(msg.data, np.uint8)
-    if step < w * channels or data.size < step * h:
-        raise InputError(f"{topic}: image data too short: {data.size} bytes for {w}x{h} {encoding} (step {step})")
-    pixels = data[: step * h].reshape(h, step)[:, : w * channels].reshape(h, w, channels)
-    if encoding == "rgb8":
-        return np.ascontiguousarray(pixels)
-    if encoding == "bgr8":
-        return np.ascontiguousarray(pixels[..., ::-1])
-    return np.repeat(pixels, 3, axis=2)
-
-
-def camera_from_messages(info: Any, transform: Any | None, name: str) -> Camera:
-    """A Camera from a CameraInfo (intrinsics) and a world -> optical-frame TransformStamped."""
+def camera_from_messages(info: Any, transform: Any | None, name: str, source: str = "") -> Camera:
+    """A validated Camera (``vision.camera.camera_from_info``) from a CameraInfo and the world -> optical-frame
+    TransformStamped of /tf_static; errors name ``source`` (the bag) and the topic."""
+    prefix = f"{source}: " if source else ""
     if transform is None:
-        raise InputError(f"{TF_STATIC_TOPIC}: no transform {WORLD_FRAME} -> {name}_optical_frame (camera pose)")
+        raise InputError(f"{prefix}{TF_STATIC_TOPIC}: no transform {WORLD_FRAME} -> {name}_optical_frame (camera pose)")
     t, q = transform.transform.translation, transform.transform.rotation
-    entry = {
-        "name": name,
-        "width": int(info.width),
-        "height": int(info.height),
-        "K": np.asarray(info.k, float).reshape(3, 3).tolist(),
-        "distortion": np.asarray(info.d, float).tolist(),
-        "pose": {"position": [t.x, t.y, t.z], "orientation": [q.x, q.y, q.z, q.w]},
-    }
-    return camera_from_dict(entry, camera_info_topic(name))
+    return camera_from_info(name, info, (t.x, t.y, t.z), (q.x, q.y, q.z, q.w), f"{prefix}{camera_info_topic(name)}",
+                            f"{prefix}{TF_STATIC_TOPIC} ({WORLD_FRAME} -> {name}_optical_frame)")
 
 
 class SequenceReader:
@@ -542,7 +507,7 @@ class SequenceReader:
                 if self.image_topic_of(name) is None:
                     raise InputError(f"{self.path}: camera {name} has no images: expected {image_topic(name, False)} "
                                      f"({IMAGE}) or {image_topic(name, True)} ({COMPRESSED_IMAGE})")
-                cameras.append(camera_from_messages(info, tf, name))
+                cameras.append(camera_from_messages(info, tf, name, str(self.path)))
             self._cameras = cameras
         return self._cameras
 
@@ -564,7 +529,7 @@ class SequenceReader:
         pending: dict[int, dict[str, np.ndarray]] = {}
         last: dict[str, int] = {}
         last_emitted: int | None = None
-        for topic, msgtype, _, msg in self.messages(topic_cam):
+        for topic, _, _, msg in self.messages(topic_cam):
             cam = topic_cam[topic]
             stamp = stamp_ns_of(msg.header)
             if cam in last and stamp <= last[cam]:
@@ -572,7 +537,7 @@ class SequenceReader:
             last[cam] = stamp
             if last_emitted is not None and stamp <= last_emitted:
                 raise InputError(f"{topic}: image at {stamp} ns arrives after frame {last_emitted} ns was complete")
-            pending.setdefault(stamp, {})[cam] = decode_image(msg, msgtype, topic) if decode else msg
+            pending.setdefault(stamp, {})[cam] = decode_image(msg, topic) if decode else msg
             if len(pending[stamp]) == n_cams:
                 for older in sorted(s for s in pending if s < stamp):
                     self._incomplete(older, pending[older], topic_cam)
@@ -630,9 +595,7 @@ class SequenceReader:
                 continue
             stamps, masks = [], []
             for _, _, _, msg in self.messages([topic]):
-                if str(msg.encoding) != "mono8":
-                    raise InputError(f"{topic}: occlusion mask encoding {msg.encoding!r}; expected mono8")
-                masks.append(decode_image(msg, IMAGE, topic)[..., 0] > 127)
+                masks.append(decode_mono8(msg, topic) > 127)
                 stamps.append(stamp_ns_of(msg.header))
             if stamps:
                 result[cam] = (np.asarray(stamps, np.int64), np.stack(masks))

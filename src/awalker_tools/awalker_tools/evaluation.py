@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.inference.speed import walking_speed
 
 EVAL_MARKERS = ("pelvis", "thorax", "left_hip", "right_hip", "left_knee", "right_knee",
                 "left_ankle", "right_ankle")
@@ -283,17 +284,10 @@ def foot_plausibility(track: PoseTrack, tolerance_m: float = 0.02, stance_left: 
     }
 
 
-def pelvis_speed(track: PoseTrack, frame_rate: float, window_s: float = 1.0) -> np.ndarray:
-    """Horizontal pelvis speed (m/s) per frame, averaged over ``window_s`` (about one stride)."""
-    xy = track.marker("pelvis")[:, :2]
-    stamps_s = track.stamps_ns * 1e-9
-    half = max(1, int(round(0.5 * window_s * frame_rate)))
-    speed = np.empty(len(xy))
-    for i in range(len(xy)):
-        a, b = max(0, i - half), min(len(xy) - 1, i + half)
-        dt = stamps_s[b] - stamps_s[a]
-        speed[i] = np.linalg.norm(xy[b] - xy[a]) / dt if dt > 0 else np.nan
-    return speed
+def track_speed(track: PoseTrack) -> np.ndarray:
+    """Walking speed (F,) m/s of a pose track's pelvis, as the tracker defines and reports it
+    (``inference.speed.walking_speed``: horizontal displacement per frame averaged over about one step)."""
+    return walking_speed(track.marker("pelvis")[:, :2], track.stamps_ns)
 
 
 def largest_step_speed(track: PoseTrack, marker: str = "pelvis") -> float:
@@ -356,8 +350,7 @@ def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarra
                       "relative_mm": errors["relative_mm"].round(3).tolist()},
     }
     if len(truth.stamps_ns) > 1:
-        rate = 1e9 / float(np.median(np.diff(truth.stamps_ns)))
-        result["truth_speed_m_s"] = float(np.nanmedian(pelvis_speed(truth, rate)))
+        result["truth_speed_m_s"] = float(np.nanmedian(track_speed(truth)))
     if summary is not None:
         result["recovery"] = {"reseeded_fallen_particles": int(np.sum(summary["reseeded_fallen"])),
                               "frames_with_fallen_reseeds": int(np.sum(summary["reseeded_fallen"] > 0)),

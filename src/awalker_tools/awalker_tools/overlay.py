@@ -7,17 +7,12 @@ import cv2
 import numpy as np
 
 from awalker_tracker.errors import InputError
-from awalker_tracker.model.body import MARKER_NAMES, BodyDescription, BodySegments
+from awalker_tracker.model.body import MARKER_NAMES, SKELETON_EDGES, BodyDescription, BodySegments
 from awalker_tracker.vision.camera import Camera
-from awalker_tracker.vision.render import DEFAULT_COLOURS, render_labels
+from awalker_tracker.vision.render import render_labels
 
-SKELETON_EDGES: tuple[tuple[str, str], ...] = (
-    ("pelvis", "thorax"), ("thorax", "head"), ("pelvis", "left_hip"), ("pelvis", "right_hip"),
-    ("left_hip", "left_knee"), ("left_knee", "left_ankle"), ("left_ankle", "left_heel"),
-    ("left_heel", "left_toe"), ("left_ankle", "left_toe"),
-    ("right_hip", "right_knee"), ("right_knee", "right_ankle"), ("right_ankle", "right_heel"),
-    ("right_heel", "right_toe"), ("right_ankle", "right_toe"),
-)
+from awalker_tools.model_render import DEFAULT_COLOURS
+
 _INDEX = {n: i for i, n in enumerate(MARKER_NAMES)}
 _LEFT_COLOUR = (60, 220, 60)
 _RIGHT_COLOUR = (240, 80, 240)

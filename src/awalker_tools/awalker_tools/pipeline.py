@@ -39,12 +39,14 @@ import numpy as np
 import yaml
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES
 from awalker_tracker.inference.tracker import StartDescription, TrackerConfig
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEG_NAMES
 
-from awalker_tools import TRACK_PARTICLES, evaluation
+from awalker_tools import evaluation
 
+DEFAULTS = PROFILES[DEFAULT_PROFILE]
 START_FILE, BODY_FILE, CALIBRATION_FILE, RUN_FILE = "start.yaml", "body.yaml", "calibration.yaml", "run.yaml"
 PROGRESS_PERIOD_S = 2.0
 #: Lockstep replay lets this many frames out beyond the oldest the tracker has not acknowledged, so the
@@ -102,20 +104,24 @@ class TrackOptions:
     out: Path
     start: Path | None = None
     body: Path | None = None
-    particles: int = TRACK_PARTICLES
-    lookahead: int = 3
-    trust: float = 0.9
-    seed: int = 0
-    likelihood_scale: float = 0.1
-    leg_scale_spread: float = 0.0   # the particles' leg lengths around the body's (TrackerConfig.leg_scale_spread)
+    # the filter's settings: the default profile's unless given (inference.profiles, as the tracker node's;
+    # `awalker track --profile` fills them from the profile it names, and sets ``profile``, whose defaults the
+    # tracker node takes for what is left unset here: depth_band_m None)
+    profile: str = DEFAULT_PROFILE
+    particles: int = DEFAULTS.num_particles
+    lookahead: int = DEFAULTS.lookahead
+    trust: float = DEFAULTS.trust
+    seed: int = DEFAULTS.seed
+    likelihood_scale: float = DEFAULTS.likelihood_scale
+    leg_scale_spread: float = DEFAULTS.leg_scale_spread   # the particles' leg lengths around the body's
     # the particles' pelvis ceilings around this fraction of the walker's hip height, whatever the number of
     # cameras (1: off); None: the tracker's default (TrackerConfig.pelvis_ceiling_for: 0.97 with two or more
     # cameras, off with one)
     pelvis_ceiling: float | None = None
     auto_start: bool = False        # ignore any start description and find the walking person (also when none exists)
     follow_near: tuple[float, float] | None = None   # automatic start: follow the person first seen near this ground point (m)
-    recovery: bool = True           # re-seed fallen walkers and re-acquire a lost track (inference/recovery.py)
-    depth_band_m: float | None = None   # one camera: the feet row's depth band (None: RecoveryConfig's, 0.3 m); off without recovery
+    recovery: bool = DEFAULTS.recovery   # re-seed fallen walkers, re-acquire a lost track, hold still (recovery.py)
+    depth_band_m: float | None = None   # one camera: the feet row's depth band (None: the profile's); off without recovery
     overlays: bool = True
     # two passes, the second with the leg length fitted to the first one's images (module docstring);
     # None: when no body description is found, so that the body would only be scaled to the seen height
@@ -386,6 +392,7 @@ def _track_once(options: TrackOptions, reader: Any, body_fit: dict | None = None
             *([Parameter("follow_near", value=[float(v) for v in options.follow_near])] if options.follow_near else []),
             Parameter("body_description", value=str(out / BODY_FILE) if body is not None else ""),
             Parameter("estimate_body", value=body is None), Parameter("body_output", value=str(out / BODY_FILE)),
+            Parameter("profile", value=options.profile),
             Parameter("num_particles", value=int(options.particles)), Parameter("lookahead", value=int(options.lookahead)),
             Parameter("trust", value=float(options.trust)), Parameter("seed", value=int(options.seed)),
             Parameter("likelihood_scale", value=float(options.likelihood_scale)),
@@ -517,7 +524,8 @@ def _track_once(options: TrackOptions, reader: Any, body_fit: dict | None = None
     result.seconds_pictures = time.monotonic() - started - result.seconds
     (out / RUN_FILE).write_text(yaml.safe_dump({
         "input": str(bag.resolve()), "start_source": start_src, "body_source": body_src,
-        "particles": options.particles, "lookahead": options.lookahead, "trust": options.trust, "seed": options.seed,
+        "profile": options.profile, "particles": options.particles, "lookahead": options.lookahead,
+        "trust": options.trust, "seed": options.seed,
         "likelihood_scale": options.likelihood_scale, "leg_scale_spread": options.leg_scale_spread,
         "pelvis_ceiling": (options.pelvis_ceiling if options.pelvis_ceiling is not None
                            else TrackerConfig().pelvis_ceiling_for(len(cameras))[0]),

@@ -38,7 +38,8 @@ def plot_errors(path: Path, frames: np.ndarray, absolute_mm: np.ndarray, relativ
 def plot_speed_and_stance(path: Path, frames: np.ndarray, speed: np.ndarray, speed_std: np.ndarray,
                           stance_left_probability: np.ndarray, true_speed: np.ndarray | None = None,
                           true_frames: np.ndarray | None = None, title: str = "") -> Path:
-    """Posterior walking speed (mean +- std, m/s) and P(left leg is stance) per frame."""
+    """Posterior walking speed (mean +- std, m/s; ``true_speed``: the truth's by the same definition,
+    ``inference.speed``) and P(left leg is stance) per frame."""
     plt = _pyplot()
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
     top.plot(frames, speed, color="tab:green", label="estimated")

@@ -3,7 +3,7 @@
 The person's motion comes from the generative model itself (the walker dynamics steered along the cyclic gaits plus the
 conditional kinematics, with optional scripted speed change and turn) or from a CMU motion
 capture walk (``--from-mocap``), so the tracker can also be tested on motion it did not
-produce. Frames are ray-cast (``vision/render.py``): a room with a tiled, noisy floor and
+produce. Frames are ray-cast (``vision/render.py``, drawn by ``model_render``): a room with a tiled, noisy floor and
 cluttered walls, the textured body, an optional box occluder hiding the lower body for a
 stretch (paper Experiments 1-3), a slow lighting change and per-pixel sensor noise. The
 first ``background_frames`` frames hold the empty room (for background models).
@@ -29,9 +29,10 @@ import yaml
 from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription, BodySegments
 from awalker_tracker.vision.camera import Camera, save_calibration
-from awalker_tracker.vision.render import pixel_rays, render, render_rgb
+from awalker_tracker.vision.render import pixel_rays, render
 
 from awalker_tools import bagio
+from awalker_tools.model_render import render_rgb
 from awalker_tools.overlay import save_overlay_png
 from awalker_tools.person_render import CARRIED, Outfit, PersonRenderer
 

@@ -6,8 +6,7 @@ import shutil
 from pathlib import Path
 
 from awalker_tracker.errors import InputError
-
-from awalker_tools import TRACK_PARTICLES
+from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES
 
 REPO_ROOT = Path(__file__).resolve().parents[4]
 
@@ -48,7 +47,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "output there), then `awalker eval` against its ground truth.")
     parser.add_argument("--bag", help="bag to track (default: the sample bag in bags/)")
     parser.add_argument("--out", default="demo_out", help="output directory (default demo_out)")
-    parser.add_argument("--particles", type=int, default=TRACK_PARTICLES,
-                        help=f"number of particles (default {TRACK_PARTICLES}, as awalker track)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed")
+    defaults = PROFILES[DEFAULT_PROFILE]
+    parser.add_argument("--particles", type=int, default=defaults.num_particles,
+                        help=f"number of particles (default {defaults.num_particles}, as awalker track)")
+    parser.add_argument("--seed", type=int, default=defaults.seed, help=f"random seed (default {defaults.seed})")
     parser.set_defaults(func=run)

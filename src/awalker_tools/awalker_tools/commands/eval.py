@@ -63,10 +63,9 @@ def run(args: argparse.Namespace) -> int:
                               np.array(per_frame["absolute_mm"]), np.array(per_frame["relative_mm"]),
                               title=f"3D marker error: {run_dir.name}")]
     if summary is not None:
-        rate = 1e9 / float(np.median(np.diff(truth.stamps_ns))) if len(truth.stamps_ns) > 1 else 30.0
         pngs.append(plots.plot_speed_and_stance(
             run_dir / "speed_stance.png", summary["frame"], summary["speed"], summary["speed_std"],
-            summary["stance_left_probability"], true_speed=evaluation.pelvis_speed(truth, rate),
+            summary["stance_left_probability"], true_speed=evaluation.track_speed(truth),
             true_frames=truth.frames, title=f"speed and stance leg: {run_dir.name}"))
     stance = None
     if summary is not None and len(summary["stamp_ns"]) == len(estimate.stamps_ns):

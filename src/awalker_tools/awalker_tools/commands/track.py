@@ -5,8 +5,9 @@ import argparse
 from pathlib import Path
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES, tracking_profile
 
-from awalker_tools import TRACK_PARTICLES
+DEFAULTS = PROFILES[DEFAULT_PROFILE]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -14,12 +15,21 @@ def run(args: argparse.Namespace) -> int:
     from awalker_tracker.inference.autostart import AutoStartConfig
     from awalker_tracker.inference.tracker import TrackerConfig
 
-    if args.particles < 1:
-        raise InputError(f"--particles must be >= 1, got {args.particles}")
-    if not args.likelihood_scale >= 0:
-        raise InputError(f"--likelihood-scale must be >= 0, got {args.likelihood_scale}")
+    profile = tracking_profile(args.profile, "--profile")       # the defaults of what is not given
+
+    def given(value: object, default: object) -> object:
+        return default if value is None else value
+
+    particles, lookahead = given(args.particles, profile.num_particles), given(args.lookahead, profile.lookahead)
+    trust, seed = given(args.trust, profile.trust), given(args.seed, profile.seed)
+    likelihood_scale = given(args.likelihood_scale, profile.likelihood_scale)
+    leg_scale_spread = given(args.leg_scale_spread, profile.leg_scale_spread)
+    if particles < 1:
+        raise InputError(f"--particles must be >= 1, got {particles}")
+    if not likelihood_scale >= 0:
+        raise InputError(f"--likelihood-scale must be >= 0, got {likelihood_scale}")
     try:
-        TrackerConfig(leg_scale_spread=args.leg_scale_spread)      # the tracker node's check, before anything starts
+        TrackerConfig(leg_scale_spread=leg_scale_spread)      # the tracker node's check, before anything starts
     except ValueError as exc:
         raise InputError(f"--leg-scale-spread: {exc}") from None
     if args.pelvis_ceiling is not None:
@@ -29,10 +39,10 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"--pelvis-ceiling: {exc}") from None
     if args.depth_band is not None and not args.depth_band >= 0:
         raise InputError(f"--depth-band must be >= 0 m (0: off), got {args.depth_band}")
-    if not 0.0 <= args.trust <= 1.0:
-        raise InputError(f"--trust (gamma) must lie in [0, 1], got {args.trust}")
-    if args.lookahead < 0:
-        raise InputError(f"--lookahead must be >= 0, got {args.lookahead}")
+    if not 0.0 <= trust <= 1.0:
+        raise InputError(f"--trust (gamma) must lie in [0, 1], got {trust}")
+    if lookahead < 0:
+        raise InputError(f"--lookahead must be >= 0, got {lookahead}")
     follow_near = tuple(args.follow_near) if args.follow_near is not None else None
     try:
         AutoStartConfig(follow_near=follow_near)      # the tracker node's check, before anything starts
@@ -40,11 +50,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--follow-near: {exc}") from None
     run_tracking(TrackOptions(
         bag=Path(args.bag), out=Path(args.out), start=Path(args.start) if args.start else None,
-        body=Path(args.body) if args.body else None, particles=args.particles, lookahead=args.lookahead,
-        trust=args.trust,
-        seed=args.seed, likelihood_scale=args.likelihood_scale, leg_scale_spread=args.leg_scale_spread,
-        pelvis_ceiling=args.pelvis_ceiling,
-        recovery=not args.no_recovery, depth_band_m=args.depth_band,
+        body=Path(args.body) if args.body else None, profile=args.profile, particles=particles,
+        lookahead=lookahead, trust=trust, seed=seed, likelihood_scale=likelihood_scale,
+        leg_scale_spread=leg_scale_spread, pelvis_ceiling=args.pelvis_ceiling,
+        recovery=profile.recovery and not args.no_recovery, depth_band_m=args.depth_band,
         auto_start=args.auto_start or args.follow_near is not None,
         follow_near=follow_near, overlays=not args.no_overlay, fit_body=args.fit_body,
         storage=args.storage,
@@ -70,19 +79,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="with several people in view, follow the one first seen within 1.5 m of this world "
                              "ground point (m); implies --auto-start (default: the first person seen walking)")
     parser.add_argument("--body", help="body description YAML (segment sizes in metres)")
-    parser.add_argument("--particles", type=int, default=TRACK_PARTICLES,
-                        help=f"number of particles (default {TRACK_PARTICLES}; 5000 runs about 3 times faster)")
-    parser.add_argument("--lookahead", type=int, default=3, help="look-ahead tau in frames (default 3)")
-    parser.add_argument("--trust", type=float, default=0.9,
-                        help="gamma: trust in the look-ahead weights when resampling (default 0.9)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    parser.add_argument("--likelihood-scale", type=float, default=0.1,
-                        help="exponent on the image likelihood (tempering, default 0.1; 0: images unused, "
-                             "dead reckoning from the start description)")
-    parser.add_argument("--leg-scale-spread", type=float, default=0.0,
+    parser.add_argument("--profile", choices=tuple(PROFILES), default=DEFAULT_PROFILE,
+                        help="defaults of the options below, as the tracker node's profile parameter "
+                             "(inference/profiles.py): " + "; ".join(f"{name} {p.num_particles} particles"
+                                                                     for name, p in PROFILES.items())
+                             + f" (default {DEFAULT_PROFILE}; realtime runs about 3 times faster)")
+    parser.add_argument("--particles", type=int, default=None,
+                        help=f"number of particles (default: the profile's, {DEFAULTS.num_particles})")
+    parser.add_argument("--lookahead", type=int, default=None,
+                        help=f"look-ahead tau in frames (default {DEFAULTS.lookahead})")
+    parser.add_argument("--trust", type=float, default=None,
+                        help=f"gamma: trust in the look-ahead weights when resampling (default {DEFAULTS.trust})")
+    parser.add_argument("--seed", type=int, default=None, help=f"random seed (default {DEFAULTS.seed})")
+    parser.add_argument("--likelihood-scale", type=float, default=None,
+                        help=f"exponent on the image likelihood (tempering, default {DEFAULTS.likelihood_scale}; "
+                             "0: images unused, dead reckoning from the start description)")
+    parser.add_argument("--leg-scale-spread", type=float, default=None,
                         help="let the particles' leg lengths differ from the body description's: log-normal spread "
-                             "(e.g. 0.04), wandering 0.1 %% per frame; default 0: the body's own (README \"Leg length "
-                             "from the images, online\")")
+                             "(e.g. 0.04), wandering 0.1 %% per frame; default "
+                             f"{DEFAULTS.leg_scale_spread:g}: the body's own (README \"Leg length from the images, "
+                             "online\")")
     parser.add_argument("--pelvis-ceiling", type=float, default=None, metavar="F",
                         help="keep each particle's pelvis at most its own fraction of the walker's hip height, drawn "
                              "around F, over the stance, the stance knee bending as a person's does, with any number "

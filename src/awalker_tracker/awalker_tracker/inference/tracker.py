@@ -30,6 +30,7 @@ from awalker_tracker.inference.posterior import ParticleOutputs, PosteriorSummar
 from awalker_tracker.inference.recovery import (
     HELD, REACQUIRED, RESEEDED_FALLEN, LostTrackMonitor, RecoveryConfig, put_rows)
 from awalker_tracker.inference.smc import AncestryHistory, FilterStep, ParticleFilter, SMCConfig
+from awalker_tracker.inference.speed import SPEED_TIME_CONSTANT_S, update_speed
 from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription, BodyPoseBatch
 from awalker_tracker.model.walker import LEFT, LEG_NAMES, RIGHT, WalkerParams, WalkerState
 
@@ -141,7 +142,7 @@ class TrackerConfig:
     smc: SMCConfig = SMCConfig()
     dt: float = 1.0 / 30.0
     spread: InitialSpread = InitialSpread()
-    speed_time_constant_s: float = 0.5   # speed = hip velocity averaged over about one step
+    speed_time_constant_s: float = SPEED_TIME_CONSTANT_S   # walking speed averaged over about one step (inference.speed)
     fallen_log_penalty: float = 1.0e3    # log-likelihood removed from fallen walkers
     # sigma_kappa_bar^2 of the control prior while tracking (N m/rad per kg)^2. The prior's default (0.01)
     # keeps > 95 % of sampled walkers on their feet for 20 steps (0.02: ~95 % at 5 km/h); real gaits change
@@ -471,13 +472,13 @@ class TrackerModel:
             self.params, self.prior, states.walker, states.control, self.config.dt, rng)
         kin, pose = self._kin.sample_posed_kinematics(self.kin_config, self.body, self.params, walker,
                                                       states.kin, rng)
-        # walking speed: horizontal pelvis displacement per frame, averaged over about one step
+        # walking speed (inference.speed): horizontal pelvis displacement per frame, averaged over about one step
         pelvis = MARKER_NAMES.index("pelvis")
         moved = np.linalg.norm(pose.markers[:, pelvis, :2] - states.pose.markers[:, pelvis, :2], axis=1)
-        gain = min(1.0, self.config.dt / self.config.speed_time_constant_s)
         fallen = states.fallen | np.asarray(events.fallen, bool)
         # a fall is not walking: a fallen walker keeps its speed (re-seeding starts it on that speed's gait)
-        speed = np.where(fallen, states.speed, states.speed + gain * (moved / self.config.dt - states.speed))
+        speed = np.where(fallen, states.speed,
+                         update_speed(states.speed, moved, self.config.dt, self.config.speed_time_constant_s))
         new = TrackerStates(walker, control, kin, pose, speed, fallen, np.zeros(len(states), np.int8),
                             np.arange(len(states)), np.zeros((len(states), 3)), np.zeros(len(states), bool))
         if self.config.recovery.reseed_fallen and fallen.any():

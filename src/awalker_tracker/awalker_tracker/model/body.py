@@ -56,6 +56,14 @@ MARKER_NAMES: tuple[str, ...] = (
     "left_hip", "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle",
     "left_heel", "right_heel", "left_toe", "right_toe",
 )
+#: The skeleton drawn over the markers (overlays, the pose publisher's lines): pairs of ``MARKER_NAMES``.
+SKELETON_EDGES: tuple[tuple[str, str], ...] = (
+    ("pelvis", "thorax"), ("thorax", "head"), ("pelvis", "left_hip"), ("pelvis", "right_hip"),
+    ("left_hip", "left_knee"), ("left_knee", "left_ankle"), ("left_ankle", "left_heel"),
+    ("left_heel", "left_toe"), ("left_ankle", "left_toe"),
+    ("right_hip", "right_knee"), ("right_knee", "right_ankle"), ("right_ankle", "right_heel"),
+    ("right_heel", "right_toe"), ("right_ankle", "right_toe"),
+)
 PART_NAMES: tuple[str, ...] = (
     "torso", "head", "left_upper_leg", "right_upper_leg",
     "left_lower_leg", "right_lower_leg", "left_foot", "right_foot",

@@ -226,11 +226,6 @@ class MocapTrial:
     def duration(self) -> float:
         return (self.markers.shape[0] - 1) / self.rate
 
-    def pelvis_speed(self) -> float:
-        """Mean horizontal pelvis speed (m/s) from the first to the last frame."""
-        pelvis = self.markers[:, 0, :2]
-        return float(np.linalg.norm(pelvis[-1] - pelvis[0]) / self.duration)
-
     def resample(self, rate: float) -> "MocapTrial":
         """Linear interpolation in time to ``rate`` Hz (exact subsampling when it divides 120)."""
         if rate <= 0:

@@ -7,15 +7,19 @@ Only conversions live here; no computation. Arrays go into float64[]/float32[] f
 from __future__ import annotations
 
 import array
+from typing import TYPE_CHECKING
 
 import numpy as np
 from awalker_msgs.msg import BodyPose, FootContact, ParticleCloud, PosteriorSummary, WalkerState
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Point, Pose
-from sensor_msgs.msg import PointCloud2, PointField
+from geometry_msgs.msg import Point, Pose, PoseStamped
+from sensor_msgs.msg import CameraInfo, PointCloud2, PointField
 from std_msgs.msg import Header
 
 from awalker_tracker.inference import posterior as core
+
+if TYPE_CHECKING:
+    from awalker_tracker.vision.camera import Camera
 
 NS_PER_S = 1_000_000_000
 #: Queue depth of /awalker/posterior at the tracker and at its readers (reliable). The automatic start
@@ -160,14 +164,11 @@ def particles_to_pointcloud2(hdr: Header, clouds: list[ParticleCloud], per_cloud
                        data=array.array("B", points.tobytes()), is_dense=True)
 
 
-def camera_from_msgs(name: str, info, pose_stamped) -> "Camera":
-    """Camera from sensor_msgs/CameraInfo and geometry_msgs/PoseStamped (world_from_optical frame)."""
-    from scipy.spatial.transform import Rotation
+def camera_from_msgs(name: str, info: CameraInfo, pose_stamped: PoseStamped) -> Camera:
+    """A validated Camera (``vision.camera.camera_from_info``) from /<name>/camera_info and /<name>/camera_pose
+    (the optical frame's pose in the world); InputError naming the topic on bad values."""
+    from awalker_tracker.vision.camera import camera_from_info      # numba: only the nodes that need cameras
 
-    from awalker_tracker.vision.camera import Camera
-
-    q = pose_stamped.pose.orientation
-    p = pose_stamped.pose.position
-    return Camera(name, int(info.width), int(info.height), np.asarray(info.k, float).reshape(3, 3),
-                  np.asarray(info.d, float), Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix(),
-                  np.array([p.x, p.y, p.z], float))
+    p, q = pose_stamped.pose.position, pose_stamped.pose.orientation
+    return camera_from_info(name, info, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w), f"/{name}/camera_info",
+                            f"/{name}/camera_pose")

@@ -1,8 +1,9 @@
 """Features node: one camera's images -> per-frame appearance ratio maps and grid flow.
 
 Subscribes (camera ``<cam>`` from the ``camera_name`` parameter):
-- ``/<cam>/image_raw`` (sensor_msgs/Image: rgb8, bgr8, mono8, rgba8, bgra8) and
-  ``/<cam>/image_raw/compressed`` (sensor_msgs/CompressedImage: jpeg/png), sensor-data QoS
+- ``/<cam>/image_raw`` (sensor_msgs/Image: rgb8, bgr8, mono8, rgba8, bgra8, mono16) and
+  ``/<cam>/image_raw/compressed`` (sensor_msgs/CompressedImage: JPEG or PNG, told by the data;
+  ``vision.decode``), sensor-data QoS
   (a best-effort reader also receives the replay's reliable publications);
 - optional ``/<cam>/occlusion_mask`` (mono8, 255 = occluded; applied to the frame with the same
   stamp: its pixels get ratio 0 and its flow cells are invalid). When the camera has masks (a
@@ -32,8 +33,8 @@ the next image and makes its maps; an unexpected error there is raised in the ex
 Undecodable images and out-of-order stamps are logged with the topic and counted (``stats``), and
 skipped.
 
-Message conversions (``image_from_msg``, ``features_to_msg``, ``features_from_msg``) are plain
-functions the tracker side reuses.
+Message conversions (``features_to_msg``, ``features_from_msg``) are plain functions the tracker side
+reuses; images are decoded by ``vision.decode``, as the bag reader decodes them.
 """
 from __future__ import annotations
 
@@ -63,49 +64,16 @@ from awalker_tracker.model.walker import LEFT
 from awalker_tracker.nodes.base import AwalkerNode
 from awalker_tracker.nodes.convert import camera_from_msgs, stamp_to_ns
 from awalker_tracker.nodes.spin import run_node
+from awalker_tracker.vision.decode import decode_image, decode_mono8
 from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor, FrameFeatures
 from awalker_tracker.vision.flow import FlowConfig, FlowGrid
 from awalker_tracker.vision.foreground import start_pose_labels
 
 START_TOPIC = "/awalker/start_description"
 BODY_TOPIC = "/awalker/body_description"
-IMAGE_ENCODINGS = ("rgb8", "bgr8", "mono8", "rgba8", "bgra8")
 
 
 # ---- message conversion -------------------------------------------------------------------
-def image_from_msg(msg: Image | CompressedImage, topic: str = "image") -> np.ndarray:
-    """RGB uint8 (H, W, 3) from sensor_msgs/Image or CompressedImage; InputError naming ``topic``.
-    An rgb8 image without row padding is a view of the message's data (not copied)."""
-    if isinstance(msg, CompressedImage):
-        data = np.frombuffer(msg.data, np.uint8)
-        decoded = cv2.imdecode(data, cv2.IMREAD_COLOR_RGB) if data.size else None
-        if decoded is None:
-            raise InputError(f"{topic}: cannot decode CompressedImage format {msg.format!r}; expected jpeg or png")
-        return decoded
-    encoding = msg.encoding.lower()
-    if encoding not in IMAGE_ENCODINGS:
-        raise InputError(f"{topic}: unsupported encoding {msg.encoding!r}; expected one of {', '.join(IMAGE_ENCODINGS)}")
-    channels = {"mono8": 1, "rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4}[encoding]
-    height, width, step = int(msg.height), int(msg.width), int(msg.step)
-    data = np.frombuffer(msg.data, np.uint8)          # a view of the message's bytes, no copy
-    if width <= 0 or height <= 0 or step < width * channels or data.size < step * height:
-        raise InputError(f"{topic}: image {width}x{height} {encoding} with step {step} has {data.size} bytes; "
-                         f"expected at least {max(step, width * channels) * height}")
-    pixels = data[: step * height].reshape(height, step)[:, : width * channels].reshape(height, width, channels)
-    if encoding == "mono8":
-        return np.repeat(pixels, 3, axis=2)
-    if encoding.startswith("bgr"):
-        return np.ascontiguousarray(pixels[..., 2::-1])
-    return np.ascontiguousarray(pixels[..., :3])
-
-
-def mono_from_msg(msg: Image, topic: str) -> np.ndarray:
-    """uint8 (H, W) from a mono8 Image (masks, label images)."""
-    if msg.encoding.lower() != "mono8":
-        raise InputError(f"{topic}: encoding {msg.encoding!r}; expected mono8")
-    return image_from_msg(msg, topic)[..., 0]
-
-
 def _floats(values: np.ndarray) -> array.array:
     """float32 array.array of ``values`` (one copy)."""
     out = array.array("f")
@@ -295,7 +263,11 @@ class FeatureNode(AwalkerNode):
         if not (self.use_start_pose and self._labels is None and self.extractor.learns_foreground_next
                 and self._start is not None and self._info is not None and self._pose is not None):
             return None
-        camera = camera_from_msgs(self.camera_name, self._info, self._pose)
+        try:
+            camera = camera_from_msgs(self.camera_name, self._info, self._pose)
+        except InputError as exc:
+            self.get_logger().error(f"{exc}; learning the foreground from height bands")
+            return None
         if (camera.height, camera.width) != rgb.shape[:2]:
             self.get_logger().error(f"/{self.camera_name}/camera_info says {camera.width}x{camera.height}, images are "
                                     f"{rgb.shape[1]}x{rgb.shape[0]}; learning the foreground from height bands")
@@ -320,7 +292,7 @@ class FeatureNode(AwalkerNode):
         stamp = stamp_to_ns(msg.header.stamp)
         self._masks_seen = True
         try:
-            self._masks[stamp] = mono_from_msg(msg, topic)
+            self._masks[stamp] = decode_mono8(msg, topic)
         except InputError as exc:
             self.get_logger().error(str(exc))
         while len(self._masks) > 30:
@@ -329,7 +301,7 @@ class FeatureNode(AwalkerNode):
 
     def _on_labels(self, msg: Image) -> None:
         try:
-            labels = mono_from_msg(msg, f"/{self.camera_name}/foreground_labels").astype(np.int16) - 1
+            labels = decode_mono8(msg, f"/{self.camera_name}/foreground_labels").astype(np.int16) - 1
         except InputError as exc:
             self.get_logger().error(str(exc))
             return
@@ -386,7 +358,7 @@ class FeatureNode(AwalkerNode):
             self._skip(f"{topic}: stamp {stamp} ns is not after the previous frame's {self._last_stamp} ns")
             return
         try:
-            rgb = image_from_msg(msg, topic)
+            rgb = decode_image(msg, topic)
             mask = self._masks.pop(stamp, None)
             start_labels = self._start_labels(rgb)
             learned = self.extractor.foreground is not None

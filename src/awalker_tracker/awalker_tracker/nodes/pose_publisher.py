@@ -27,16 +27,11 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from awalker_tracker.inference.gait import PosteriorSteps, Step
-from awalker_tracker.model.body import BodyDescription
+from awalker_tracker.model.body import SKELETON_EDGES, BodyDescription
 from awalker_tracker.nodes.base import AwalkerNode
 from awalker_tracker.nodes.convert import POSTERIOR_DEPTH, particles_to_pointcloud2, points_from_msg, stamp_to_ns
 from awalker_tracker.nodes.spin import run_node
 
-BONES = (("pelvis", "thorax"), ("thorax", "head"), ("pelvis", "left_hip"), ("pelvis", "right_hip"),
-         ("left_hip", "left_knee"), ("left_knee", "left_ankle"), ("left_ankle", "left_heel"),
-         ("left_heel", "left_toe"), ("left_ankle", "left_toe"),
-         ("right_hip", "right_knee"), ("right_knee", "right_ankle"), ("right_ankle", "right_heel"),
-         ("right_heel", "right_toe"), ("right_ankle", "right_toe"))
 #: Samples per body marker's cloud in /awalker/particles (the heaviest; the posterior message carries 200).
 DEFAULT_CLOUD_POINTS = 50
 
@@ -107,7 +102,7 @@ class MarkerBuilder:
     def _lay_out(self, names: tuple[str, ...]) -> None:
         """The skeleton's lines and the cylinders for these marker names (those whose ends are all present)."""
         index = {n: i for i, n in enumerate(names)}
-        self._line_rows = [index[end] for bone in BONES if bone[0] in index and bone[1] in index for end in bone]
+        self._line_rows = [index[end] for bone in SKELETON_EDGES if bone[0] in index and bone[1] in index for end in bone]
         self._lines.points = [Point() for _ in self._line_rows]
         self._joints.points = [Point() for _ in names]
         self._cylinders = []

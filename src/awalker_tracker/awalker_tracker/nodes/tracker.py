@@ -12,6 +12,8 @@ Cameras come from the ``calibration`` YAML or from ``/<cam>/camera_info`` + ``/<
 (as the replay publishes them); start and body descriptions from YAML files or the latched
 ``/awalker/start_description`` and ``/awalker/body_description`` topics (body: default if none).
 Frames that arrive before everything is known are kept and processed as soon as it is.
+The filter's settings default to the ``profile`` parameter's (``inference.profiles``, as `awalker track
+--profile`: ``accurate``, 15000 particles, or ``realtime``, 5000, for a live camera).
 """
 from __future__ import annotations
 
@@ -34,6 +36,7 @@ from std_msgs.msg import Header, String
 from awalker_tracker.errors import InputError
 from awalker_tracker.inference.autostart import AUTO_SPREAD, AutoStartConfig
 from awalker_tracker.inference.posterior import PosteriorSummary as CoreSummary
+from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES, tracking_profile
 from awalker_tracker.inference.recovery import RecoveryConfig
 from awalker_tracker.inference.smc import SMCConfig
 from awalker_tracker.inference.sync import StampSynchronizer
@@ -80,16 +83,19 @@ class TrackerNode(AwalkerNode):
         self.calibration_path = declare("calibration", "", "calibration YAML; empty: camera_info + camera_pose topics")
         start_path = declare("start_description", "", "start YAML; empty: /awalker/start_description topic")
         body_path = declare("body_description", "", "body YAML; empty: /awalker/body_description topic or default")
-        n = declare("num_particles", 5000, "number of particles N")
-        tau = declare("lookahead", 3, "look-ahead tau (frames)")
-        gamma = declare("trust", 0.9, "gamma: trust in look-ahead weights when resampling")
-        fraction = declare("resample_fraction", 0.1, "resample when N_eff < fraction * N")
-        scheme = declare("resampling", "systematic", "systematic | stratified | multinomial")
-        seed = declare("seed", 0, "random seed")
-        self.likelihood_scale = float(declare("likelihood_scale", TrackerConfig.likelihood_scale,
+        self.profile_name = str(declare("profile", DEFAULT_PROFILE, "defaults of the settings below, as `awalker "
+                                        f"track --profile` (inference/profiles.py): {', '.join(PROFILES)}"))
+        profile = tracking_profile(self.profile_name, "awalker_tracker: parameter 'profile'")
+        n = declare("num_particles", profile.num_particles, "number of particles N (default: the profile's)")
+        tau = declare("lookahead", profile.lookahead, "look-ahead tau (frames)")
+        gamma = declare("trust", profile.trust, "gamma: trust in look-ahead weights when resampling")
+        fraction = declare("resample_fraction", profile.resample_fraction, "resample when N_eff < fraction * N")
+        scheme = declare("resampling", profile.resampling, "systematic | stratified | multinomial")
+        seed = declare("seed", profile.seed, "random seed")
+        self.likelihood_scale = float(declare("likelihood_scale", profile.likelihood_scale,
                                               "exponent (tempering) of the image likelihood; 0: images unused "
                                               "(dead reckoning)"))
-        self.leg_scale_spread = float(declare("leg_scale_spread", TrackerConfig.leg_scale_spread,
+        self.leg_scale_spread = float(declare("leg_scale_spread", profile.leg_scale_spread,
                                               "spread (log, std) of the particles' leg lengths around the body's "
                                               "(0: the body's own; TrackerConfig.leg_scale_spread)"))
         self.pelvis_ceiling = float(declare("pelvis_ceiling", TrackerConfig.pelvis_ceiling,
@@ -113,15 +119,17 @@ class TrackerNode(AwalkerNode):
         self.estimate_body = bool(declare("estimate_body", False, "no body description: with the automatic start, "
                                           "scale the default body to the person's height seen in the images"))
         self.body_output = str(declare("body_output", "", "write an estimated body description to this YAML file"))
-        depth_band = float(declare("depth_band_m", RecoveryConfig.depth_band_m, "one camera: walkers whose pelvis "
+        depth_band = float(declare("depth_band_m", profile.depth_band_m, "one camera: walkers whose pelvis "
                                    "lies farther than this (m) from where the blob's feet row puts the person lose "
                                    "weight; 0: off (inference/recovery.py)"))
         try:
             self.recovery = RecoveryConfig(
-                reseed_fallen=bool(declare("reseed_fallen", True, "re-seed walkers that fall (inference/recovery.py)")),
-                reacquire=bool(declare("reacquire", True, "re-acquire a lost track at the person seen in the images")),
-                hold_still=bool(declare("hold_still", True, "hold the walkers while the person seen in the images "
-                                                            "stands still")),
+                reseed_fallen=bool(declare("reseed_fallen", profile.reseed_fallen,
+                                           "re-seed walkers that fall (inference/recovery.py)")),
+                reacquire=bool(declare("reacquire", profile.reacquire,
+                                       "re-acquire a lost track at the person seen in the images")),
+                hold_still=bool(declare("hold_still", profile.hold_still,
+                                        "hold the walkers while the person seen in the images stands still")),
                 depth_band_m=depth_band)
         except ValueError as exc:
             raise InputError(f"awalker_tracker: parameter 'depth_band_m': {exc}") from None
@@ -188,6 +196,7 @@ class TrackerNode(AwalkerNode):
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self._infos: dict[str, CameraInfo] = {}
         self._poses: dict[str, PoseStamped] = {}
+        self._camera_errors: dict[str, str] = {}    # camera -> the last error its camera_info + camera_pose gave
         if not self.cameras:
             for cam in self.camera_names:
                 self.create_subscription(CameraInfo, f"/{cam}/camera_info",
@@ -220,7 +229,12 @@ class TrackerNode(AwalkerNode):
             return
         for cam in self.camera_names:
             if cam in self._infos and cam in self._poses and cam not in self.cameras:
-                self.cameras[cam] = camera_from_msgs(cam, self._infos[cam], self._poses[cam])
+                try:
+                    self.cameras[cam] = camera_from_msgs(cam, self._infos[cam], self._poses[cam])
+                except InputError as exc:           # logged once per distinct error; the next message may do
+                    if self._camera_errors.get(cam) != str(exc):
+                        self._camera_errors[cam] = str(exc)
+                        self.get_logger().error(f"{exc}; camera {cam} not used until a valid calibration arrives")
         self._process_pending()
 
     def _on_start(self, msg: String) -> None:

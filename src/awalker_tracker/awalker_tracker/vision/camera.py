@@ -184,6 +184,39 @@ def _matrix(value: Any, shape: tuple[int, ...], where: str) -> np.ndarray:
     return arr
 
 
+def _size(width: Any, height: Any, where: str) -> tuple[int, int]:
+    """Image width and height (px), positive integers."""
+    if not all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v > 0 for v in (width, height)):
+        raise InputError(f"{where}: width and height must be positive integers, got {width!r}, {height!r}")
+    return int(width), int(height)
+
+
+def _intrinsics(value: Any, where: str) -> np.ndarray:
+    """K (3, 3): finite, [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0."""
+    K = _matrix(value, (3, 3), where)
+    if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]) or K[1, 0] != 0:
+        raise InputError(f"{where}: K must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, got {K.tolist()}")
+    return K
+
+
+def _rotation(value: Any, where: str) -> np.ndarray:
+    """world_from_camera rotation (3, 3) from a quaternion (qx, qy, qz, qw) whose norm is 1 within 1e-3 (then
+    normalised); a zero or otherwise non-unit quaternion is an error."""
+    quat = _matrix(value, (4,), where)
+    norm = float(np.linalg.norm(quat))
+    if norm < 1e-6:
+        raise InputError(f"{where}: a zero quaternion is no rotation; expected a unit quaternion [qx, qy, qz, qw]")
+    if abs(norm - 1.0) > 1e-3:
+        raise InputError(f"{where}: must be a unit quaternion [qx, qy, qz, qw], norm is {norm:.4f}")
+    return Rotation.from_quat(quat / norm).as_matrix()
+
+
+def _name(name: Any, where: str) -> str:
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise InputError(f"{where}: name must match [A-Za-z][A-Za-z0-9_]*, got {name!r}")
+    return name
+
+
 def camera_from_dict(entry: Any, where: str) -> Camera:
     """One camera from a calibration YAML entry; ``where`` names the file and entry in errors."""
     if not isinstance(entry, dict):
@@ -191,16 +224,10 @@ def camera_from_dict(entry: Any, where: str) -> Camera:
     missing = [k for k in ("name", "width", "height", "K", "pose") if k not in entry]
     if missing:
         raise InputError(f"{where}: missing field(s) {', '.join(missing)}")
-    name = entry["name"]
-    if not isinstance(name, str) or not _NAME.match(name):
-        raise InputError(f"{where}: name must match [A-Za-z][A-Za-z0-9_]*, got {name!r}")
+    name = _name(entry["name"], where)
     where = f"{where} (camera {name})"
-    width, height = entry["width"], entry["height"]
-    if not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in (width, height)):
-        raise InputError(f"{where}: width and height must be positive integers, got {width!r}, {height!r}")
-    K = _matrix(entry["K"], (3, 3), f"{where}: K")
-    if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]) or K[1, 0] != 0:
-        raise InputError(f"{where}: K must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+    width, height = _size(entry["width"], entry["height"], where)
+    K = _intrinsics(entry["K"], f"{where}: K")
     dist_value = entry.get("distortion") or []
     dist = np.asarray(dist_value, float).ravel() if isinstance(dist_value, list) else None
     if dist is None or dist.size not in _DISTORTION_SIZES or not np.all(np.isfinite(dist)):
@@ -209,11 +236,39 @@ def camera_from_dict(entry: Any, where: str) -> Camera:
     if not isinstance(pose, dict) or "position" not in pose or "orientation" not in pose:
         raise InputError(f"{where}: pose must have position [x, y, z] and orientation [qx, qy, qz, qw]")
     position = _matrix(pose["position"], (3,), f"{where}: pose.position")
-    quat = _matrix(pose["orientation"], (4,), f"{where}: pose.orientation")
-    norm = np.linalg.norm(quat)
-    if abs(norm - 1.0) > 1e-3:
-        raise InputError(f"{where}: pose.orientation must be a unit quaternion [qx, qy, qz, qw], norm is {norm:.4f}")
-    rotation = Rotation.from_quat(quat / norm).as_matrix()
+    rotation = _rotation(pose["orientation"], f"{where}: pose.orientation")
+    return Camera(name, width, height, K, dist, rotation, position)
+
+
+#: sensor_msgs/CameraInfo distortion models the camera model takes (OpenCV's radial-tangential family) and the
+#: numbers of coefficients each may carry: plumb_bob k1 k2 p1 p2 [k3] (or none: an uncalibrated driver's zero
+#: distortion), rational_polynomial k1 k2 p1 p2 k3 k4 k5 k6, and an empty model with no coefficients.
+DISTORTION_MODELS: dict[str, tuple[int, ...]] = {"plumb_bob": (0, 4, 5), "rational_polynomial": (8,), "": (0,)}
+
+
+def camera_from_info(name: str, info: Any, position: Any, orientation: Any, info_where: str,
+                     pose_where: str) -> Camera:
+    """A validated Camera from a sensor_msgs/CameraInfo (rclpy or rosbags message: width, height, k,
+    distortion_model, d) and the pose of its optical frame in the world: ``position`` (x, y, z) m and
+    ``orientation`` (qx, qy, qz, qw). The one builder of cameras from messages (bag reader, tracker and
+    features nodes). Checked: a positive size, finite intrinsics with fx, fy > 0, a distortion model of
+    ``DISTORTION_MODELS`` with as many finite coefficients as it takes, a unit quaternion (normalised) and a
+    finite position; an InputError names ``info_where`` (the camera_info topic) or ``pose_where`` (where the
+    pose came from) and what was expected."""
+    name = _name(name, info_where)
+    width, height = _size(info.width, info.height, info_where)
+    K = _intrinsics(info.k, f"{info_where}: k")
+    model = str(info.distortion_model)
+    if model not in DISTORTION_MODELS:
+        raise InputError(f"{info_where}: distortion model {model!r} is not one this camera model takes; expected "
+                         f"{', '.join(repr(m) for m in DISTORTION_MODELS)}")
+    dist = np.asarray(info.d, float).ravel()
+    if dist.size not in DISTORTION_MODELS[model] or not np.all(np.isfinite(dist)):
+        counts = " or ".join(str(n) for n in DISTORTION_MODELS[model])
+        raise InputError(f"{info_where}: distortion model {model!r} takes {counts} finite coefficients in d, "
+                         f"got {dist.tolist()}")
+    position = _matrix(position, (3,), f"{pose_where}: position")
+    rotation = _rotation(orientation, f"{pose_where}: orientation")
     return Camera(name, width, height, K, dist, rotation, position)
 
 

@@ -298,10 +298,23 @@ def _direct_cell_flow(grey: np.ndarray, size: int, step: int, tensor: np.ndarray
                     min_texture, flow, cov, valid)
 
 
-def student_t_log_likelihood(v: np.ndarray, u: np.ndarray, information: np.ndarray,
-                             log_det_cov: np.ndarray, dof: float = STUDENT_T_DOF) -> np.ndarray:
-    """Eq. (9) without its constant: measured flow v (..., 2), predicted u (..., 2), inverse
-    covariance (..., 2, 2), log|Sigma| (...) -> (...)."""
-    d = v - u
-    e2 = np.einsum("...i,...ij,...j->...", d, information, d) / dof
-    return -0.5 * log_det_cov - 0.5 * (dof + 2.0) * np.log1p(e2)
+# Eq. (9), the one implementation: compiled scalar functions the likelihood kernel inlines (there they take
+# its fast-math flags) and numpy callers call on arrays (compiled for them without fast math, so the same
+# operations as numpy's own in the same order).
+_scalar = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
+
+
+@_scalar
+def student_t_e2(du: float, dv: float, i00: float, i01: float, i11: float) -> float:
+    """e^2 of eq. (9): the squared Mahalanobis distance of the flow difference d = v - u = (du, dv) (px)
+    under Sigma^-1 = [[i00, i01], [i01, i11]] (1/px^2), over n: d^T Sigma^-1 d / n. Scalars or arrays."""
+    return (du * (i00 * du + 2.0 * i01 * dv) + i11 * dv * dv) / STUDENT_T_DOF
+
+
+@_scalar
+def student_t_log_ratio(e2: float, log1p_e0: float) -> float:
+    """log p(v | u) - log p(v | 0) of eq. (9) (its -log|Sigma| / 2 and constant cancel): -(n + 2) / 2
+    (log(1 + e2) - log(1 + e0^2)), from e2 = ``student_t_e2`` of v - u and ``log1p_e0`` = log(1 + e0^2) of v
+    itself (a grid cell's, computed once per frame). With ``log1p_e0`` = 0 it is log p(v | u) + log|Sigma| / 2
+    up to eq. (9)'s constant. Scalars or arrays."""
+    return -0.5 * (STUDENT_T_DOF + 2.0) * (np.log(1.0 + e2) - log1p_e0)

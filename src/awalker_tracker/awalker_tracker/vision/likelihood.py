@@ -66,7 +66,7 @@ from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import BodySegments, PartShape
 from awalker_tracker.vision.camera import Camera
 from awalker_tracker.vision.features import FrameFeatures
-from awalker_tracker.vision.flow import STUDENT_T_DOF, FlowGrid
+from awalker_tracker.vision.flow import FlowGrid, student_t_e2, student_t_log_ratio
 
 
 @dataclass(frozen=True)
@@ -345,10 +345,10 @@ def _score_states(origin: np.ndarray, rotation: np.ndarray, lengths: np.ndarray,
                 mu = cx - (pax + t * (prev_axes[n, p, _BX] - pax))
                 mv = cy - (pay + t * (prev_axes[n, p, _BY] - pay))
                 du, dv = flow_u[cell] - mu, flow_v[cell] - mv
-                # eq. 9: Student-t log p(v | u) - log p(v | 0), e2 the squared Mahalanobis distance / dof
-                e2 = (du * (info00[cell] * du + 2.0 * info01[cell] * dv) + info11[cell] * dv * dv) / STUDENT_T_DOF
-                # (log(1 + e2) rather than log1p: ~3x faster, and its absolute error is ~1e-16)
-                flow += -0.5 * (STUDENT_T_DOF + 2.0) * (np.log(1.0 + e2) - log_zero[cell])
+                # eq. 9: Student-t log p(v | u) - log p(v | 0) (vision.flow; log(1 + e2) there rather than
+                # log1p: ~3x faster, and its absolute error is ~1e-16)
+                flow += student_t_log_ratio(student_t_e2(du, dv, info00[cell], info01[cell], info11[cell]),
+                                            log_zero[cell])
             if p == top_part and length > 1e-3:
                 # just above the end of the head (b), 0.75 map pixels out along the image axis: the
                 # person's foreground there means the body is drawn too small or too far
@@ -511,7 +511,7 @@ class _FlowTable:
         det = cov[..., 0, 0] * cov[..., 1, 1] - cov[..., 0, 1] * cov[..., 1, 0]
         i00, i01, i11 = cov[..., 1, 1] / det, -cov[..., 0, 1] / det, cov[..., 0, 0] / det
         fx, fy = grid.flow[..., 0].astype(np.float64), grid.flow[..., 1].astype(np.float64)
-        e0 = (fx * (i00 * fx + 2 * i01 * fy) + i11 * fy * fy) / STUDENT_T_DOF
+        e0 = student_t_e2(fx, fy, i00, i01, i11)
 
         def padded(a: np.ndarray) -> np.ndarray:
             return np.append(np.where(valid, a, 0).reshape(-1), 0).astype(np.float32)

@@ -1,4 +1,6 @@
-"""Per-pixel rendering of the body: part labels and depth with self-occlusion, and RGB.
+"""Per-pixel ray casting of the body: part labels and depth with self-occlusion (the foreground is learned
+from the body's labels at the start pose, ``vision.foreground``). Test images are drawn from the same hits
+by ``awalker_tools.model_render``.
 
 Ray casting, exact up to a bisection tolerance: every pixel's ray (through the distorted
 camera model, ``Camera.pixels_to_normalised``) is intersected with each part's tapered elliptical
@@ -38,14 +40,15 @@ def pixel_rays(camera: Camera) -> np.ndarray:
 @dataclass
 class RenderResult:
     """labels (H, W) int16 part index or -1; depth (H, W) m (inf = background);
-    local (H, W, 3) hit point in the part's frame (m), for texturing and shading."""
+    local (H, W, 3) hit point in the part's frame (m), for texturing and shading a picture."""
 
     labels: np.ndarray
     depth: np.ndarray
     local: np.ndarray
 
 
-def _single(segments: BodySegments) -> tuple[np.ndarray, np.ndarray]:
+def one_body(segments: BodySegments) -> tuple[np.ndarray, np.ndarray]:
+    """The part origins (P, 3) m and frames (P, 3, 3) of one body's segments (a batch of one or none)."""
     origin, rotation = np.asarray(segments.origin), np.asarray(segments.rotation)
     if origin.ndim == 3:
         if origin.shape[0] != 1:
@@ -145,7 +148,7 @@ def _cast_part(part: PartShape, origin: np.ndarray, rotation: np.ndarray, camera
 
 def render(body: BodyDescription, segments: BodySegments, camera: Camera) -> RenderResult:
     """Ray-cast one body into one camera: labels, depth and local hit points per pixel."""
-    origin, rotation = _single(segments)
+    origin, rotation = one_body(segments)
     return render_parts(body.parts, origin, rotation, camera)
 
 
@@ -178,55 +181,3 @@ def render_labels(body: BodyDescription, segments: BodySegments, camera: Camera)
     depth (H, W) in metres along the optical axis (inf = background), with self-occlusion."""
     result = render(body, segments, camera)
     return result.labels, result.depth
-
-
-# Default appearance: one base colour (RGB) per part and a texture period (m) along its axis.
-DEFAULT_COLOURS = np.array([
-    [200, 60, 50],    # torso: red shirt
-    [225, 180, 150],  # head: skin
-    [40, 60, 140], [40, 60, 140],    # upper legs: blue trousers
-    [40, 60, 140], [40, 60, 140],    # lower legs
-    [50, 40, 35], [50, 40, 35],      # feet: dark shoes
-], dtype=float)
-
-
-def render_rgb(body: BodyDescription, segments: BodySegments, camera: Camera, background: np.ndarray,
-               colours: np.ndarray | None = None, texture_period: float = 0.06,
-               result: RenderResult | None = None) -> np.ndarray:
-    """The body drawn over ``background`` (H, W, 3) uint8 RGB: per-part colour, a stripe/check
-    texture of period ``texture_period`` (m) on the part surface, and view-dependent shading."""
-    if background.shape != (camera.height, camera.width, 3):
-        raise ValueError(f"render_rgb: background must be ({camera.height}, {camera.width}, 3), got {background.shape}")
-    result = result or render(body, segments, camera)
-    colours = DEFAULT_COLOURS if colours is None else np.asarray(colours, float)
-    image = background.copy()
-    mask = result.labels >= 0
-    if not mask.any():
-        return image
-    label = result.labels[mask].astype(int)
-    local = result.local[mask]
-    parts = body.parts
-    lengths = np.array([p.length for p in parts])[label]
-    r0 = np.array([p.radii_start for p in parts])[label]
-    r1 = np.array([p.radii_end for p in parts])[label]
-    radii = r0 + (r1 - r0) * np.clip(local[:, 2] / lengths, 0, 1)[:, None]
-    # Texture: stripes along the axis crossed with stripes around it (a soft check pattern).
-    around = np.arctan2(local[:, 1] / radii[:, 1], local[:, 0] / radii[:, 0])
-    along = np.floor(local[:, 2] / texture_period)
-    ring = np.floor(around / (np.pi / 4))
-    check = (along + ring) % 2
-    texture = 0.8 + 0.2 * check
-    # Shading: surface normal of the elliptical side against the viewing ray.
-    normal_local = np.column_stack([local[:, 0] / radii[:, 0] ** 2, local[:, 1] / radii[:, 1] ** 2,
-                                    np.zeros(len(label))])
-    origin, rotation = _single(segments)
-    normal = np.einsum("kij,kj->ki", rotation[label], normal_local)
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
-    world = origin[label] + np.einsum("kij,kj->ki", rotation[label], local)
-    view = camera.position - world
-    view /= np.linalg.norm(view, axis=1, keepdims=True)
-    shade = 0.45 + 0.55 * np.abs(np.sum(normal * view, axis=1))
-    on_cap = (local[:, 2] <= 1e-6) | (local[:, 2] >= lengths - 1e-6)
-    shade = np.where(on_cap, 0.7, shade)
-    image[mask] = np.clip(colours[label] * (texture * shade)[:, None], 0, 255).astype(np.uint8)
-    return image
