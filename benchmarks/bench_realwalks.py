@@ -43,6 +43,7 @@ from bench_accuracy import evaluate_run  # noqa: E402  (one `awalker eval` wrapp
 SETTINGS = {"mono": 1, "two": 2}
 MODES = ("hand", "handsoff")
 SWAPPED_FRACTION = 0.05       # a run with legs swapped on more of its frames counts as swapped
+FAILED = "failed.txt"         # in a run's directory: why `awalker track` refused to track (the run counts as lost)
 
 
 def log(text: str) -> None:
@@ -97,6 +98,16 @@ def score(result: dict, run_dir: Path, truth_csv: Path) -> dict:
             "reacquisitions": result.get("recovery", {}).get("reacquisitions", 0)}
 
 
+def failed_run(why: str) -> dict:
+    """The figures of a run `awalker track` refused (e.g. no walking person found): infinitely wrong, never on the
+    person, so that it counts against every figure."""
+    inf = float("inf")
+    return {"failed": why, "absolute_median_mm": inf, "relative_median_mm": inf, "frames": 0, "swap_fraction": 1.0,
+            "heading_median_deg": inf, "ended_on_person": False, "off_person_frames": None,
+            "map_max_step_m_s": float("nan"), "live_max_step_m_s": float("nan"), "heel_strike_error_s": None,
+            "heel_strike_bias_s": None, "step_length_error_m": None, "start_leg_right": None, "reacquisitions": 0}
+
+
 def summarise(runs: dict[tuple[str, int], dict], trials: dict) -> dict:
     """Figures over the runs of one setting and mode: {(trial, seed): score}."""
     by_walk: dict[str, list[float]] = {}
@@ -107,7 +118,7 @@ def summarise(runs: dict[tuple[str, int], dict], trials: dict) -> dict:
     turning = [m for trial, m in walk_medians.items() if trials[trial].turns]
     out = {"runs": len(runs), "walks": len(walk_medians),
            "median_of_walk_medians_mm": float(np.median(list(walk_medians.values()))),
-           "p90_run_mm": float(np.percentile(errors, 90)), "worst_run_mm": float(errors.max()),
+           "p90_run_mm": float(np.percentile(errors, 90, method="higher")), "worst_run_mm": float(errors.max()),
            "relative_median_of_walk_medians_mm": float(np.median([np.median([r["relative_median_mm"] for (t, _), r in
                                                                             runs.items() if t == trial])
                                                                  for trial in walk_medians])),
@@ -116,6 +127,7 @@ def summarise(runs: dict[tuple[str, int], dict], trials: dict) -> dict:
            "largest_map_step_m_s": float(np.nanmax([r["map_max_step_m_s"] for r in runs.values()])),
            "largest_live_step_m_s": float(np.nanmax([r["live_max_step_m_s"] for r in runs.values()])),
            "runs_ended_on_person": int(sum(r["ended_on_person"] for r in runs.values())),
+           "runs_failed": int(sum("failed" in r for r in runs.values())),
            "walk_medians_mm": {t: round(m, 1) for t, m in sorted(walk_medians.items())}}
     legs: dict[str, list[bool]] = {}
     for (trial, _), run in runs.items():
@@ -157,13 +169,15 @@ def markdown(report: dict) -> str:
         lambda x, s, m: f"{x['runs_legs_swapped']} of {x['runs']}")
     row("largest pelvis step between frames, MAP path / live (m/s)",
         lambda x, s, m: f"{x['largest_map_step_m_s']:.1f} / {x['largest_live_step_m_s']:.1f}")
-    row("runs ending on the person", lambda x, s, m: f"{x['runs_ended_on_person']} of {x['runs']}")
+    row("runs ending on the person (runs that never started)",
+        lambda x, s, m: f"{x['runs_ended_on_person']} of {x['runs']} ({x['runs_failed']})")
     return "\n".join(rows) + "\n"
 
 
 def main(argv: list[str] | None = None) -> int:
     from awalker_tools import devset
     from awalker_tools.pipeline import TrackOptions, run_tracking
+    from awalker_tracker.errors import InputError
 
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--set", choices=("quick", "tuning", "reporting", "all"), default="quick",
@@ -193,7 +207,7 @@ def main(argv: list[str] | None = None) -> int:
                                  "tuning_subjects": list(devset.TUNING_SUBJECTS),
                                  "reporting_subjects": list(devset.REPORTING_SUBJECTS)},
                     "runs": {}, "summary": {}}
-    jobs = [(t, s) for t in trials for s in seeds]
+    jobs = [(t, s) for s in seeds for t in trials]     # seed by seed: every walk is seen early
     started = time.monotonic()
     scores: dict[str, dict[tuple[str, int], dict]] = {}
     for k, (trial, seed) in enumerate(jobs):
@@ -203,17 +217,26 @@ def main(argv: list[str] | None = None) -> int:
             for mode in args.modes:
                 variant = variant_of(setting, mode)
                 run_dir = args.out / "runs" / f"{trial}_s{seed}_{variant}{suffix}"
-                if not (run_dir / "eval.json").exists():
-                    with contextlib.redirect_stdout(sys.stderr):
-                        run_tracking(TrackOptions(bag=bags[variant], out=run_dir, particles=args.particles, seed=seed,
-                                                  auto_start=mode == "handsoff", overlays=False, quiet=True))
-                    evaluate_run(run_dir)
-                result = json.loads((run_dir / "eval.json").read_text())
-                entry = score(result, run_dir, bags[variant].parent / "ground_truth.csv")
+                if not (run_dir / "eval.json").exists() and not (run_dir / FAILED).exists():
+                    try:
+                        with contextlib.redirect_stdout(sys.stderr):
+                            run_tracking(TrackOptions(bag=bags[variant], out=run_dir, particles=args.particles,
+                                                      seed=seed, auto_start=mode == "handsoff", overlays=False,
+                                                      quiet=True))
+                        evaluate_run(run_dir)
+                    except InputError as exc:       # e.g. no walking person found: the run failed, say so
+                        run_dir.mkdir(parents=True, exist_ok=True)
+                        (run_dir / FAILED).write_text(str(exc))
+                if (run_dir / FAILED).exists():
+                    entry = failed_run((run_dir / FAILED).read_text())
+                else:
+                    entry = score(json.loads((run_dir / "eval.json").read_text()), run_dir,
+                                  bags[variant].parent / "ground_truth.csv")
                 report["runs"].setdefault(f"{trial} s{seed}", {})[variant] = entry
                 scores.setdefault(f"{setting} {mode}", {})[(trial, seed)] = entry
                 log(f"[{k + 1}/{len(jobs)}] {trial} seed {seed} {variant}: {entry['absolute_median_mm']:.0f} mm, "
-                    f"swapped {entry['swap_fraction']:.0%}, steps {entry['map_max_step_m_s']:.1f} / "
+                    + (f"FAILED ({entry['failed']}), " if "failed" in entry else "")
+                    + f"swapped {entry['swap_fraction']:.0%}, steps {entry['map_max_step_m_s']:.1f} / "
                     f"{entry['live_max_step_m_s']:.1f} m/s ({(time.monotonic() - started) / 60:.1f} min)")
     report["summary"] = {key: summarise(runs, devset.TRIALS) for key, runs in scores.items()}
     table = markdown(report)

@@ -32,7 +32,9 @@ descriptions: the automatic start). Units: m, s, rad unless a name says otherwis
 from __future__ import annotations
 
 import json
+import shutil
 import sys
+import zlib
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -65,6 +67,7 @@ UPPER_BODY = ("thorax", "head", "left_shoulder", "right_shoulder", "left_elbow",
 BACKGROUND_FRAMES = 15          # empty frames before the person in the hand-started sequences
 ROOM_HALF_SIZE = 12.0           # m: cameras stand up to 10 m from the middle of the walk
 MIN_CAMERA_CLEARANCE = 1.5      # m: no camera stands nearer than this to the pelvis's path
+SECOND_PERSON_BEHIND_M = 1.2    # m: the second person's path behind the first's, as the first camera sees them
 
 
 @dataclass(frozen=True)
@@ -164,13 +167,17 @@ class Recording:
     start_offset_m: tuple[float, float]
     heading_error: float                 # rad
     speed_factor: float
+    span: tuple[float, float] | None = None   # s of the trial's stretch to use (None: all of it)
+    # another person walking this trial the other way, SECOND_PERSON_BEHIND_M farther from the first camera
+    # (crossing behind the first person), in other clothes; the truth and the descriptions stay the first's
+    second: str | None = None
 
     @classmethod
     def draw(cls, trial: str, seed: int) -> "Recording":
         """The recording of ``trial`` for run ``seed`` (the same seed draws the same recording)."""
         if trial not in TRIALS:
             raise InputError(f"development set: unknown trial {trial!r}; expected one of {', '.join(TRIALS)}")
-        rng = np.random.default_rng([seed, sum(map(ord, trial))])
+        rng = np.random.default_rng([seed, zlib.crc32(trial.encode())])
         heading = float(rng.uniform(-np.pi, np.pi))
         first = float(rng.uniform(-np.pi, np.pi))
         second = first + float(rng.choice([-1.0, 1.0])) * float(rng.uniform(np.radians(45), np.radians(135)))
@@ -247,6 +254,9 @@ def recording_motion(recording: Recording) -> Motion:
 
     trial, rate = TRIALS[recording.trial], recording.rate
     points = trial_points(trial, rate)
+    if recording.span is not None:
+        first, last = (int(round(s * rate)) for s in recording.span)
+        points = points[first: last + 1]
     pelvis0 = points[0, _M["pelvis"]] * np.array([1.0, 1.0, 0.0])
     points = (points - pelvis0) * recording.scale
     upper = [POINT_NAMES.index(n) for n in UPPER_BODY]
@@ -279,6 +289,24 @@ def user_start(recording: Recording, start: dict) -> dict:
     s.pop("step_length", None)
     s["stance_leg"] = "unknown"
     return {"start": s}
+
+
+def second_person(recording: Recording, first: Motion) -> Motion:
+    """The second person of ``recording``: its ``second`` trial walked the other way (the first's heading turned
+    round), its path's middle ``SECOND_PERSON_BEHIND_M`` behind the first's as the first camera looks, as many
+    frames as the first's (the walk repeated if shorter)."""
+    motion = recording_motion(replace(recording, trial=recording.second, heading=recording.heading + np.pi,
+                                      span=None, second=None))
+    points = motion.points
+    if len(points) < len(first.points):
+        points = mocap_motion.loop_to_duration(points, recording.rate, (len(first.points) - 1) / recording.rate)
+    points = points[: len(first.points)].copy()
+    toward_camera = np.array([np.cos(recording.cameras[0].direction), np.sin(recording.cameras[0].direction)])
+    path = first.points[:, _M["pelvis"], :2]
+    middle = 0.5 * (path.min(axis=0) + path.max(axis=0))
+    points[..., :2] += middle - SECOND_PERSON_BEHIND_M * toward_camera
+    markers = np.ascontiguousarray(points[:, : len(MARKER_NAMES)])
+    return replace(motion, markers=markers, points=points)
 
 
 def tape_measure(recording: Recording, body: BodyDescription) -> BodyDescription:
@@ -324,24 +352,28 @@ def make_recording(recording: Recording, out: Path, progress: bool = True) -> di
     """Render ``recording`` into ``out`` (created) and derive its sequences: ``out/<variant>/synth.bag`` for each
     of ``VARIANTS`` with calibration.yaml, ground_truth.csv and, hand-started, start.yaml and body.yaml;
     ``out/recording.yaml`` (the draws) and ``out/ground_truth_body.yaml``. Returns variant -> bag. Reuses
-    what a finished earlier call left (``out/done``)."""
+    what an earlier call left for the same draws (``out/done`` holds them)."""
     out = Path(out)
     bags = {variant: out / variant / "synth.bag" for variant in VARIANTS}
-    if (out / "done").is_file():
+    draws = json.dumps(recording.describe(), sort_keys=True)
+    if (out / "done").is_file() and (out / "done").read_text() == draws:
         return bags
     if out.exists():
-        import shutil
-
         shutil.rmtree(out)
     master = out / "master"
     master.mkdir(parents=True)
     motion = recording_motion(recording)
-    cameras = [draw_camera(f"cam{k}", draw, recording.size, motion.points) for k, draw in enumerate(recording.cameras)]
-    rng = np.random.default_rng([recording.seed, sum(map(ord, recording.trial)), 1])
+    rng = np.random.default_rng([recording.seed, zlib.crc32(recording.trial.encode()), 1])
+    other = second_person(recording, motion) if recording.second is not None else None
+    seen = motion.points if other is None else np.concatenate([motion.points, other.points], axis=1)
+    cameras = [draw_camera(f"cam{k}", draw, recording.size, seen) for k, draw in enumerate(recording.cameras)]
     textures = make_textures(rng, ROOM_HALF_SIZE)
     painters = {cam.name: PersonRenderer(cam, recording.outfit, blur_sigma_px=0.0) for cam in cameras}
     scene = Scene(cameras, [render_room(cam, textures, ROOM_HALF_SIZE) for cam in cameras], painters=painters,
-                  blur_px=recording.blur_px)
+                  blur_px=recording.blur_px, other=other)
+    if other is not None:
+        outfit = Outfit.draw(rng)
+        scene.other_painters = {cam.name: PersonRenderer(cam, outfit, blur_sigma_px=0.0) for cam in cameras}
     body = tape_measure(recording, motion.body)
     start = user_start(recording, motion.start)
     start_text, body_text = yaml.safe_dump(start, sort_keys=False), body.to_yaml_text()
@@ -358,10 +390,13 @@ def make_recording(recording: Recording, out: Path, progress: bool = True) -> di
         bagio.copy_bag(master / "synth.bag", bags[variant], cameras=kept,
                        start_ns=None if hand_started else first_person_ns, descriptions=hand_started)
         save_calibration(cameras[:count], seq / "calibration.yaml")
-        truth = (master / "ground_truth.csv").read_text()
-        if not hand_started:       # frames count from the first frame of the bag
-            truth = _shift_frames(truth, -BACKGROUND_FRAMES)
-        (seq / "ground_truth.csv").write_text(truth)
+        for csv in ("ground_truth.csv", "second_person.csv"):
+            if not (master / csv).is_file():
+                continue
+            truth = (master / csv).read_text()
+            if not hand_started:       # frames count from the first frame of the bag
+                truth = _shift_frames(truth, -BACKGROUND_FRAMES)
+            (seq / csv).write_text(truth)
         if hand_started:
             (seq / "start.yaml").write_text(start_text)
             (seq / "body.yaml").write_text(body_text)
@@ -371,10 +406,8 @@ def make_recording(recording: Recording, out: Path, progress: bool = True) -> di
     info["cameras_placed"] = [{"name": c.name, "position": [round(float(v), 3) for v in c.position],
                                "focal_px": round(float(c.K[0, 0]), 1)} for c in cameras]
     (out / "recording.yaml").write_text(yaml.safe_dump(info, sort_keys=False))
-    import shutil
-
     shutil.rmtree(master / "synth.bag")
-    (out / "done").write_text("")
+    (out / "done").write_text(draws)
     return bags
 
 
