@@ -107,6 +107,7 @@ def test_asymmetry_and_comparison_with_the_truth():
     assert result["matched_strikes"] == result["true_strikes"] == 6
     assert result["timing_error_s_median"] == pytest.approx(2 / RATE, abs=1e-6)
     assert result["step_length_error_m_median"] == pytest.approx(0.0, abs=0.03)
+    assert result["footprint_error_m_median"] == pytest.approx(0.05, abs=1e-9)
     assert result["speed_error_m_s"] == pytest.approx(0.0, abs=0.1)
     # a limp: right steps shorter than left ones
     limp = markers.copy()

@@ -240,6 +240,14 @@ def test_heel_strikes_become_gait_steps(ros_context):
             executor.spin_once(timeout_sec=0.05)
         assert [m.frame_index for m in got] == [15, 30, 45, 60]
         assert [stamp_to_ns(m.header.stamp) for m in got] == [stamps[15], stamps[30], stamps[45], stamps[60]]
+        # the strike itself: where the stance probability crossed 0.5 (half way into the frame's period), less the
+        # walker's strike delay (inference.gait.PosteriorSteps)
+        from awalker_tracker.inference.gait import TYPICAL_STEP_TIME_S, WALKER_STRIKE_DELAY
+
+        crossed = [0.5 * (stamps[k - 1] + stamps[k]) for k in (15, 30, 45, 60)]
+        delays = [WALKER_STRIKE_DELAY * TYPICAL_STEP_TIME_S] + [WALKER_STRIKE_DELAY * 0.5] * 3
+        assert [stamp_to_ns(m.strike) for m in got] == pytest.approx([c - d * 1e9 for c, d in zip(crossed, delays)],
+                                                                     abs=2)
         assert [m.foot for m in got] == [GaitStep.RIGHT, GaitStep.LEFT, GaitStep.RIGHT, GaitStep.LEFT]
         assert np.isnan(got[0].step_length) and np.isnan(got[1].step_width)
         assert [round(m.step_length, 6) for m in got[2:]] == [0.7, 0.7]

@@ -262,8 +262,9 @@ def compare(estimate: list[Step], truth: list[Step], window_s: float = 0.25) -> 
     to one to an estimated strike of the same foot within ``window_s``, nearest pairs first; matched, missed
     (true strikes left over) and extra (estimated ones left over) counts; of the missed, how many match an
     unmatched strike of the other foot (left and right swapped); the median size and the median signed timing
-    error (s, later than the truth > 0) and the median step length error (m) of the matched strikes; the median
-    speeds' difference (m/s)."""
+    error (s, later than the truth > 0), the median step length error (m) and the median distance between where
+    the feet came down (m, the footprints: the estimate's contacts against the true ones) of the matched strikes;
+    the median speeds' difference (m/s)."""
     pairs = sorted((abs(e.time_s - t.time_s), i, j) for i, t in enumerate(truth) for j, e in enumerate(estimate)
                    if e.foot == t.foot and abs(e.time_s - t.time_s) <= window_s)
     matched: dict[int, int] = {}
@@ -273,6 +274,7 @@ def compare(estimate: list[Step], truth: list[Step], window_s: float = 0.25) -> 
             matched[i] = j
             used.add(j)
     timing = [estimate[j].time_s - truth[i].time_s for i, j in matched.items()]
+    footprint = [float(np.hypot(estimate[j].x - truth[i].x, estimate[j].y - truth[i].y)) for i, j in matched.items()]
     length = [estimate[j].step_length_m - truth[i].step_length_m for i, j in matched.items()
               if np.isfinite(estimate[j].step_length_m) and np.isfinite(truth[i].step_length_m)]
     spare = [j for j in range(len(estimate)) if j not in used]
@@ -292,6 +294,7 @@ def compare(estimate: list[Step], truth: list[Step], window_s: float = 0.25) -> 
         "timing_error_s_median": float(np.median(np.abs(timing))) if timing else None,
         "timing_bias_s_median": float(np.median(timing)) if timing else None,     # > 0: reported late
         "step_length_error_m_median": float(np.median(np.abs(length))) if length else None,
+        "footprint_error_m_median": float(np.median(footprint)) if footprint else None,
         "speed_error_m_s": (abs(est_speed - true_speed) if est_speed is not None and true_speed is not None
                             else None),
     }

@@ -29,7 +29,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 from awalker_tracker.inference.gait import PosteriorSteps, Step
 from awalker_tracker.model.body import SKELETON_EDGES, BodyDescription
 from awalker_tracker.nodes.base import AwalkerNode
-from awalker_tracker.nodes.convert import POSTERIOR_DEPTH, particles_to_pointcloud2, points_from_msg, stamp_to_ns
+from awalker_tracker.nodes.convert import (
+    POSTERIOR_DEPTH, ns_to_stamp, particles_to_pointcloud2, points_from_msg, stamp_to_ns)
 from awalker_tracker.nodes.spin import run_node
 
 #: Samples per body marker's cloud in /awalker/particles (the heaviest; the posterior message carries 200).
@@ -61,9 +62,9 @@ def quaternion_z_to(direction: np.ndarray) -> tuple[float, float, float, float]:
     return tuple(float(v) for v in q)
 
 
-def gait_step_to_msg(step: Step, header) -> GaitStep:
-    """awalker_msgs/GaitStep of one step (``header``: the strike frame's)."""
-    return GaitStep(header=header, index=step.index, frame_index=step.frame,
+def gait_step_to_msg(step: Step, header, strike_ns: int) -> GaitStep:
+    """awalker_msgs/GaitStep of one step (``header``: the frame's that completed it; ``strike_ns``: when it struck)."""
+    return GaitStep(header=header, strike=ns_to_stamp(strike_ns), index=step.index, frame_index=step.frame,
                     foot=GaitStep.LEFT if step.foot == "left" else GaitStep.RIGHT,
                     position=Point(x=step.x, y=step.y, z=0.0), step_length=step.step_length_m,
                     step_width=step.step_width_m, step_time=step.step_time_s, stride_time=step.stride_time_s,
@@ -201,7 +202,7 @@ class PosePublisherNode(AwalkerNode):
                               msg.stance_left_probability,
                               {int(c.foot): np.array([c.position.x, c.position.y]) for c in msg.contacts})
         if step is not None:
-            self.gait_pub.publish(gait_step_to_msg(step, msg.header))
+            self.gait_pub.publish(gait_step_to_msg(step, msg.header, self._first_stamp_ns + round(step.time_s * 1e9)))
         if self.tf_broadcaster is not None:
             from geometry_msgs.msg import TransformStamped
 
