@@ -15,7 +15,8 @@ varies, drawn per run so that no constant is tuned on one draw:
   widths and clothes from ``person_render.Outfit.draw`` (trousers, shorts or a skirt; light, mid or dark;
   plain or patterned; a body build from slim to heavy);
 - the cameras (``draw_camera``): 0.8-3 m high, 3-10 m from the middle of the walk, seen from any side
-  between nearly frontal (15 degrees off the walking line) and side-on, a horizontal field of view of 50-75
+  between nearly frontal or from nearly behind (15 degrees off the line the walk starts along) and side-on
+  (``off_the_walking_line``), a horizontal field of view of 50-75
   degrees widened until the whole walk is in view, slight lens distortion; two cameras at least 45 degrees
   apart around the walk; 30 or 60 Hz and 640x480 or 1280x720 for the recording;
 - the light: exposure 0.65-1.15, a colour tint of +-8 % per channel, a slow change of up to 30 %, sensor
@@ -68,6 +69,15 @@ BACKGROUND_FRAMES = 15          # empty frames before the person in the hand-sta
 ROOM_HALF_SIZE = 12.0           # m: cameras stand up to 10 m from the middle of the walk
 MIN_CAMERA_CLEARANCE = 1.5      # m: no camera stands nearer than this to the pelvis's path
 SECOND_PERSON_BEHIND_M = 1.2    # m: the second person's path behind the first's, as the first camera sees them
+VIEW_OFF_LINE = np.radians(15.0)  # rad: cameras stand at least this far off the line the walk starts along
+
+
+def off_the_walking_line(direction: float, heading: float) -> float:
+    """A camera ``direction`` (rad, from the middle of the walk) moved, if needed, to ``VIEW_OFF_LINE`` from the
+    line along ``heading``: nearly frontal (or from behind) at most, never straight along the walk."""
+    off = float(np.angle(np.exp(1j * (direction - heading))))         # -pi..pi from the walking direction
+    side = 1.0 if off >= 0 else -1.0
+    return heading + side * float(np.clip(abs(off), VIEW_OFF_LINE, np.pi - VIEW_OFF_LINE))
 
 
 @dataclass(frozen=True)
@@ -179,8 +189,9 @@ class Recording:
             raise InputError(f"development set: unknown trial {trial!r}; expected one of {', '.join(TRIALS)}")
         rng = np.random.default_rng([seed, zlib.crc32(trial.encode())])
         heading = float(rng.uniform(-np.pi, np.pi))
-        first = float(rng.uniform(-np.pi, np.pi))
-        second = first + float(rng.choice([-1.0, 1.0])) * float(rng.uniform(np.radians(45), np.radians(135)))
+        first = heading + float(rng.choice([-1.0, 1.0])) * float(rng.uniform(VIEW_OFF_LINE, np.pi - VIEW_OFF_LINE))
+        second = off_the_walking_line(
+            first + float(rng.choice([-1.0, 1.0])) * float(rng.uniform(np.radians(45), np.radians(135))), heading)
         cameras = tuple(CameraDraw(direction=d, distance_m=float(rng.uniform(3.0, 10.0)),
                                    height_m=float(rng.uniform(0.8, 3.0)), fov_deg=float(rng.uniform(50.0, 75.0)),
                                    k1=float(rng.uniform(-0.08, 0.02))) for d in (first, second))
