@@ -114,6 +114,29 @@ def test_robust_background_is_learned_again_and_a_ghost_fades():
         FeatureConfig(refit_frames=(0,))
 
 
+@pytest.mark.parametrize("rate", [30.0, 60.0, 24.0])
+def test_the_robust_background_keeps_the_same_seconds_at_any_frame_rate(rate: float):
+    """Given the frames' stamps, the robust background is learned (and learned again) after the same camera time
+    at any frame rate, from at most 30 frames a second: counted in its own frames a 60 Hz camera learned in half
+    the time, before a person walking along its view had left their first pixels."""
+    from awalker_tracker.vision.features import SCHEDULE_RATE_HZ, FeatureConfig, FeatureExtractor
+
+    rng = np.random.default_rng(3)
+    clean = background_image(CAM)
+    extractor = FeatureExtractor(FeatureConfig(downsample=4, median_frames=6, refit_frames=(9,)))
+    learned, buffered = [], []
+    for k in range(int(0.5 * rate)):
+        before = extractor.background
+        extractor.process(noisy(clean, rng), stamp_ns=1_000_000_000 + round(k * 1e9 / rate))
+        if extractor.background is not before:
+            learned.append(k / rate)
+            buffered.append(len(extractor._buffer))
+    # 6 and 9 frames at 30 per second: at the first frame at or after 5/30 and 8/30 s of stamps (the first counts at 0 s)
+    assert all(0 <= t - due < 1 / rate for t, due in zip(learned, (5 / SCHEDULE_RATE_HZ, 8 / SCHEDULE_RATE_HZ))), learned
+    assert len(learned) == 2
+    assert buffered[0] <= 6
+
+
 def test_adaptation_moves_background_but_not_foreground_pixels():
     rng = np.random.default_rng(2)
     clean = background_image(CAM)

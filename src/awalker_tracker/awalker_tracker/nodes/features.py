@@ -165,7 +165,8 @@ class FeatureNode(AwalkerNode):
         self.background_param = int(declare("background_frames", -1,
                                             "background-only frames at the start; -1: the start description's "
                                             "frame; 0: none (robust background from the walk itself)"))
-        median = declare("median_frames", 20, "frames the robust background is first learned from when none are known")
+        median = declare("median_frames", FeatureConfig.median_frames, "frames (at 30 per second of the images' stamps) the robust "
+                         "background is first learned from when none are known")
         outlier = declare("outlier_probability", 0.02, "uniform outlier share of the appearance densities")
         clip = declare("llr_clip", 25.0, "bound on each pixel's log-likelihood ratio")
         adapt = declare("adapt_rate", 0.0, "background adaptation rate per frame (0 = frozen)")
@@ -364,15 +365,15 @@ class FeatureNode(AwalkerNode):
             learned = self.extractor.foreground is not None
             had_background = self.extractor.background is not None
             if start_labels is not None:
-                pending = self.extractor.submit(rgb, mask, start_labels, fill_with_bands=True)
+                pending = self.extractor.submit(rgb, mask, start_labels, fill_with_bands=True, stamp_ns=stamp)
             else:
-                pending = self.extractor.submit(rgb, mask, self._labels)
+                pending = self.extractor.submit(rgb, mask, self._labels, stamp_ns=stamp)
             if not had_background and self.extractor.background is not None:
                 frames = self.extractor.frame_index - 1
                 self.stats.background_from = (
                     f"{frames} background-only frames (start description)" if self.extractor.background_frames > 0
                     else f"robust fit (densest colour per pixel) of frames 0-{frames}, refitted "
-                    f"after {list(self.config.refit_frames)} frames")
+                    f"after {list(self.config.refit_frames)} frames at 30 per second")
             if not learned and self.extractor.foreground is not None:
                 self.stats.foreground_from = ("start pose" if start_labels is not None else
                                               "label image" if self._labels is not None else "height bands")

@@ -15,7 +15,10 @@ Learning, in order of preference (all automatic, no hand labels needed):
    frames so far (at most ``refit_keep`` of them, evenly spread) after each of ``refit_frames``
    frames: a person who walks along a camera's view covers the same pixels for much of the
    first frames, and that "ghost" fades as the frames where the person has moved on outnumber
-   them.
+   them. These counts are frames at ``SCHEDULE_RATE_HZ`` (30 per second) of the camera's own time: given the
+   frames' stamps, a 60 Hz camera learns after as many seconds as a 30 Hz one (and buffers at most 30 frames a
+   second), where counted in its own frames it learned in half the time, too soon for a person walking along
+   the view to have moved off their first pixels.
 2. Foreground: at the first frame after the background is known, the mixtures are fitted to
    the interior pixels of the foreground (``learn_foreground``), labelled by (a) a class-label image passed
    with that frame: a user's label mask, or the body projected at the start description's
@@ -66,6 +69,8 @@ from awalker_tracker.vision.foreground import ForegroundModel, learn_foreground
 MULTI_CAMERA_MAP_WIDTH = 160
 #: Frames whose maps are made but whose flow is not (``FeatureExtractor.submit``) before the next waits.
 MAX_PENDING_FLOWS = 2
+#: The frame rate the robust background's schedule counts frames at (``FeatureConfig.median_frames``).
+SCHEDULE_RATE_HZ = 30.0
 
 
 @dataclass(frozen=True)
@@ -74,8 +79,10 @@ class FeatureConfig:
 
     downsample: int = 4
     background_frames: int = 0        # known background-only frames at the start (0 = unknown)
-    median_frames: int = 20           # frames buffered for the robust background when none are known
-    refit_frames: tuple[int, ...] = (25, 30, 35, 40, 50, 60)  # robust background learned again after these
+    # frames at SCHEDULE_RATE_HZ (module doc): buffered for the robust background when none are known, and the
+    # robust background learned again after these
+    median_frames: int = 20
+    refit_frames: tuple[int, ...] = (25, 30, 35, 40, 50, 60, 75, 90, 120)
     refit_keep: int = 30              # at most this many frames (evenly spread) per robust refit
     outlier_probability: float = 0.02  # uniform outlier share of both appearance densities
     llr_clip: float = 25.0            # |log-likelihood ratio| bound per pixel (a safety net)
@@ -178,6 +185,8 @@ class FeatureExtractor:
         self.background_frames = config.background_frames
         self._buffer: list[np.ndarray] = []
         self._refits: list[int] = []           # frame counts after which the robust background is refitted
+        self._first_stamp_ns: int | None = None
+        self._schedule_frame = 0                # frames so far at SCHEDULE_RATE_HZ (module doc)
         self._flow = GridFlow(config.flow)
         self._prev_grey: np.ndarray | None = None
         self._pending: deque[Future] = deque()    # flows of submitted frames, oldest first (done ones too)
@@ -252,13 +261,30 @@ class FeatureExtractor:
         return self.foreground is None and 0 < self.background_frames == self.frame_index
 
     def process(self, rgb: np.ndarray, occlusion_mask: np.ndarray | None = None,
-                class_labels: np.ndarray | None = None, fill_with_bands: bool = False) -> FrameFeatures:
+                class_labels: np.ndarray | None = None, fill_with_bands: bool = False,
+                stamp_ns: int | None = None) -> FrameFeatures:
         """Features of the next frame (RGB (H, W, 3) uint8); updates the models as described above.
-        ``class_labels`` (and ``fill_with_bands``) are used if this frame learns the foreground."""
-        return self.submit(rgb, occlusion_mask, class_labels, fill_with_bands).result()
+        ``class_labels`` (and ``fill_with_bands``) are used if this frame learns the foreground; ``stamp_ns``: the
+        frame's time (without it, frames are taken ``SCHEDULE_RATE_HZ`` apart)."""
+        return self.submit(rgb, occlusion_mask, class_labels, fill_with_bands, stamp_ns).result()
+
+    def _schedule(self, stamp_ns: int | None) -> bool:
+        """Advance the robust background's clock to this frame; True if the frame counts as a new frame at
+        ``SCHEDULE_RATE_HZ`` (the first frame, and then one per 1/30 s of stamps)."""
+        if stamp_ns is None:
+            self._schedule_frame += 1
+            return True
+        if self._first_stamp_ns is None:
+            self._first_stamp_ns = int(stamp_ns)
+        counted = int(np.floor((int(stamp_ns) - self._first_stamp_ns) * 1e-9 * SCHEDULE_RATE_HZ + 1e-6)) + 1
+        if counted <= self._schedule_frame:
+            return False
+        self._schedule_frame = counted
+        return True
 
     def submit(self, rgb: np.ndarray, occlusion_mask: np.ndarray | None = None,
-               class_labels: np.ndarray | None = None, fill_with_bands: bool = False) -> Future:
+               class_labels: np.ndarray | None = None, fill_with_bands: bool = False,
+               stamp_ns: int | None = None) -> Future:
         """``process`` that returns once the frame's maps are made (the models learned from it): a future of its
         FrameFeatures, done when its flow is, on the worker thread; frames are done in the order submitted. At
         most ``MAX_PENDING_FLOWS`` frames wait for their flow: a further one waits here for the oldest.
@@ -275,7 +301,7 @@ class FeatureExtractor:
             self._pending.popleft().exception()     # waits; its own future carries any error
         flow = self._start_flow(image, worker)
         try:
-            llr = self._maps(image, class_labels, fill_with_bands)
+            llr = self._maps(image, class_labels, fill_with_bands, self._schedule(stamp_ns))
         except BaseException:
             flow.exception()            # this frame's flow step still runs (and keeps its grey image)
             raise
@@ -293,9 +319,11 @@ class FeatureExtractor:
         flow.add_done_callback(finish)
         return features
 
-    def _maps(self, image: np.ndarray, class_labels: np.ndarray | None, fill_with_bands: bool) -> np.ndarray:
+    def _maps(self, image: np.ndarray, class_labels: np.ndarray | None, fill_with_bands: bool,
+              counts: bool = True) -> np.ndarray:
         """The log-likelihood-ratio maps (C, h, w) float32 of a frame, after learning what this frame teaches
-        the background and foreground models (module doc)."""
+        the background and foreground models (module doc); ``counts``: a new frame of the robust background's
+        schedule (it is buffered, and may end a stage)."""
         cfg = self.config
         height, width = image.shape[:2]
         shape = (height // cfg.downsample, width // cfg.downsample)
@@ -315,19 +343,19 @@ class FeatureExtractor:
             elif known and self._buffer:
                 self.background = fit_background(np.stack(self._buffer))
                 self._buffer = []
-            else:
+            elif counts:
                 self.background_frames = 0     # nothing known to be background: robust fit
                 self._buffer.append(m)
-                if len(self._buffer) >= cfg.median_frames:
+                if self._schedule_frame >= cfg.median_frames:
                     self.background = fit_background_robust(np.stack(self._buffer))
-                    self._refits = sorted(f for f in cfg.refit_frames if f > self.frame_index + 1)
+                    self._refits = sorted(f for f in cfg.refit_frames if f > self._schedule_frame)
                     if not self._refits:
                         self._buffer = []
             if self.background is not None:
                 self._log(f"background learned at frame {self.frame_index}")
-        elif self._refits:
+        elif self._refits and counts:
             self._buffer.append(m)
-            if self.frame_index + 1 == self._refits[0]:
+            if self._schedule_frame >= self._refits[0]:
                 self._refits.pop(0)
                 keep = np.linspace(0, len(self._buffer) - 1, min(len(self._buffer), cfg.refit_keep)).round().astype(int)
                 self.background = fit_background_robust(np.stack([self._buffer[k] for k in keep]))
