@@ -228,19 +228,28 @@ def test_the_walkers_are_held_while_the_person_stands_still(walk_stop_walk):
     rng = np.random.default_rng(0)
     states = model.initial(16, rng)
     weights = np.zeros(16)
-    held = []
+    held, turned = [], []
     for f, feats in enumerate(features):
         parent = states
         moved, _ = model.transition(parent, rng)
         states = model.rejuvenate(f, weights, parent, moved, ImageObservation(features=(feats,)), rng)
         if model.monitor.still(f):
-            assert states.pose.markers is parent.pose.markers and (states.speed == 0).all()
-            assert (states.reseeded == HELD).all()
+            # held where they stand: the pelvis stays, the body only turns about it (the same pose otherwise)
+            np.testing.assert_allclose(states.pose.markers[:, PELVIS], parent.pose.markers[:, PELVIS], atol=1e-9)
+            around = np.linalg.norm(states.pose.markers[..., :2] - states.pose.markers[:, PELVIS, None, :2], axis=2)
+            before = np.linalg.norm(parent.pose.markers[..., :2] - parent.pose.markers[:, PELVIS, None, :2], axis=2)
+            np.testing.assert_allclose(around, before, atol=1e-9)
+            np.testing.assert_allclose(states.pose.markers[..., 2], parent.pose.markers[..., 2], atol=1e-9)
+            assert (states.speed == 0).all() and (states.reseeded == HELD).all()
             assert not model.outputs(states, _).heel_strike.any()
             held.append(f)
+            turned.append(np.angle(np.exp(1j * (states.kin.heading - parent.kin.heading))))
         else:
             assert states is moved
     assert 15 <= len(held) <= 30
+    # free to turn round on the spot: over the stop the walkers' headings spread by tens of degrees
+    spread = np.degrees(np.std(np.sum(turned, axis=0)))
+    assert 20 < spread < 180, spread
 
 
 def test_one_camera_places_the_person_by_the_feet_row_only_where_the_blob_is_as_tall_as_the_body(seen):

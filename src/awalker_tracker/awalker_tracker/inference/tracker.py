@@ -210,6 +210,11 @@ class TrackerConfig:
     # stay in the posterior until the images tell them apart, and a wrong one is replaced when they do; the MAP
     # trajectory names its whole lineage as it ends (``relabel_lineage``). 0: each particle keeps its naming.
     label_flip_rate_hz: float = 0.0
+    # While the person stands still (RecoveryConfig.hold_still) the walkers are held where they stand and may turn
+    # there (TrackerModel._turned_in_place): each one's turn rate (rad/s) persists by this factor per frame and
+    # wanders by this standard deviation (rad/s per frame); (0.95, 0.35): a stationary spread of ~64 deg/s, so a
+    # person turning round on the spot in 2-3 s is within reach. sigma 0: held walkers keep their heading.
+    held_turn: tuple[float, float] = (0.95, 0.35)
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -229,6 +234,8 @@ class TrackerConfig:
         if not (np.isfinite(self.label_flip_rate_hz) and 0.0 <= self.label_flip_rate_hz * self.dt < 0.5):
             raise ValueError(f"TrackerConfig.label_flip_rate_hz must be >= 0 and below half a flip per frame, got "
                              f"{self.label_flip_rate_hz}")
+        if not (0.0 <= self.held_turn[0] <= 1.0 and self.held_turn[1] >= 0.0):
+            raise ValueError(f"TrackerConfig.held_turn must be (persistence in [0, 1], sigma >= 0), got {self.held_turn}")
         if self.hip_over_ankle_min_cameras < 1:
             raise ValueError(f"TrackerConfig.hip_over_ankle_min_cameras must be >= 1, got "
                              f"{self.hip_over_ankle_min_cameras}")
@@ -530,10 +537,11 @@ class TrackerModel:
         order = self.monitor.update(frame, obs.features, pelvis)
         self._depth_band_centre = self.monitor.depth_band_centre(frame)
         if parent is not None and self.monitor.still(frame):
-            # the person stands still: the frame's walkers are the previous frame's, not moving
-            states = replace(parent, speed=np.zeros(len(parent)), reseeded=np.full(len(parent), HELD, np.int8),
-                             continues=np.arange(len(parent)), jump=np.zeros((len(parent), 3)),
-                             flipped=np.zeros(len(parent), bool))
+            # the person stands still: the frame's walkers are the previous frame's, not walking, but free to
+            # turn where they stand (a person turning round on the spot)
+            states = replace(self._turned_in_place(parent, rng), speed=np.zeros(len(parent)),
+                             reseeded=np.full(len(parent), HELD, np.int8), continues=np.arange(len(parent)),
+                             jump=np.zeros((len(parent), 3)), flipped=np.zeros(len(parent), bool))
         if order is None:
             return states
         n = len(states)
@@ -572,6 +580,23 @@ class TrackerModel:
         continues = np.arange(n)
         continues[rows[:half]] = sources
         return replace(states, continues=continues)
+
+    def _turned_in_place(self, states: TrackerStates, rng: np.random.Generator) -> TrackerStates:
+        """Held walkers turned about the vertical through their pelvis at their own turn rate, which wanders
+        (``TrackerConfig.held_turn``: omega' = persistence omega + N(0, sigma^2) per frame, |omega| <= the turn
+        prior's largest rate): people standing still turn round on the spot, and the walkers that face the
+        way the images do are the ones that walk on."""
+        persistence, sigma = self.config.held_turn
+        if sigma <= 0:
+            return states
+        kin = states.kin.copy()
+        kin.turn_rate = np.clip(persistence * kin.turn_rate + sigma * rng.standard_normal(len(states)),
+                                -self._kin.TurnPrior().max_rate, self._kin.TurnPrior().max_rate)
+        pelvis = states.pose.markers[:, MARKER_NAMES.index("pelvis"), :2]
+        turned = self._kin.moved_on_ground(kin, pelvis, pelvis, kin.turn_rate * self.config.dt)
+        turned.turn_rate = kin.turn_rate
+        return replace(states, kin=turned,
+                       pose=self._kin.pose_body(self.body, self.params, states.walker, turned, self.kin_config))
 
     def log_likelihood(self, prev: TrackerStates | None, states: TrackerStates, obs: Any) -> np.ndarray:
         penalty = self.config.fallen_log_penalty * states.fallen
