@@ -91,7 +91,8 @@ def test_robust_background_has_no_ghost_where_a_moving_person_lingers():
 def test_robust_background_is_learned_again_and_a_ghost_fades():
     """A person standing still in 14 of the first 20 frames is learned into the background (nothing can
     tell them apart yet); refitted from the frames so far, the background there is right again once the
-    frames without them are the majority (after 30 frames here)."""
+    frames without them are the majority (after 30 frames here), and the foreground, learned again with it,
+    finds the walking person whole."""
     from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
 
     rng = np.random.default_rng(6)
@@ -99,16 +100,27 @@ def test_robust_background_is_learned_again_and_a_ghost_fades():
     extractor = FeatureExtractor(FeatureConfig(downsample=2, median_frames=20, refit_frames=(25, 30, 40)))
     block = (slice(40, 90), slice(20, 35))
     clean_m = measurements(clean, 2)
-    ghost_at = {}
+    ghost_at, foregrounds, foreground = {}, [], None
     for f in range(41):
         image = noisy(clean, rng)
-        x = 40 if f < 14 else 40 + 40 * (f - 13)          # stands, then walks off to the right
+        # stands, walks off to the right, and from frame 30 walks back into view away from where they stood
+        x = 40 if f < 14 else 40 + 40 * (f - 13) if f < 30 else 150 + 4 * (f - 30)
         image[80:180, x : x + 30] = (200, 40, 40)
-        extractor.process(image)
+        last = extractor.process(image)
         if extractor.background is not None:
             ghost_at[f + 1] = extractor.background.foreground_mask(clean_m)[block].mean()
+        if extractor.foreground is not foreground:
+            foregrounds.append(f + 1)
+            foreground = extractor.foreground
     assert ghost_at[20] > 0.9 and ghost_at[25] > 0.9       # learned at 20 frames, still 14 of 25 there
     assert ghost_at[30] < 0.01 and ghost_at[41] < 0.01     # 14 of 30: gone
+    # the foreground mixtures were learned again with each background: first learned against the ghost (the
+    # person's own colours in the background), they would not tell the walking person from it
+    assert foregrounds == [20, 25, 30, 40]
+    from awalker_tracker.vision.detection import person_blobs
+
+    blob = person_blobs(last, threshold=2.0, min_area_fraction=0.001)[0]
+    assert blob.area_px > 0.8 * 100 * 30, blob
     assert np.percentile(np.abs(extractor.background.mean[..., :3] - clean_m[..., :3]), 99) < 3.0
     with pytest.raises(ValueError):
         FeatureConfig(refit_frames=(0,))

@@ -15,7 +15,8 @@ Learning, in order of preference (all automatic, no hand labels needed):
    frames so far (at most ``refit_keep`` of them, evenly spread) after each of ``refit_frames``
    frames: a person who walks along a camera's view covers the same pixels for much of the
    first frames, and that "ghost" fades as the frames where the person has moved on outnumber
-   them. These counts are frames at ``SCHEDULE_RATE_HZ`` (30 per second) of the camera's own time: given the
+   them; the foreground mixtures (2.) are learned again with it, since a person in the first frames' background
+   taught them the wrong blob. These counts are frames at ``SCHEDULE_RATE_HZ`` (30 per second) of the camera's own time: given the
    frames' stamps, a 60 Hz camera learns after as many seconds as a 30 Hz one (and buffers at most 30 frames a
    second), where counted in its own frames it learned in half the time, too soon for a person walking along
    the view to have moved off their first pixels.
@@ -359,6 +360,7 @@ class FeatureExtractor:
                 self._refits.pop(0)
                 keep = np.linspace(0, len(self._buffer) - 1, min(len(self._buffer), cfg.refit_keep)).round().astype(int)
                 self.background = fit_background_robust(np.stack([self._buffer[k] for k in keep]))
+                self.foreground = None          # learned again below, against the new background
                 self._log(f"background learned again at frame {self.frame_index} from {len(keep)} of its "
                           f"{len(self._buffer)} frames")
                 if not self._refits:
