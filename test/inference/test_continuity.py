@@ -161,3 +161,33 @@ def test_walkers_replaced_after_a_fall_or_renamed_continue_their_own_lineage_and
     np.testing.assert_array_equal(moved.continues, np.arange(30))
     assert np.all(np.linalg.norm(moved.jump[fallen, :2], axis=1) > 0) and not moved.fallen.any()
     assert 0 < moved.flipped.sum() < 30
+
+
+def test_the_lineage_takes_the_naming_the_posterior_favoured():
+    """Where the last particle's naming is a coin toss, the posterior's frames decide: a lineage that renamed its
+    legs at frame 9 of 12, while the posterior kept favouring its first naming, keeps that naming throughout (the
+    frames after the flip are mirrored back); a posterior that agrees with the last naming keeps it."""
+    from awalker_tracker.inference.tracker import relabel_lineage
+    from awalker_tracker.model import kinematics
+
+    model, walk = _walking_particles(1, 12, seed=3)
+    markers = np.array([s.pose.markers[0] for s in walk])
+    angles = np.array([s.pose.joint_angles[0] for s in walk])
+    stance = np.array([s.walker.stance_leg[0] for s in walk])
+    renamed = [kinematics.pose_body(model.body, model.params, *kinematics.mirrored_legs(
+        s.walker, s.kin, s.pose.markers[:, PELVIS, :2], model.body, model.params, model.kin_config),
+        model.kin_config) for s in walk[9:]]
+    lineage, lineage_angles, lineage_stance = markers.copy(), angles.copy(), stance.copy()
+    lineage[9:] = [r.markers[0] for r in renamed]
+    lineage_angles[9:] = [r.joint_angles[0] for r in renamed]
+    lineage_stance[9:] = 1 - stance[9:]
+    flipped = np.zeros(12, bool)
+    flipped[9] = True
+    first_naming = np.where(stance == 0, 0.9, 0.1)                 # the posterior's P(left) per frame
+    out, _, out_stance = relabel_lineage(lineage, lineage_angles, lineage_stance, flipped, first_naming)
+    np.testing.assert_allclose(out, markers, atol=1e-9)
+    np.testing.assert_array_equal(out_stance, stance)
+    last_naming = 1.0 - first_naming
+    out, _, out_stance = relabel_lineage(lineage, lineage_angles, lineage_stance, flipped, last_naming)
+    np.testing.assert_array_equal(out_stance, 1 - stance)
+    np.testing.assert_allclose(out[9:], lineage[9:])

@@ -665,28 +665,44 @@ _OTHER_SIDE = {name: name.replace("left", "#").replace("right", "left").replace(
                MARKER_NAMES + JOINT_NAMES}
 
 
-def relabel_lineage(markers: np.ndarray, joint_angles: np.ndarray, stance_leg: np.ndarray, flipped: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A lineage (markers (F, M, 3), joint angles (F, J), stance legs (F,)) whose particle renamed its legs at the
-    frames ``flipped`` (F,) (``TrackerModel._flip_labels``), named throughout as at its last frame: every frame
-    before an odd number of later flips mirrored about its own sagittal plane (through the pelvis along the
-    heading, ``torso_yaw``) with left and right swapped, as the flip did to the frames after it. The naming is
-    then one walk's, and no foot jumps to the other side at a flip."""
-    later = np.cumsum(np.asarray(flipped, int)[::-1])[::-1] - np.asarray(flipped, int)   # flips after each frame
-    odd = later % 2 == 1
-    if not odd.any():
-        return markers, joint_angles, stance_leg
-    markers, joint_angles, stance_leg = markers.copy(), joint_angles.copy(), np.array(stance_leg).copy()
-    pelvis = markers[odd, MARKER_NAMES.index("pelvis"), None, :2]
-    heading = joint_angles[odd, JOINT_NAMES.index("torso_yaw")]
+def mirror_poses(markers: np.ndarray, joint_angles: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Copies of poses (markers (F, M, 3), joint angles (F, J)) with the frames ``rows`` (bool (F,)) mirrored about
+    their own sagittal plane (through the pelvis along the heading, ``torso_yaw``) and left and right swapped: the
+    same body with its legs named the other way round (``kinematics.mirrored_legs``)."""
+    markers, joint_angles = markers.copy(), joint_angles.copy()
+    if not np.any(rows):
+        return markers, joint_angles
+    pelvis = markers[rows, MARKER_NAMES.index("pelvis"), None, :2]
+    heading = joint_angles[rows, JOINT_NAMES.index("torso_yaw")]
     side = np.stack([-np.sin(heading), np.cos(heading)], axis=1)[:, None, :]      # the body's left, (F', 1, 2)
-    reflected = markers[odd].copy()
+    reflected = markers[rows].copy()
     reflected[..., :2] -= 2.0 * np.sum((reflected[..., :2] - pelvis) * side, axis=-1, keepdims=True) * side
-    markers[odd] = reflected[:, [MARKER_NAMES.index(_OTHER_SIDE[n]) for n in MARKER_NAMES]]
-    angles = joint_angles[odd][:, [JOINT_NAMES.index(_OTHER_SIDE[n]) for n in JOINT_NAMES]]
+    markers[rows] = reflected[:, [MARKER_NAMES.index(_OTHER_SIDE[n]) for n in MARKER_NAMES]]
+    angles = joint_angles[rows][:, [JOINT_NAMES.index(_OTHER_SIDE[n]) for n in JOINT_NAMES]]
     angles[:, JOINT_NAMES.index("torso_roll")] *= -1.0
-    joint_angles[odd] = angles
-    stance_leg[odd] = 1 - stance_leg[odd]
+    joint_angles[rows] = angles
+    return markers, joint_angles
+
+
+def relabel_lineage(markers: np.ndarray, joint_angles: np.ndarray, stance_leg: np.ndarray, flipped: np.ndarray,
+                    left_probability: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A lineage (markers (F, M, 3), joint angles (F, J), stance legs (F,)) whose particle renamed its legs at the
+    frames ``flipped`` (F,) (``TrackerModel._flip_labels``), named one way throughout: every frame before an odd
+    number of later flips mirrored (``mirror_poses``), as the flip did to the frames after it, so that no foot
+    jumps to the other side at a flip. Which way: as at its last frame, or with ``left_probability`` (F,) (the
+    posterior's, per frame) the way the posterior favoured over the lineage's frames (each weighted by how sure
+    it was, |p - 0.5|): one particle's last naming is a coin toss where the images hardly tell the legs apart,
+    the posterior's frames together are the evidence."""
+    flipped = np.asarray(flipped, int)
+    later = np.cumsum(flipped[::-1])[::-1] - flipped                                    # flips after each frame
+    odd = later % 2 == 1
+    stance_leg = np.where(odd, 1 - np.asarray(stance_leg), np.asarray(stance_leg))
+    if left_probability is not None:
+        p = np.asarray(left_probability, float)
+        agreement = np.sum(np.abs(p - 0.5) * np.where((stance_leg == LEFT) == (p > 0.5), 1.0, -1.0))
+        if agreement < 0:
+            odd, stance_leg = ~odd, 1 - stance_leg
+    markers, joint_angles = mirror_poses(markers, joint_angles, odd)
     return markers, joint_angles, stance_leg
 
 
@@ -729,6 +745,7 @@ class Tracker:
         self._frames: list[tuple[int, int]] = []   # (frame index, stamp) in push order
         self._last_step: FilterStep | None = None
         self.published = PublishedPath(self.config.dt)
+        self._left_probability: list[float] = []    # the posterior's stance-left probability per completed frame
 
     def push(self, frame_index: int, stamp_ns: int, obs: Any) -> list[PosteriorSummary]:
         """Add the observation of one frame; returns the summaries completed (in frame order)."""
@@ -752,6 +769,7 @@ class Tracker:
         self._last_step = step
         summary = summarize(frame_index, stamp_ns, step.log_weights, out, MARKER_NAMES, JOINT_NAMES,
                             step.resampled, cloud_size=self.config.cloud_size)
+        self._left_probability.append(summary.stance_left_probability)
         offset = self.published.update(out.markers[:, MARKER_NAMES.index("pelvis"), :2], step.ancestors,
                                        step.states.jump, step.best_index)
         if not offset.any():
@@ -761,8 +779,9 @@ class Tracker:
                        map_torso_position=summary.map_torso_position - shift)
 
     def map_trajectory(self) -> MapTrajectory:
-        """Lineage of the highest-weight particle of the last completed frame, its legs named throughout as at its end
-        (``relabel_lineage``), re-seedings' jumps spread over the frames before them (``smooth_jumps``)."""
+        """Lineage of the highest-weight particle of the last completed frame, its legs named one way throughout, the
+        way the posterior favoured (``relabel_lineage``), re-seedings' jumps spread over the frames before them
+        (``smooth_jumps``)."""
         if self._last_step is None:
             raise ValueError("no frame has been completed yet")
         traj = self.history.trajectory(self._last_step.best_index)
@@ -770,7 +789,7 @@ class Tracker:
         frames = np.array([f for f, _ in self._frames[:count]], np.int64)
         stamps = np.array([s for _, s in self._frames[:count]], np.int64)
         markers, angles, stance = relabel_lineage(traj["markers"].astype(float), traj["joint_angles"].astype(float),
-                                                  traj["stance_leg"], traj["flipped"])
+                                                  traj["stance_leg"], traj["flipped"], self._left_probability[:count])
         markers, angles = smooth_jumps(markers, angles, traj["jump"].astype(float), self.model.config.dt)
         return MapTrajectory(frames, stamps, markers, angles, stance, traj["heel_strike"].astype(bool),
                              traj["strike_fraction"].astype(float))
