@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from awalker_tracker.inference.tracker import (
-    JUMP_SPREAD_M_S, JUMP_SPREAD_MIN_S, PublishedPath, smooth_jumps)
+    JUMP_SPREAD_M_S, JUMP_SPREAD_MIN_S, MAX_PUBLISHED_SPEED_M_S, PublishedPath, smooth_jumps)
 from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES
 
 DT = 1 / 30
@@ -63,11 +63,18 @@ def test_the_live_pose_follows_a_map_that_swaps_between_particles_without_jumpin
         if frame % 10 == 9:                            # 9 frames after a swap: 0.8 m takes 0.67 s at 1.2 m/s
             assert np.linalg.norm(offset) < 0.8 - 8 * JUMP_SPREAD_M_S * DT + 1e-9
     steps = np.linalg.norm(np.diff(np.array(published), axis=0), axis=1) / DT
-    assert steps.max() <= speed + JUMP_SPREAD_M_S + 1e-6
+    assert steps.max() <= min(speed + JUMP_SPREAD_M_S, MAX_PUBLISHED_SPEED_M_S) + 1e-6
+    # a walk that itself moves too fast for a person (a particle's own stumble) is published no faster than that
+    fast = PublishedPath(DT)
+    out = [np.array([0.0, 0.0]) - fast.update(np.array([[0.0, 0.0]]), np.array([0]), np.zeros((1, 3)), 0)]
+    for frame in range(1, 10):
+        x = np.array([[0.2 * frame, 0.0]])                         # 6 m/s
+        out.append(x[0] - fast.update(x, np.array([0]), np.zeros((1, 3)), 0))
+    assert np.max(np.linalg.norm(np.diff(out, axis=0), axis=1)) / DT <= MAX_PUBLISHED_SPEED_M_S + 1e-9
     # a MAP that stays on one lineage is published as it is
     still = PublishedPath(DT)
     for frame in range(5):
-        assert not still.update(np.array([[0.1 * frame, 0.0]]), np.array([0]), np.zeros((1, 3)), 0).any()
+        assert not still.update(np.array([[0.05 * frame, 0.0]]), np.array([0]), np.zeros((1, 3)), 0).any()
 
 
 def _walking_particles(n: int, frames: int, seed: int = 0):

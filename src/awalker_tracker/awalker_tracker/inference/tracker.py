@@ -706,13 +706,19 @@ def relabel_lineage(markers: np.ndarray, joint_angles: np.ndarray, stance_leg: n
     return markers, joint_angles, stance_leg
 
 
+#: The fastest the published pelvis moves from one frame to the next (m/s): a walking person's pelvis stays under
+#: ~2 m/s, so faster is a jump of the estimate (PublishedPath).
+MAX_PUBLISHED_SPEED_M_S = 2.5
+
+
 class PublishedPath:
     """Where the pose published frame by frame stands: the filtering MAP (the frame's highest-weight particle)
     shifted over the ground so that the live path does not jump when the MAP moves to another particle or a
     particle is re-seeded. Each frame the published pelvis moves as the MAP particle's own walk moved over the
     frame (from its parent a frame ago, less any re-seeding jump); the offset that leaves between the published
-    and the MAP pelvis shrinks by ``settle_m_s`` x dt, so the published path moves at most that much faster than
-    the walk and catches up with the MAP within |offset| / ``settle_m_s`` s."""
+    and the MAP pelvis shrinks by ``settle_m_s`` x dt, so the published path catches up with the MAP within
+    |offset| / ``settle_m_s`` s, and its step is never faster than ``MAX_PUBLISHED_SPEED_M_S`` (the offset keeps
+    the rest)."""
 
     def __init__(self, dt: float, settle_m_s: float = JUMP_SPREAD_M_S) -> None:
         self.dt = float(dt)
@@ -724,12 +730,18 @@ class PublishedPath:
     def update(self, pelvis_xy: np.ndarray, ancestors: np.ndarray, jump: np.ndarray, best: int) -> np.ndarray:
         """The offset (2,) m to take from the MAP pose of this frame: ``pelvis_xy`` (N, 2) of the frame's particles,
         their ``ancestors`` among the last frame's, re-seeding ``jump`` (N, 3), the MAP particle ``best``."""
+        pelvis = np.array(pelvis_xy, float)
         if self._pelvis is not None:
             walked_from = self._pelvis[int(ancestors[best])] + jump[best, :2]
             offset = walked_from - self._published
             size = float(np.linalg.norm(offset))
-            self.offset = offset * max(0.0, 1.0 - self.settle_m_s * self.dt / size) if size > 0 else offset
-        self._pelvis = np.array(pelvis_xy, float)
+            offset = offset * max(0.0, 1.0 - self.settle_m_s * self.dt / size) if size > 0 else offset
+            step = pelvis[best] - offset - self._published
+            fastest = MAX_PUBLISHED_SPEED_M_S * self.dt
+            if np.linalg.norm(step) > fastest:
+                offset = pelvis[best] - (self._published + step * fastest / np.linalg.norm(step))
+            self.offset = offset
+        self._pelvis = pelvis
         self._published = self._pelvis[best] - self.offset
         return self.offset.copy()
 
