@@ -115,28 +115,34 @@ def test_a_body_with_its_legs_named_the_other_way_is_its_mirror_image():
     assert np.array_equal(walker.stance_leg, 1 - s.walker.stance_leg)
 
 
+def _renamed_walk(at: int, frames: int = 12):
+    """One particle's walk (markers, joint angles, stance legs per frame) and the same walk with its legs renamed
+    from frame ``at`` on (``kinematics.mirrored_legs``), as a lineage that flipped there records it, with the
+    flip flags."""
+    from awalker_tracker.model import kinematics
+
+    model, walk = _walking_particles(1, frames, seed=3)
+    markers = np.array([s.pose.markers[0] for s in walk])
+    angles = np.array([s.pose.joint_angles[0] for s in walk])
+    stance = np.array([s.walker.stance_leg[0] for s in walk])
+    renamed = [kinematics.pose_body(model.body, model.params, *kinematics.mirrored_legs(
+        s.walker, s.kin, s.pose.markers[:, PELVIS, :2], model.body, model.params, model.kin_config),
+        model.kin_config) for s in walk[at:]]
+    lineage, lineage_angles, lineage_stance = markers.copy(), angles.copy(), stance.copy()
+    lineage[at:] = [r.markers[0] for r in renamed]
+    lineage_angles[at:] = [r.joint_angles[0] for r in renamed]
+    lineage_stance[at:] = 1 - stance[at:]
+    flipped = np.zeros(frames, bool)
+    flipped[at] = True
+    return (markers, angles, stance), (lineage, lineage_angles, lineage_stance), flipped
+
+
 def test_a_lineage_that_renamed_its_legs_is_named_throughout_as_it_ends():
     """A walk whose particle renamed its legs at frame 6: the lineage's earlier frames are mirrored and renamed
     too, so its feet do not swap sides at the flip, and the frames after it are left as they are."""
     from awalker_tracker.inference.tracker import relabel_lineage
-    from awalker_tracker.model import kinematics
 
-    model, walk = _walking_particles(1, 12, seed=3)
-    markers = np.array([s.pose.markers[0] for s in walk])
-    angles = np.array([s.pose.joint_angles[0] for s in walk])
-    stance = np.array([s.walker.stance_leg[0] for s in walk])
-    # the same walk, its legs renamed from frame 6 on
-    renamed = [kinematics.pose_body(model.body, model.params, *kinematics.mirrored_legs(
-        s.walker, s.kin, s.pose.markers[:, PELVIS, :2], model.body, model.params, model.kin_config),
-        model.kin_config) for s in walk[6:]]
-    lineage = markers.copy()
-    lineage[6:] = [r.markers[0] for r in renamed]
-    lineage_angles = angles.copy()
-    lineage_angles[6:] = [r.joint_angles[0] for r in renamed]
-    lineage_stance = stance.copy()
-    lineage_stance[6:] = 1 - stance[6:]
-    flipped = np.zeros(12, bool)
-    flipped[6] = True
+    (markers, angles, stance), (lineage, lineage_angles, lineage_stance), flipped = _renamed_walk(6)
     left_ankle = MARKER_NAMES.index("left_ankle")
     assert np.linalg.norm(lineage[6, left_ankle, :2] - lineage[5, left_ankle, :2]) > 0.05     # the raw lineage: a jump
     out, out_angles, out_stance = relabel_lineage(lineage, lineage_angles, lineage_stance, flipped)
@@ -157,7 +163,6 @@ def test_walkers_replaced_after_a_fall_or_renamed_continue_their_own_lineage_and
     (``continues`` is each row itself) and records how far it moved (the MAP trajectory spreads it)."""
     from dataclasses import replace
 
-
     model, walk = _walking_particles(30, 5)
     model.config = replace(model.config, label_flip_rate_hz=10.0)    # a third of the particles each frame
     states = walk[-1]
@@ -175,21 +180,8 @@ def test_the_lineage_takes_the_naming_the_posterior_favoured():
     legs at frame 9 of 12, while the posterior kept favouring its first naming, keeps that naming throughout (the
     frames after the flip are mirrored back); a posterior that agrees with the last naming keeps it."""
     from awalker_tracker.inference.tracker import relabel_lineage
-    from awalker_tracker.model import kinematics
 
-    model, walk = _walking_particles(1, 12, seed=3)
-    markers = np.array([s.pose.markers[0] for s in walk])
-    angles = np.array([s.pose.joint_angles[0] for s in walk])
-    stance = np.array([s.walker.stance_leg[0] for s in walk])
-    renamed = [kinematics.pose_body(model.body, model.params, *kinematics.mirrored_legs(
-        s.walker, s.kin, s.pose.markers[:, PELVIS, :2], model.body, model.params, model.kin_config),
-        model.kin_config) for s in walk[9:]]
-    lineage, lineage_angles, lineage_stance = markers.copy(), angles.copy(), stance.copy()
-    lineage[9:] = [r.markers[0] for r in renamed]
-    lineage_angles[9:] = [r.joint_angles[0] for r in renamed]
-    lineage_stance[9:] = 1 - stance[9:]
-    flipped = np.zeros(12, bool)
-    flipped[9] = True
+    (markers, _, stance), (lineage, lineage_angles, lineage_stance), flipped = _renamed_walk(9)
     first_naming = np.where(stance == 0, 0.9, 0.1)                 # the posterior's P(left) per frame
     out, _, out_stance = relabel_lineage(lineage, lineage_angles, lineage_stance, flipped, first_naming)
     np.testing.assert_allclose(out, markers, atol=1e-9)
