@@ -171,6 +171,22 @@ def markdown(report: dict) -> str:
         lambda x, s, m: f"{x['largest_map_step_m_s']:.1f} / {x['largest_live_step_m_s']:.1f}")
     row("runs ending on the person (runs that never started)",
         lambda x, s, m: f"{x['runs_ended_on_person']} of {x['runs']} ({x['runs_failed']})")
+    walks = sorted({w for s, m in columns for w in report["summary"][f"{s} {m}"]["walk_medians_mm"]})
+    rows += ["", "| walk: median over its runs (mm) | " + " | ".join(head.split(" | ")[1:]),
+             "|" + "---|" * (len(columns) + 1)]
+    for walk in walks:
+        rows.append(f"| {walk} | " + " | ".join(
+            f"{report['summary'][f'{s} {m}']['walk_medians_mm'].get(walk, float('nan')):.0f}" for s, m in columns) + " |")
+    subjects = sorted({k for s, m in columns for k in report["summary"][f"{s} {m}"]["gait_by_subject"]})
+    rows += ["", "| subject: heel-strike timing / step length error, medians of runs | "
+             + " | ".join(head.split(" | ")[1:]), "|" + "---|" * (len(columns) + 1)]
+    for subject in subjects:
+        cells = []
+        for s, m in columns:
+            g = report["summary"][f"{s} {m}"]["gait_by_subject"].get(subject, {})
+            cells.append(f"{g['heel_strike_error_s']:.3f} s / {100 * g['step_length_error_m']:.1f} cm"
+                         if "heel_strike_error_s" in g and "step_length_error_m" in g else "-")
+        rows.append(f"| {subject} | " + " | ".join(cells) + " |")
     return "\n".join(rows) + "\n"
 
 
