@@ -114,7 +114,7 @@ def test_start_step_length_is_optional_and_follows_speed_and_leg_length():
     assert s.step_length is None and s.frame == 15 and s.stance_leg == 1
     assert "step_length" not in s.to_yaml_text()
     assert StartDescription.from_yaml_text(s.to_yaml_text()) == s
-    # 0.7 m at 5 km/h for a 0.9 m leg (MODEL.md: 0.65-0.75 m), growing as speed^0.42, longer legs longer steps
+    # 0.7 m at 5 km/h for a 0.9 m leg (docs/design.md: people step 0.65-0.75 m), growing as speed^0.42, longer legs longer steps
     assert s.step_length_for(WalkerParams(leg_length=0.9)) == pytest.approx(0.7, abs=0.002)
     faster = StartDescription(0, (0.0, 0.0), 0.0, 2 * 1.389, None, LEFT).step_length_for(WalkerParams(leg_length=0.9))
     assert faster == pytest.approx(0.7 * 2 ** 0.42, rel=0.01)

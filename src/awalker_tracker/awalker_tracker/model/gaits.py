@@ -21,7 +21,7 @@ family beside them is stable (radius 0.83-1.0; e.g. 5 km/h, 0.7 m: kappa 0.749, 
 of kappa 0.737, radius 1.077; its swing leg retracts a little more before the strike). ``family=
 "stable"`` keeps the most stable solution at each point instead. It was measured and not adopted:
 the cyclic-gait toe-off already corrects the stance rate at every strike, and tracking real walks
-was worse with it (README, "Which cyclic gait").
+was worse with it (docs/design.md, "Which cyclic gait").
 """
 from __future__ import annotations
 
@@ -62,7 +62,7 @@ def double_support_angle(params: WalkerParams, step_length: np.ndarray | float) 
 
 
 #: Preferred human step length at 5 km/h for L = 0.9 m (m), and its growth with speed: step ~ speed^0.42
-#: (MODEL.md Sec. 4: about 0.65-0.75 m at 5 km/h). Scaled to other leg lengths by Froude similarity.
+#: (people step about 0.65-0.75 m at 5 km/h; docs/design.md, *A person's usual step length*). Scaled to other leg lengths by Froude similarity.
 PREFERRED_STEP_AT_5KMH = 0.7
 PREFERRED_STEP_EXPONENT = 0.42
 

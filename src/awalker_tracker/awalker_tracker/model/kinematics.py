@@ -10,13 +10,13 @@ it follows from the stance-foot ground contact.
 Each DOF psi follows eq. (6):
     psi_t = psi_{t-1} + alpha (psi_{t-1} - psi_{t-2}) + dt^2 (k (psi_bar - psi_{t-1}) + eta),
     eta ~ N(0, sigma^2) truncated so that psi_t stays within its joint limits,
-with Table 1's parameters (``TABLE1``; the joint column reconstructed as in MODEL.md Sec. 5).
+with Table 1's parameters (``TABLE1``; the joint column reconstructed as in docs/design.md, *Table 1's joints*).
 alpha is given for dt = 1/30 s; at another dt we use alpha^(30 dt) (square root at 1/60 s,
 as the paper does), and sigma scaled so that the joint velocity eq. (6) drives keeps Table 1's
 stationary variance dt^2 sigma^2 / (1 - alpha^2) at any dt (``KinematicConfig.noise_scale``: 1.45-1.63
 at 1/60 s for Table 1's alphas 0.9-0.5; the paper says only that its 60 Hz parameters were "adjusted to
 account for a difference in frame rate"). With sigma unchanged, 60 Hz had half that variance or less:
-less freedom to follow a veer (real walks at 60 Hz, README). k is in 1/s^2. The swing knee's rest angle is gain x psi_hip with
+less freedom to follow a veer (real walks at 60 Hz, docs/design.md, "Conditional kinematics"). k is in 1/s^2. The swing knee's rest angle is gain x psi_hip with
 psi_hip = phi1 - phi2, the sagittal angle of the swing leg behind the stance leg (bent knee
 early in the stride, straight towards its end). The paper's gain is 5; ours is 2.5
 (``KinematicConfig.swing_knee_rest_gain``), measured on real walks (CMU subject 7, rendered by
@@ -46,7 +46,7 @@ changes turn the body about it. At heel strike the contact passes to the other f
 the ground position under that foot's lowest point (its height is snapped to the ground: the
 paper's small "jump").
 
-Swing-foot clearance (our addition, MODEL.md: prefer testable physics): the knee-less walker's
+Swing-foot clearance (our addition): the knee-less walker's
 trailing leg sweeps through the floor just after toe-off; where the sampled swing knee would
 put the swing foot's sole lower than ``swing_clearance`` (2 cm, about the minimum toe
 clearance of human gait) above the ground while the swing leg trails the stance leg, or
@@ -66,7 +66,7 @@ lowers the hip straight down over the ankle instead, which stays as far ahead of
 L0 sin(phi - CHORD_LEAN) with L0 = l_thigh + l_shank (``_chord_angle``: sin theta = L0 sin(phi - CHORD_LEAN) /
 L(knee)): late in the stance, the chord leaning forward from the ankle, shortening along it slid the hip back as
 the ceilings bend the knee, and the tracked pelvis rode 30 mm behind the person's on the real walks with two
-cameras against 19 without the ceilings (README "The hip comes down over the ankle"). The straight leg's
+cameras against 19 without the ceilings (docs/design.md, "The hip comes down over the ankle"). The straight leg's
 chord leans ``CHORD_LEAN`` (0.08 rad) back from the walker's leg: the walker's leg ends at the rolling
 contact, where a person's centre of pressure lies ahead of the ankle over the stance (heel, flat foot,
 forefoot), so their hip rides ahead of the stance ankle (CMU subject 7: a median 65 mm over single
@@ -76,7 +76,7 @@ pelvis 7 cm behind the person's on the real walks. The stance knee rests at ``st
 which holds the hips lower and the knees ahead of the hip-ankle line
 (7-9 cm on those walks), where a straight stance leg carried the pelvis 2 cm high and the knees 6-7 cm
 behind. With Table 1's slow knee (k = 20, alpha 0.75) it reaches ~9 degrees on average over the stance
-in the prior. Measured on the real walks (README "Knees"). Since the feet land where the walker's do,
+in the prior. Measured on the real walks (docs/design.md, "Knees"). Since the feet land where the walker's do,
 the body walks at the walker's speed (with the thigh at phi, a swing knee still bent at heel strike
 landed the foot short and the body walked at 0.7x). Two position projections keep the body with the
 walker at heel strike, when the walker's rigid legs meet the ground together: *heel rise*
