@@ -118,7 +118,7 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
     # the run's settings (run.yaml), so that each candidate is tracked as the run was, but for the pelvis ceiling:
     # the legs are weighed with the pelvis at the walker's hip (1: off). With the ceiling the evidence favours legs
     # as much longer as it lowers the pelvis, which undoes it (real walks hands off, two cameras: leg factors 1.12
-    # against 1.06-1.09 and the pelvis +63 mm high against +20-42; README "A pelvis ceiling")
+    # against 1.06-1.09 and the pelvis +63 mm high against +20-42; docs/design.md, "Pelvis ceiling")
     recovery = bool(info.get("recovery", True))
     config = TrackerConfig(
         smc=SMCConfig(lookahead=int(info.get("lookahead", 3)), trust=float(info.get("trust", 0.9))),

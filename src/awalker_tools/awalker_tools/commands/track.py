@@ -97,8 +97,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--leg-scale-spread", type=float, default=None,
                         help="let the particles' leg lengths differ from the body description's: log-normal spread "
                              "(e.g. 0.04), wandering 0.1 %% per frame; default "
-                             f"{DEFAULTS.leg_scale_spread:g}: the body's own (README \"Leg length from the images, "
-                             "online\")")
+                             f"{DEFAULTS.leg_scale_spread:g}: the body's own (docs/design.md, "
+                             "\"Leg length per particle\")")
     parser.add_argument("--pelvis-ceiling", type=float, default=None, metavar="F",
                         help="keep each particle's pelvis at most its own fraction of the walker's hip height, drawn "
                              "around F, over the stance, the stance knee bending as a person's does, with any number "

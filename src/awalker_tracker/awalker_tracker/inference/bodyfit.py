@@ -4,7 +4,7 @@ A tape measure's leg length is easily a few per cent off, and a body scaled to t
 its leg length from average proportions. The leg length sets how high the walker carries the pelvis
 (the walker's L, ``BodyDescription.leg_length``), so a leg too long puts pelvis, hips and thorax too
 high however well the rest is tracked (real walks: the tape's leg 4.5 cm longer than the person's hip
-height, the pelvis 75 mm high; README "Where the two-camera error is").
+height, the pelvis 75 mm high; docs/tracking.md, "Body fit").
 
 ``fit_leg_length`` runs the tracker's own filter once per candidate, each with thigh and shank scaled
 by a factor (``legs_scaled``; ankle, feet, torso and head unchanged), over the first ``frames`` frames,
@@ -14,7 +14,7 @@ above the head against the body (``LikelihoodConfig.head_top_weight`` 1): withou
 preferred legs 3 % short on our own renders, where the drawn body is the tracker's.
 
 Measured (2026-11-26; ``awalker fitbody`` on the real-walks benchmark's hand-started runs, tracker seeds
-0-2, then ``awalker track --body`` the fitted body; README "Where the two-camera error is"): two cameras,
+0-2, then ``awalker track --body`` the fitted body; docs/tracking.md, "Body fit"): two cameras,
 median of the walk medians 83 mm against 91 with the tape's body (better on 7 of 12 walks, worse on 4),
 relative 51 against 56; one camera 130 against 118 (better on 6, worse on 5: depth, seed noise), relative
 53 against 58. Hands off (the body scaled to the seen height, candidates 0.97-1.12): one camera 147 against
@@ -36,11 +36,11 @@ weighs (one camera, 5000 particles, 60 frames: +-20 nats), so each leg's evidenc
 ``stance_repeats`` filters of their own seeds (log of the mean of exp), and while the two legs lie within
 ``stance_tie_nats`` of each other, over as many again, up to ``stance_max_repeats`` per leg: more filters
 only where the first ones left it open.
-Measured on the real-walks benchmark, one camera, hands off, 15000 particles, tracker seeds 0-4 (README "One
-camera's stance leg from the evidence"): the legs named the other way round in 6 of 60 runs against 15 when
+Measured on the real-walks benchmark, one camera, hands off, 15000 particles, tracker seeds 0-4 (docs/tracking.md,
+"Body fit"): the legs named the other way round in 6 of 60 runs against 15 when
 the filter chose, 89.4 mm median of the walk medians against 100.2; two cameras 0 of 60 against 1, 68.0 mm
 against 66.6 (per run a median -3.0 mm, within seed noise).
-Weighing near ties again (within 10 nats, up to 6 filters per leg; README "Near ties weighed again"): 4 of 60
+Weighing near ties again (within 10 nats, up to 6 filters per leg; docs/tracking.md, "Body fit"): 4 of 60
 runs swapped against 6, 87.8 mm against 89.4; 29 of the 60 one-camera runs took the extra filters.
 """
 from __future__ import annotations

@@ -5,11 +5,11 @@ A profile names the particle count and takes every other setting from the core's
 ``TrackerConfig``, ``RecoveryConfig``), so there is one place for each default:
 
 - ``accurate`` (the default of both): 15000 particles. The paper used 5000; on the real walks 15000 reach
-  poses the image likelihood ranks higher (README "Not the body, not the likelihood": two cameras 56 mm
+  poses the image likelihood ranks higher (docs/tracking.md, "The filter": two cameras 56 mm
   against 59, one camera 73 against 74, the worst runs 104 and 185 mm against 142 and 277) at about 3 times
   the time per frame.
 - ``realtime``: 5000 particles, for a live camera (the paper's number, and the tracker node's before the
-  profiles): about 3 times less time per frame (README "At a glance" for the frames/s of each).
+  profiles): about 3 times less time per frame (docs/results.md, "Speed", for the frames/s of each).
 """
 from __future__ import annotations
 

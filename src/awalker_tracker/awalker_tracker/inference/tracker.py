@@ -172,14 +172,14 @@ class TrackerConfig:
     # worst runs are worse (226 -> 328 mm, 138 -> 161) and 54 of 60 one-camera runs end on the person
     # (56): runs whose legs settle below 0.95 gain most (two cameras, seeds 0-2: 74 against 85 mm), runs whose
     # legs grow past 0.99 lose (119 against 95); capped at 1.02, one camera gave 119 mm and two cameras 83.5.
-    # README "Leg length from the images, online".
+    # docs/design.md, "Leg length per particle".
     leg_scale_spread: float = 0.0
     leg_scale_drift: float = 0.001
     # Postures the filter explores (kinematics module doc, *Posture*), with at least posture_min_cameras
     # cameras: each particle's torso pitch rests at its own angle, Table 1's rest (upright) plus
     # N(0, posture_spread^2) rad when drawn (start, re-seeds), wandering by posture_drift rad per frame (std);
     # otherwise, and with posture_spread 0, upright for every particle. Real walks, hand-started, tracker seeds
-    # 0-4 (bench_realwalks; README "Posture"): two cameras a median 4.6 mm better per run (42 of 60 runs
+    # 0-4 (bench_realwalks; docs/design.md, "Posture"): two cameras a median 4.6 mm better per run (42 of 60 runs
     # better; median of the walk medians 64.1 -> 59.2 mm); one camera 17.7 mm worse per run (the body then
     # stands farther from the camera), so one camera keeps Table 1's upright torso.
     posture_spread: float = 0.08
@@ -190,7 +190,7 @@ class TrackerConfig:
     # hip height, pelvis_ceiling plus N(0, pelvis_ceiling_spread^2) when drawn (start, re-seeds) within 0.85-1,
     # wandering by pelvis_ceiling_drift per frame (std); with fewer cameras, or pelvis_ceiling 1, off (the
     # walker's hip height). People walk on a stance knee bent ~20 degrees, the pelvis ~0.96 of the standing leg
-    # (README "A pelvis ceiling"). Real walks, two cameras, tracker seeds 0-4, one ceiling of 0.97 for every
+    # (docs/design.md, "Pelvis ceiling"). Real walks, two cameras, tracker seeds 0-4, one ceiling of 0.97 for every
     # particle: hand-started the pelvis +37 -> +17 mm high and the median of the walk medians 56.1 -> 53.5 mm
     # (39 of 60 runs better), but our own straight walk (walker renders, pelvis at the hip) 29 -> 39 mm, which
     # the spread lets the images choose; one camera 73.5 -> 79.7 (seeds 0-2: the depth moves with the shape).
@@ -200,7 +200,7 @@ class TrackerConfig:
     pelvis_ceiling_min_cameras: int = 2
     # A bent knee lowers the hip straight down over the ankle (``KinematicConfig.hip_over_ankle``) with at least
     # hip_over_ankle_min_cameras cameras, and wherever the pelvis ceilings are on (a ceiling bending the stance
-    # knee slid the hip back along the walk without it). README "The hip comes down over the ankle": two
+    # knee slid the hip back along the walk without it). docs/design.md, "The hip comes down over the ankle": two
     # cameras, hand-started, 54.2 -> 51.9 mm (per run -2.2, 39 of 60 runs better); hands off (after a leg fit,
     # no ceilings) 63.1 -> 61.4 (per run -0.8, within noise, 33 of 60); one camera 73.5 -> 75.9 and worst runs
     # 88-100 mm (seeds 0-2), so one camera keeps the chord's angle.

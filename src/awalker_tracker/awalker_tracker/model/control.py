@@ -22,7 +22,7 @@ Units (checked against the solved cyclic gaits, see test_control.py): kappa in N
 mu_kappa = 0.7 sits inside the solved range (0.74 at 5 km/h, 0.7 m with L = 0.9 m); iota in m/s.
 
 Why the defaults are not the paper's (measured with :func:`prior_walk_statistics`, 1000 walkers, 20
-steps; figures in README "The walker's prior"): the paper calls its walker "very stable" and says
+steps; figures in docs/design.md, "The control prior and where it departs from the paper"): the paper calls its walker "very stable" and says
 other controllers may work as well. This walker, checked by its invariants, is not:
 
 - Open loop (fixed kappa, iota) the step-to-step map of the cyclic gaits has largest Floquet

@@ -109,7 +109,7 @@ def map_downsample(image_width: int, cameras: int) -> int:
 
     Why: at 320x240 a fixed 4 makes a map 80 pixels wide, where a person 5 m away is ~17 map pixels tall,
     a leg less than one wide and one map row ~0.2-0.3 m of depth. With two cameras the finer maps tracked
-    the real-walks benchmark closer (README "Two cameras: maps as fine at 320x240 as at 640x480"); with one
+    the real-walks benchmark closer (docs/tracking.md, "Image features"); with one
     camera they did not (worse on 3 of 12 walks, by 40-50 mm: the sharper likelihood holds depth and which
     leg is which no better), so it keeps the coarser maps."""
     if image_width < 1 or cameras < 1:
