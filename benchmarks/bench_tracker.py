@@ -13,12 +13,12 @@ reported apart), and the same filter at 60 Hz input (dt = 1/60 s:
 compiled) by a short untimed run first; ``warm_up_s`` says how long that took.
 
 ``--baseline REV`` also runs this benchmark's filter tables on the code of git revision REV (a
-temporary worktree, e.g. the last numpy implementation 831cccf) in the same session and reports
+temporary worktree, e.g. the last numpy implementation 831cccf) in the same run and reports
 the speed-up of each entry against it. ``--repeats K`` runs the filter tables K times (with a
 baseline: ours, the baseline's, ours, ... alternately) and reports each entry's median run with all
 its runs' frames/s: on this shared machine the speed drifts by 10-30 % within minutes, so one run of
 each is not a comparison. ``core_sin_cos_ns`` times a compiled sine-and-cosine loop on each core in
-turn: a yardstick for the day's speed. Prints JSON.
+turn: a yardstick for the machine's speed at the time. Prints JSON.
 
     .venv/bin/python benchmarks/bench_tracker.py [--frames 20] [--particles 500 1000 5000] [--cameras 1 3]
         [--rates 30 60] [--skip-end-to-end] [--long-frames 300] [--baseline REV] [--repeats K]
@@ -191,8 +191,8 @@ def sustained(particles: int, bag: Path, folder: Path) -> dict:
 
 def core_speeds() -> list[float]:
     """ns per sine-and-cosine pair of a compiled loop, on each core this process may use in turn (the thread
-    pinned to it): a yardstick for the machine's speed, which varies by day and between its two cores (one ran
-    the kernels ~1.5x slower than the other on 2026-11-30), so that runs of different days can be compared."""
+    pinned to it): a yardstick for the machine's speed, which varies over time and between its two cores (one ran
+    the kernels ~1.5x slower than the other), so that runs made at different times can be compared."""
     import threading
 
     import numba

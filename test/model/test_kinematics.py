@@ -310,7 +310,7 @@ def test_body_follows_walker_legs_and_speed(hip_over_ankle: bool):
     body_speed = travel / (63 / 30)
     # At the walker's speed (0.99x here): the hip-ankle chords follow the walker's legs, so a swing knee
     # still bent at heel strike does not land the foot short of the walker's (with the thigh at the
-    # walker's leg angle, before 2026-11-27, the body walked at 0.67x).
+    # walker's leg angle instead, the body walked at 0.67x).
     assert 0.95 * walker_speed < np.median(body_speed) < 1.02 * walker_speed
     # Pelvis near the leg length above the ground.
     z = np.array([p.markers[:, M["pelvis"], 2] for p in poses])

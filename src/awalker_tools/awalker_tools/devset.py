@@ -5,7 +5,7 @@ slow walks, starts from standing, a curved U-turn, a turn on the spot, slow turn
 subject; two of subject 7's walks also turned round or veering by ``mocap_motion.bend`` (``BENT``). The
 subjects are split once, before any measurement, into a tuning set (what the tracker may be tuned on)
 and a reporting set (what accuracy figures are reported on; never tuned on): ``TUNING_SUBJECTS``,
-``REPORTING_SUBJECTS``. ``QUICK`` is a small tuning subset for daily use.
+``REPORTING_SUBJECTS``. ``QUICK`` is a small tuning subset for frequent runs.
 
 A *recording* is a trial drawn from a seed (``Recording.draw``): everything a user's own recording
 varies, drawn per run so that no constant is tuned on one draw:
@@ -128,7 +128,7 @@ TRIALS: dict[str, Trial] = {t.name: t for t in (
 #: The subjects a setting may be tuned on, and the ones accuracy is reported on (chosen before measuring).
 TUNING_SUBJECTS = ("07", "35", "69", "91")
 REPORTING_SUBJECTS = ("05", "09", "29", "49")
-#: A small tuning subset for daily use: a straight walk, a turn and a start from standing.
+#: A small tuning subset for frequent runs: a straight walk, a turn and a start from standing.
 QUICK = ("07_01", "07_01-uturn", "69_01")
 #: The sequences a recording gives: name -> (cameras, hand-started).
 VARIANTS = {"mono": (1, True), "two": (2, True), "mono_handsoff": (1, False), "two_handsoff": (2, False)}

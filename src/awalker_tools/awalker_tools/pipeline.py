@@ -57,12 +57,12 @@ FRAMES_AHEAD = 3
 #: s: how long a thread may hold the GIL while another waits (Python's default 0.005). The feature thread's
 #: OpenCV and numba calls give up the GIL and must win it back from the main thread's Python (the filter's
 #: glue, the messages) after each; a shorter slice lets them back sooner. Measured (four alternate fresh runs
-#: of `awalker track bags/walk.bag --no-overlay` each, 2026-11-26): 500 particles 27.4-33.0 -> 29.5-33.8
+#: of `awalker track bags/walk.bag --no-overlay` each): 500 particles 27.4-33.0 -> 29.5-33.8
 #: frames/s, 5000 14.9-16.7 -> 15.3-16.8 (no pair slower).
 GIL_SWITCH_INTERVAL_S = 0.001
 #: Seconds the replay waits for the tracker to acknowledge a frame before giving up. The first frames the
 #: tracker filters compile its numba kernels on a fresh install (~25 s on an idle 2-core machine; a first
-#: run beside three other jobs took over the replay's default 60 s and stopped, 2026-11-26); a failure in
+#: run beside three other jobs took over the replay's default 60 s and stopped); a failure in
 #: a node's thread stops the run at once, whatever this says.
 ACK_TIMEOUT_S = 600.0
 #: Seconds the pipeline waits, after the last frame, for the pose publisher's outputs of every posterior to

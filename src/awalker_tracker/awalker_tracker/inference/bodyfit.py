@@ -13,7 +13,7 @@ and keeps the candidate with the highest evidence log p(z_1:T) = sum_t log sum_j
 above the head against the body (``LikelihoodConfig.head_top_weight`` 1): without it the evidence
 preferred legs 3 % short on our own renders, where the drawn body is the tracker's.
 
-Measured (2026-11-26; ``awalker fitbody`` on the real-walks benchmark's hand-started runs, tracker seeds
+Measured (``awalker fitbody`` on the real-walks benchmark's hand-started runs, tracker seeds
 0-2, then ``awalker track --body`` the fitted body; docs/tracking.md, "Body fit"): two cameras,
 median of the walk medians 83 mm against 91 with the tape's body (better on 7 of 12 walks, worse on 4),
 relative 51 against 56; one camera 130 against 118 (better on 6, worse on 5: depth, seed noise), relative
@@ -23,7 +23,7 @@ drawn length kept in 11 of 12 runs.
 
 With ``BodyFitConfig.keep_height`` each candidate keeps the body's standing height, its torso and head giving
 what the legs gain: for a body scaled to a height the images measured (``awalker_tools.fit_body`` sets it with
-two or more cameras). Measured (2026-11-29, hands off, two cameras, 15000 particles, seeds 0-4): 63.1 mm median
+two or more cameras). Measured (hands off, two cameras, 15000 particles, seeds 0-4): 63.1 mm median
 of the walk medians against 68.0 with the legs added to the seen height, per run -3.3 mm (36 of 60 better).
 
 ``fit_stance_leg`` compares, the same way, the two stance legs a start that does not name one leaves open
@@ -131,7 +131,7 @@ def _log_evidence(candidates: dict[object, tuple[BodyDescription, StartDescripti
     """log p(z_1:T) (nats) of each candidate (key -> its body, start and filter seed), in the candidates'
     order. The candidates are independent filters with their own random streams: they run on as many threads
     as there are cores (the kernels release the GIL; one candidate's numpy and Python overlap another's
-    kernels), each the same bit for bit as alone. Measured (2026-11-26, 6 candidates x 60 frames x 5000
+    kernels), each the same bit for bit as alone. Measured (6 candidates x 60 frames x 5000
     particles, a real walk's first pass): two cameras 19.0 -> 13.6 s, one camera 14.7 -> 12.7 s."""
 
     def evidence(key: object) -> tuple[float, int]:

@@ -166,7 +166,7 @@ class TrackerConfig:
     # Leg lengths the filter explores (kinematics module doc, *Leg length*; off by default): with
     # leg_scale_spread > 0 each particle's thigh and shank are x its own factor, log-normal with this spread
     # when drawn (start, re-seeds), wandering by leg_scale_drift per frame (log, std). Real walks, hand-started,
-    # tracker seeds 0-4, 0.04 and 0.001 (2026-11-26, bench_realwalks --leg-scale-spread 0.04): medians of the
+    # tracker seeds 0-4, 0.04 and 0.001 (bench_realwalks --leg-scale-spread 0.04): medians of the
     # walk medians one camera 125 -> 95 mm (better on 9 of 12 walks), two cameras 88 -> 82 (7 of 12), but per
     # run the change is -7 mm (mean; one camera: 10th-90th percentile -75..+53 mm) and 0 (two cameras), the
     # worst runs are worse (226 -> 328 mm, 138 -> 161) and 54 of 60 one-camera runs end on the person

@@ -4,7 +4,7 @@ rclpy gives every publisher and subscription a handler that logs an incompatible
 parameter services and a type description service. An executor scans all of them each time it waits, which
 it does about once per message: `awalker track` runs its nodes in one process, on a private domain, each
 reader matched to its writer there, and leaves them out (``private_node_options``): 62 frames/s end to end
-against 58 at 500 particles (2026-11-30, four alternate pairs; docs/speed.md, "Fewer returns to the interpreter lock").
+against 58 at 500 particles (four alternate pairs; docs/speed.md, "Fewer returns to the interpreter lock").
 """
 from __future__ import annotations
 
