@@ -11,7 +11,7 @@ setup:
 	@bash scripts/setup_env.sh
 
 demo: setup
-	@$(AWALKER) demo
+	@$(AWALKER) demo --force
 
 test: setup
 	@$(PY) -m pytest -n $(TEST_WORKERS) test

@@ -45,10 +45,14 @@ from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEG_NAMES
 
 from awalker_tools import evaluation
+from awalker_tools.outdir import files_under, prepare_output_dir, record_written
 
 DEFAULTS = PROFILES[DEFAULT_PROFILE]
 START_FILE, BODY_FILE, CALIBRATION_FILE, RUN_FILE = "start.yaml", "body.yaml", "calibration.yaml", "run.yaml"
 PROGRESS_PERIOD_S = 2.0
+#: What a run writes at the top of its output folder (a file of the user's there stops a --force run).
+TRACK_OUTPUTS = ("result.bag", RUN_FILE, CALIBRATION_FILE, START_FILE, BODY_FILE, "poses.csv", "summary.csv",
+                 "gait.csv", "gait.json", "gait.png", "overlay", "overlay.mp4", "first_pass")
 #: Lockstep replay lets this many frames out beyond the oldest the tracker has not acknowledged, so the
 #: feature thread works on the next frames while the tracker filters this one, and a frame that takes the
 #: filter longer (a look-ahead re-simulation after resampling) does not leave the feature thread idle.
@@ -140,6 +144,9 @@ class TrackOptions:
     # image pixels per map pixel (each way) of the features nodes; None: vision.features.map_downsample (4 with
     # one camera, maps about 160 pixels wide with two or more); run_tracking's first pass sets 4
     map_downsample: int | None = None
+    # ``out`` may hold files: those a previous run listed in its run.yaml are replaced, the others kept
+    # (``outdir.prepare_output_dir``); False: ``out`` must be new or empty
+    force: bool = False
 
 
 @dataclass
@@ -250,14 +257,26 @@ def _new_result_bag(out: Path) -> Path:
 
 def run_tracking(options: TrackOptions) -> TrackResult:
     """Run the whole pipeline on ``options.bag``; write the outputs into ``options.out``. With a body
-    to fit (``TrackOptions.fit_body``), a first pass into ``out/first_pass``, the fit, and the run."""
+    to fit (``TrackOptions.fit_body``), a first pass into ``out/first_pass``, the fit, and the run.
+    ``out`` must be new or empty (``TrackOptions.force``: see ``outdir.prepare_output_dir``); run.yaml lists
+    the files the run wrote, also when it stops on an error (with ``incomplete``: the reason)."""
     from awalker_tools.bagio import SequenceReader
 
     bag = Path(options.bag)
     if not bag.exists():
         raise InputError(f"{bag}: no such bag (expected a rosbag2 directory, .mcap or .db3)")
-    with SequenceReader(bag) as reader:      # opened once for every pass (opening parses its metadata, ~30 ms)
-        return _run_passes(options, reader)
+    out = Path(options.out)
+    kept = prepare_output_dir(out, force=options.force, outputs=TRACK_OUTPUTS)
+    try:
+        with SequenceReader(bag) as reader:      # opened once for every pass (opening parses its metadata, ~30 ms)
+            result = _run_passes(options, reader)
+    except BaseException as exc:
+        reason = " ".join(str(exc).split()) or type(exc).__name__
+        if out.is_dir() and files_under(out) - kept:
+            record_written(out, kept, {"input": str(bag.resolve()), "incomplete": reason})
+        raise
+    record_written(out, kept)
+    return result
 
 
 def _run_passes(options: TrackOptions, reader: Any) -> TrackResult:

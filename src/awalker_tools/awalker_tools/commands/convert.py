@@ -6,6 +6,7 @@ from pathlib import Path
 
 from awalker_tools.bagio import IMAGE_FORMATS, STORAGES
 from awalker_tools.convert import convert, parse_source
+from awalker_tools.outdir import check_new_path
 
 EPILOG = """\
 Calibration YAML (one file, one entry per camera; world frame z up, ground z = 0):
@@ -31,7 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--calibration", required=True, type=Path, help="calibration YAML (schema below)")
-    parser.add_argument("--out", required=True, type=Path, help="output bag directory (must not exist)")
+    parser.add_argument("--out", required=True, help="output bag directory (must not exist)")
     parser.add_argument("--storage", choices=sorted(STORAGES), default="mcap", help="bag storage (default mcap)")
     parser.add_argument("--compressed", action="store_true", help="store CompressedImage instead of raw Image")
     parser.add_argument("--image-format", choices=IMAGE_FORMATS, default="png",
@@ -49,9 +50,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    out = check_new_path(args.out, "--out", force=None, what="bag")
     sources = [parse_source(s, "video") for s in args.video] + [parse_source(s, "images") for s in args.images]
     convert(
-        args.calibration, args.out, sources, storage=args.storage, compressed=args.compressed,
+        args.calibration, out, sources, storage=args.storage, compressed=args.compressed,
         image_format=args.image_format, timestamps=args.timestamps, fps=args.fps, start_time=args.start_time,
         start_description=args.start_description, body_description=args.body_description,
     )

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import shutil
 from pathlib import Path
 
 from awalker_tracker.errors import InputError
@@ -26,15 +25,14 @@ def find_sample_bag(search: list[Path]) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     from awalker_tools.commands import eval as eval_command
-    from awalker_tools.pipeline import TrackOptions, run_tracking
+    from awalker_tools.outdir import output_path, prepare_output_dir
+    from awalker_tools.pipeline import TRACK_OUTPUTS, TrackOptions, run_tracking
 
     bag = Path(args.bag) if args.bag else find_sample_bag([Path.cwd() / "bags", REPO_ROOT / "bags"])
-    out = Path(args.out)
-    if out.exists():
-        if not (out / "run.yaml").is_file() and any(out.iterdir()):
-            raise InputError(f"{out}: exists and is not an earlier demo output; choose another --out")
-        shutil.rmtree(out)
-    run_tracking(TrackOptions(bag=bag, out=out, particles=args.particles, seed=args.seed))
+    out = output_path(args.out, "--out")
+    # an earlier demo's files (its run.yaml lists them) are replaced with --force, the user's never
+    prepare_output_dir(out, force=args.force, outputs=TRACK_OUTPUTS + eval_command.OUTPUTS)
+    run_tracking(TrackOptions(bag=bag, out=out, particles=args.particles, seed=args.seed, force=True))
     status = eval_command.run(argparse.Namespace(dir=str(out), truth=None, json=None))
     print(f"look at {out / 'overlay.mp4'}, {out / 'error_over_time.png'} and {out / 'speed_stance.png'}")
     return status
@@ -43,10 +41,12 @@ def run(args: argparse.Namespace) -> int:
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "demo", help="track the sample bag in bags/ and print the evaluation",
-        description="Runs `awalker track` on the sample bag (bags/) into --out (replacing an earlier demo "
-                    "output there), then `awalker eval` against its ground truth.")
+        description="Runs `awalker track` on the sample bag (bags/) into --out (new or empty; --force replaces "
+                    "an earlier demo's outputs there, nothing else), then `awalker eval` against its ground truth.")
     parser.add_argument("--bag", help="bag to track (default: the sample bag in bags/)")
-    parser.add_argument("--out", default="demo_out", help="output directory (default demo_out)")
+    parser.add_argument("--out", default="demo_out", help="output directory, new or empty (default demo_out)")
+    parser.add_argument("--force", action="store_true",
+                        help="replace an earlier run's outputs in --out (those its run.yaml lists); other files stay")
     defaults = PROFILES[DEFAULT_PROFILE]
     parser.add_argument("--particles", type=int, default=defaults.num_particles,
                         help=f"number of particles (default {defaults.num_particles}, as awalker track)")

@@ -11,8 +11,12 @@ import yaml
 from awalker_tracker.errors import InputError
 
 from awalker_tools import evaluation, plots
+from awalker_tools.outdir import add_written, check_may_write, check_new_path
 
 RUN_FILE = "run.yaml"   # written by `awalker track`: {input: bag path, ...}
+#: What eval writes into the run's folder (besides --json's file, DIR/eval.json by default).
+PLOTS = ("error_over_time.png", "speed_stance.png", "gait_vs_truth.png")
+OUTPUTS = ("eval.json", *PLOTS)
 
 
 def find_truth(run_dir: Path, truth: Path | None) -> Path:
@@ -47,6 +51,13 @@ def run(args: argparse.Namespace) -> int:
     run_dir = Path(args.dir)
     if not run_dir.is_dir():
         raise InputError(f"{run_dir}: not a directory (expected the --out DIR of `awalker track`)")
+    # the run's own files may be replaced (an earlier eval's, listed in run.yaml); anything else is refused
+    check_may_write(run_dir, PLOTS)
+    if args.json is not None:
+        out = check_new_path(args.json, "--json", force=None)
+    else:
+        out = run_dir / "eval.json"
+        check_may_write(run_dir, [out.name])
     estimate = evaluation.read_poses_csv(run_dir / "poses.csv")
     truth_path = find_truth(run_dir, Path(args.truth) if args.truth else None)
     truth = load_truth(truth_path)
@@ -56,7 +67,6 @@ def run(args: argparse.Namespace) -> int:
     live = evaluation.live_track_from_bag(result_bag) if result_bag.exists() else None
     result = evaluation.evaluate(estimate, truth, summary, live)
     result["truth_source"] = str(truth_path)
-    out = Path(args.json) if args.json else run_dir / "eval.json"
     out.write_text(json.dumps(result, indent=1))
     per_frame = result["per_frame"]
     pngs = [plots.plot_errors(run_dir / "error_over_time.png", np.array(per_frame["frame"]),
@@ -73,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
     pngs.append(plots.plot_gait(run_dir / "gait_vs_truth.png", evaluation.track_steps(estimate, stance),
                                 estimate.marker("pelvis")[:, :2], evaluation.track_steps(truth),
                                 truth.marker("pelvis")[:, :2], title=f"footprints: {run_dir.name} (squares: truth)"))
+    inside = [p.name for p in (out, *pngs) if p.resolve().parent == run_dir.resolve()]
+    add_written(run_dir, inside)
     print(evaluation.format_table(result, label=run_dir.name))
     print(f"wrote {out} and {', '.join(str(p) for p in pngs)}")
     return 0
@@ -88,5 +100,5 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("dir", help="output directory of `awalker track` (holds poses.csv, summary.csv)")
     parser.add_argument("--truth", help="ground truth: CSV (frame,stamp_ns,marker,x,y,z) or a bag with "
                                         "/awalker/ground_truth (default: found beside the run or input bag)")
-    parser.add_argument("--json", help="where to write the metrics (default DIR/eval.json)")
+    parser.add_argument("--json", help="where to write the metrics: a new file (default DIR/eval.json)")
     parser.set_defaults(func=run)

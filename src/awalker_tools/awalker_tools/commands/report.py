@@ -20,6 +20,9 @@ import numpy as np
 from awalker_tracker.errors import InputError, parse_yaml
 
 from awalker_tools import evaluation, plots
+from awalker_tools.outdir import add_written, check_may_write
+
+REPORT_FILE = "report.html"
 
 
 def _image(path: Path, caption: str) -> str:
@@ -74,9 +77,11 @@ def build_report(run_dir: Path) -> Path:
     gait_summary = json.loads((run_dir / "gait.json").read_text())
     with open(run_dir / "gait.csv", newline="") as fh:
         steps = list(csv.DictReader(fh))
+    written = [REPORT_FILE]
     if not (run_dir / "speed_stance.png").is_file():
         plots.plot_speed_and_stance(run_dir / "speed_stance.png", summary["frame"], summary["speed"],
                                     summary["speed_std"], summary["stance_left_probability"])
+        written.append("speed_stance.png")
     parts = [f"<h1>awalker: {html.escape(run_dir.name)}</h1>"]
     frames = len(summary["frame"])
     sym = gait_summary.get("symmetry_left_over_right", {})
@@ -124,8 +129,9 @@ def build_report(run_dir: Path) -> Path:
              "td,th{border:1px solid #ccc;padding:3px 6px;font-size:13px}figure{margin:10px 0}")
     page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>awalker report: {html.escape(run_dir.name)}"
             f"</title><style>{style}</style></head><body>{''.join(parts)}</body></html>")
-    out = run_dir / "report.html"
+    out = run_dir / REPORT_FILE
     out.write_text(page)
+    add_written(run_dir, written)
     return out
 
 
@@ -133,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
     run_dir = Path(args.dir)
     if not run_dir.is_dir():
         raise InputError(f"{run_dir}: not a directory (expected the --out DIR of `awalker track`)")
+    check_may_write(run_dir, [REPORT_FILE])      # an earlier report (listed in run.yaml) only
     print(f"wrote {build_report(run_dir)}")
     return 0
 

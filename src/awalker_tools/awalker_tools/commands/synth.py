@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from awalker_tools.outdir import output_path, prepare_output_dir, record_written
 from awalker_tools.person_render import CARRIED
 from awalker_tools.synth import OCCLUDED_SHARE, VARIANTS, SynthConfig, synthesise
 
@@ -16,7 +17,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "DIR/<name>.bag with DIR/calibration.yaml, body.yaml, start.yaml and ground_truth.csv. Motion comes "
         "from the walker dynamics on the cyclic gaits and the conditional kinematics, or from a CMU mocap walk (--from-mocap).",
     )
-    parser.add_argument("--out", required=True, type=Path, help="output directory (created if needed)")
+    parser.add_argument("--out", required=True, help="output directory, new or empty (see --force)")
+    parser.add_argument("--force", action="store_true",
+                        help="--out may hold an earlier synth's files (listed in its run.yaml): they are replaced, "
+                             "other files are kept (one in the way of this run's outputs stops it)")
     parser.add_argument("--name", default="synth", help="bag name inside DIR (default: synth)")
     parser.add_argument("--cameras", type=int, default=1, help="number of cameras, 1-4 (default 1)")
     parser.add_argument("--rate", type=float, default=30.0, choices=(30.0, 60.0), help="frame rate, Hz")
@@ -67,8 +71,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    out = output_path(args.out, "--out")
     config = SynthConfig(
-        out_dir=args.out, name=args.name, cameras=args.cameras, rate=args.rate, frames=args.frames,
+        out_dir=out, name=args.name, cameras=args.cameras, rate=args.rate, frames=args.frames,
         background_frames=args.background_frames, seed=args.seed, speed=args.speed, step_length=args.step_length,
         speed_change=args.speed_change, turn_deg=args.turn, occluder=args.occluder,
         mocap=tuple(args.from_mocap) if args.from_mocap else None, width=args.size[0], height=args.size[1],
@@ -77,7 +82,13 @@ def run(args: argparse.Namespace) -> int:
         person=args.person, variant=args.variant, user_start=args.user_start, tape_measure=args.tape_measure,
         descriptions=not args.no_descriptions, second_person=args.second_person, carry=args.carry,
     )
-    paths = synthesise(config)
+    outputs = (f"{args.name}.bag", "run.yaml", "calibration.yaml", "body.yaml", "start.yaml", "ground_truth.csv",
+               "ground_truth_body.yaml", "second_person.csv", *(f"overlay_cam{k}.png" for k in range(config.cameras)))
+    kept = prepare_output_dir(out, force=args.force, outputs=outputs)
+    try:
+        paths = synthesise(config)
+    finally:
+        record_written(out, kept, {"command": "synth"})      # what this run wrote, for a later --force
     for kind, path in paths.items():
         print(f"{kind}: {path}")
     return 0

@@ -5,6 +5,8 @@ import argparse
 from pathlib import Path
 
 from awalker_tracker.errors import InputError
+
+from awalker_tools.outdir import output_path
 from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES, tracking_profile
 
 DEFAULTS = PROFILES[DEFAULT_PROFILE]
@@ -49,14 +51,14 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise InputError(f"--follow-near: {exc}") from None
     run_tracking(TrackOptions(
-        bag=Path(args.bag), out=Path(args.out), start=Path(args.start) if args.start else None,
+        bag=Path(args.bag), out=output_path(args.out, "--out"), start=Path(args.start) if args.start else None,
         body=Path(args.body) if args.body else None, profile=args.profile, particles=particles,
         lookahead=lookahead, trust=trust, seed=seed, likelihood_scale=likelihood_scale,
         leg_scale_spread=leg_scale_spread, pelvis_ceiling=args.pelvis_ceiling,
         recovery=profile.recovery and not args.no_recovery, depth_band_m=args.depth_band,
         auto_start=args.auto_start or args.follow_near is not None,
         follow_near=follow_near, overlays=not args.no_overlay, fit_body=args.fit_body,
-        storage=args.storage,
+        storage=args.storage, force=args.force,
         share_topics=args.share_topics))
     return 0
 
@@ -70,7 +72,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     "/awalker/start_description and /awalker/body_description, else start.yaml/body.yaml "
                     "beside the bag; with no start description the tracker finds the walking person itself.")
     parser.add_argument("bag", help="input rosbag2 bag (directory, .mcap or .db3)")
-    parser.add_argument("--out", required=True, help="output directory")
+    parser.add_argument("--out", required=True, help="output directory: new or empty (see --force)")
+    parser.add_argument("--force", action="store_true",
+                        help="--out may hold a previous run: the files its run.yaml lists are replaced, every "
+                             "other file is kept (one in the way of this run's outputs stops it)")
     parser.add_argument("--start", help="start description YAML (start: frame, position, heading, speed, ...)")
     parser.add_argument("--auto-start", action="store_true",
                         help="ignore any start description and find the walking person in the images (also done "
