@@ -11,28 +11,52 @@ from awalker_tracker.errors import InputError
 from awalker_tracker.model import gaits
 from awalker_tracker.model.walker import WalkerParams
 
+from awalker_tools.outdir import check_new_path
+
 PACKAGED_TABLE = Path(gaits.__file__).resolve().parents[1] / "data" / "cyclic_gaits.json"
+#: The installed awalker_tracker package: its files (the packaged gait table among them) are never written.
+PACKAGE_DIR = PACKAGED_TABLE.parents[1]
+#: `gaits solve` writes here unless --out says otherwise (a new file in the current folder).
+DEFAULT_OUT = "cyclic_gaits.json"
+#: The most grid points `gaits solve` takes (the default grid has 11 x 19 = 209; each point takes up to a few
+#: seconds, so 2:7:100000 would run for days).
+MAX_GRID_POINTS = 2000
 
 
 def _range(text: str, what: str) -> tuple[float, float, int]:
     try:
         lo, hi, n = text.split(":")
         value = (float(lo), float(hi), int(n))
-    except ValueError as exc:
-        raise InputError(f"--{what} {text!r}: expected LOW:HIGH:COUNT, e.g. 2:7:11") from exc
-    if value[2] < 2 or not value[0] < value[1]:
-        raise InputError(f"--{what} {text!r}: need LOW < HIGH and COUNT >= 2")
+    except ValueError:
+        raise InputError(f"--{what} {text!r}: expected LOW:HIGH:COUNT, e.g. 2:7:11") from None
+    if not (np.isfinite(value[0]) and np.isfinite(value[1]) and 0 < value[0] < value[1]) or value[2] < 2:
+        raise InputError(f"--{what} {text!r}: need finite 0 < LOW < HIGH and COUNT >= 2")
     return value
 
 
+def solve_output(text: str, force: bool) -> Path:
+    """Where `gaits solve` may write: a new file (or, with ``force``, an existing one), never a file of the
+    installed package (``PACKAGE_DIR``: its gait table is read-only)."""
+    out = check_new_path(text, "--out", force=force)
+    if out.resolve().is_relative_to(PACKAGE_DIR):
+        raise InputError(f"--out {out}: inside the installed package ({PACKAGE_DIR}), whose gait table is "
+                         "read-only; write the table elsewhere and pass it with --table")
+    return out
+
+
 def run_solve(args: argparse.Namespace) -> int:
-    if args.leg_length <= 0:
+    if not (np.isfinite(args.leg_length) and args.leg_length > 0):
         raise InputError(f"--leg-length {args.leg_length}: expected a positive length in metres")
+    if not (np.isfinite(args.gravity) and args.gravity > 0):
+        raise InputError(f"--gravity {args.gravity}: expected a positive finite acceleration in m/s^2")
+    speeds_range, steps_range = _range(args.speeds, "speeds"), _range(args.step_lengths, "step-lengths")
+    if speeds_range[2] * steps_range[2] > MAX_GRID_POINTS:
+        raise InputError(f"--speeds {args.speeds} x --step-lengths {args.step_lengths}: "
+                         f"{speeds_range[2] * steps_range[2]} grid points, at most {MAX_GRID_POINTS}")
+    out = solve_output(args.out, args.force)
     params = WalkerParams(leg_length=args.leg_length, gravity=args.gravity)
-    speeds, step_lengths = gaits.grid_axes(_range(args.speeds, "speeds"), _range(args.step_lengths, "step-lengths"))
+    speeds, step_lengths = gaits.grid_axes(speeds_range, steps_range)
     table = gaits.solve_grid(params, speeds, step_lengths, progress=gaits.stderr_progress, family=args.family)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
     table.save(out)
     coef, rms = gaits.fit_impulse_mean(table) if table.converged.sum() >= 4 else (np.full(4, np.nan), np.nan)
     radius = table.step_map_radius[table.converged]
@@ -102,7 +126,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("gaits", help="solve or plot the cyclic-gait table of the walker (eq. 3)")
     sub = parser.add_subparsers(dest="gaits_command", required=True)
     solve = sub.add_parser("solve", help="solve eq. (3) over a speed x step-length grid (progress on stderr)")
-    solve.add_argument("--out", default=str(PACKAGED_TABLE), help="output JSON (default: the packaged table)")
+    solve.add_argument("--out", default=DEFAULT_OUT,
+                       help=f"output JSON, a new file (default {DEFAULT_OUT} in the current folder; never the "
+                            "packaged table, which is read-only)")
+    solve.add_argument("--force", action="store_true", help="replace --out if it exists")
     solve.add_argument("--speeds", default="2:7:11", help="km/h LOW:HIGH:COUNT (default 2:7:11)")
     solve.add_argument("--step-lengths", default="0.3:1.2:19", help="m LOW:HIGH:COUNT (default 0.3:1.2:19)")
     solve.add_argument("--leg-length", type=float, default=WalkerParams().leg_length, help="L in m")

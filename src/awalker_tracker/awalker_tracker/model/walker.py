@@ -12,6 +12,7 @@ Conventions (shared by dynamics, kinematics and the tracker):
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -39,8 +40,8 @@ class WalkerParams:
             value = getattr(self, f.name)
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"WalkerParams.{f.name} must be finite and >= 0, got {value!r}")
-        if self.leg_length <= 0 or self.gravity <= 0:
-            raise ValueError("WalkerParams.leg_length and gravity must be > 0")
+        if not (self.leg_length > 0 and self.gravity > 0 and math.isfinite(self.leg_length * self.gravity)):
+            raise ValueError("WalkerParams.leg_length and gravity must be finite and > 0")
         if not 0 < self.foot_radius_ratio < 1:
             raise ValueError("WalkerParams.foot_radius_ratio must lie in (0, 1)")
 
