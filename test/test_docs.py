@@ -67,7 +67,7 @@ MODULE_CONSTANTS = (
     "awalker_tools.pipeline.FRAMES_AHEAD", "awalker_tools.pipeline.GIL_SWITCH_INTERVAL_S",
     "awalker_tools.pipeline.ACK_TIMEOUT_S", "awalker_tools.pipeline.RECORD_WAIT_S",
     "awalker_tools.pipeline.FIRST_PASS_PARTICLES", "awalker_tools.pipeline.FIT_FRAMES",
-    "nodes.pose_publisher.DEFAULT_CLOUD_POINTS",
+    "nodes.pose_publisher.DEFAULT_CLOUD_POINTS", "nodes.pose_publisher.CONTACT_MIN_PROBABILITY",
 )
 
 

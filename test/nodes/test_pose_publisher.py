@@ -89,7 +89,35 @@ def test_a_reused_marker_builder_gives_the_markers_of_a_fresh_one():
         assert again == fresh
         counts.add(len(again.markers))
         assert all(m.header.stamp.nanosec == 1000 + frame for m in again.markers)
-    assert counts == {11, 12}          # one or both contacts shown
+    assert counts == {12}          # both contacts each frame: shown (ADD) or lifted (DELETE)
+
+
+def test_a_foot_that_lifts_has_its_contact_marker_deleted():
+    """In RViz both feet looked planted forever: a contact marker was only ever added. Now each frame sends
+    each foot's contact as an ADD while it stands and a DELETE (same namespace and id) once it has lifted:
+    no longer the posterior's stance foot with at least CONTACT_MIN_PROBABILITY, or no position."""
+    from visualization_msgs.msg import Marker
+
+    from awalker_tracker.nodes.convert import summary_to_msg
+    from awalker_tracker.nodes.pose_publisher import CONTACT_MIN_PROBABILITY, MarkerBuilder, body_cylinders
+
+    rng = np.random.default_rng(2)
+    builder = MarkerBuilder(body_cylinders(BodyDescription.default()), "w")
+    spot, nowhere = np.array([0.3, 0.1, 0.0]), np.full(3, np.nan)
+    # (left probability, left position, right position) per frame: left stands, lifts, is barely likely
+    frames = [(0.95, spot, spot + 0.6), (0.0, nowhere, spot + 0.6), (0.5 * CONTACT_MIN_PROBABILITY, spot, spot + 0.6),
+              (0.6, spot + 1.2, spot + 0.6)]
+    expected_left = [Marker.ADD, Marker.DELETE, Marker.DELETE, Marker.ADD]
+    for k, ((p_left, left, right), action) in enumerate(zip(frames, expected_left)):
+        contacts = (FootContactEstimate(LEFT, left, p_left, False), FootContactEstimate(RIGHT, right, 1 - p_left, False))
+        markers = builder.build(summary_to_msg(make_summary(100 + k, k, rng, contacts))).markers
+        dots = {m.id: m for m in markers if m.ns == "w/contacts"}
+        assert set(dots) == {LEFT, RIGHT}
+        assert dots[LEFT].action == action, k
+        assert dots[RIGHT].action == (Marker.ADD if 1 - p_left >= CONTACT_MIN_PROBABILITY else Marker.DELETE), k
+        assert dots[LEFT].header.stamp.nanosec == 100 + k
+        if action == Marker.ADD:
+            assert np.allclose([dots[LEFT].pose.position.x, dots[LEFT].pose.position.y], left[:2])
 
 
 def test_particle_clouds_pack_into_a_pointcloud2_heaviest_first():

@@ -6,7 +6,7 @@ the image stamp of each summary:
   sensor_msgs/JointState with the MAP pose's joint names and angles;
 - ``/awalker/markers`` visualization_msgs/MarkerArray in the world frame: skeleton lines and
   joints of the MAP pose, body cylinders (sizes from the body description), foot contacts (heel
-  strikes larger);
+  strikes larger; the contact of a foot that has lifted is sent as a DELETE);
 - ``/awalker/particles`` sensor_msgs/PointCloud2 in the world frame: the heaviest samples of the
   posterior's head/pelvis/knee/ankle clouds, fields x, y, z, weight, marker (``convert.PARTICLE_POINT``);
 - ``/awalker/gait_steps`` awalker_msgs/GaitStep at every heel strike: each change of the posterior's stance
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 import rclpy
-from awalker_msgs.msg import GaitStep, PosteriorSummary
+from awalker_msgs.msg import FootContact, GaitStep, PosteriorSummary
 from geometry_msgs.msg import Point, Vector3
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -35,6 +35,8 @@ from awalker_tracker.nodes.spin import run_node
 
 #: Samples per body marker's cloud in /awalker/particles (the heaviest; the posterior message carries 200).
 DEFAULT_CLOUD_POINTS = 50
+#: A foot whose posterior probability of standing is below this has lifted: its contact marker is deleted.
+CONTACT_MIN_PROBABILITY = 0.1
 
 
 def body_cylinders(body: BodyDescription) -> tuple[tuple[str, str, float], ...]:
@@ -71,6 +73,11 @@ def gait_step_to_msg(step: Step, header, strike_ns: int) -> GaitStep:
                     cadence=step.cadence_steps_min, speed=step.speed_m_s)
 
 
+def contact_on_ground(contact: FootContact) -> bool:
+    """Whether a posterior's foot contact is shown: a finite position and at least ``CONTACT_MIN_PROBABILITY``."""
+    return bool(np.isfinite(contact.position.x) and contact.probability >= CONTACT_MIN_PROBABILITY)
+
+
 def joint_state_from_summary(msg: PosteriorSummary) -> JointState:
     return JointState(header=msg.header, name=list(msg.map_pose.joint_names),
                       position=list(msg.map_pose.joint_angles))
@@ -92,6 +99,7 @@ class MarkerBuilder:
         self._line_rows: list[int] = []                 # marker row of each skeleton line end
         self._cylinders: list[tuple[Marker, int, int]] = []     # (marker, start row, end row)
         self._contacts: dict[int, Marker] = {}
+        self._lifted: dict[int, Marker] = {}            # the DELETE of each contact marker
 
     def _marker(self, ns: str, mid: int, kind: int, rgba, scale) -> Marker:
         m = Marker(ns=f"{self.body_id}/{ns}", id=mid, type=kind, action=Marker.ADD)
@@ -135,7 +143,12 @@ class MarkerBuilder:
             orientation.x, orientation.y, orientation.z, orientation.w = quaternion_z_to(end - start)
             out.append(cyl)
         for i, contact in enumerate(msg.contacts):
-            if not np.isfinite(contact.position.x):
+            if not contact_on_ground(contact):
+                # the foot has lifted: its marker goes (sent every frame, so a late subscriber drops it too)
+                gone = self._lifted.get(i)
+                if gone is None:
+                    gone = self._lifted[i] = Marker(ns=f"{self.body_id}/contacts", id=i, action=Marker.DELETE)
+                out.append(gone)
                 continue
             dot = self._contacts.get(i)
             if dot is None:
