@@ -215,7 +215,7 @@ def check_awalker(args: list[str], synopsis: bool) -> str | None:
         if rest[0] not in choices:
             return f"no subcommand {rest[0]!r} (there are {sorted(choices)})"
         current, rest = choices[rest[0]], rest[1:]
-    if _subparsers(current):
+    if _subparsers(current) and not any(t in _option_strings(current) for t in rest):   # `awalker --version`
         return "a subcommand is missing"
     known = _option_strings(current)
     unknown = [t.split("=")[0] for t in rest if t.startswith("-") and t.split("=")[0] not in known]
@@ -277,6 +277,8 @@ def test_readme_names_existing_subcommands_and_options() -> None:
     (".venv/bin/python benchmarks/bench_nothing.py", True),
     ("make test TEST_WORKERS=4", False),
     ("make tests", True),
+    ("awalker --version", False),
+    ("awalker --verzion", True),
 ])
 def test_the_command_check_tells_right_from_wrong(command: str, wrong: bool) -> None:
     assert (check_command(command) is not None) == wrong

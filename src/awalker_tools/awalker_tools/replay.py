@@ -39,12 +39,11 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rcl_interfaces.msg import ParameterDescriptor
 from rosbags.interfaces import Connection
 from rosbags.rosbag2 import Reader
 
 from awalker_tracker.errors import InputError
-from awalker_tracker.nodes.base import AwalkerNode
+from awalker_tracker.nodes.base import AwalkerNode, NodeParameter, declare_parameters
 from awalker_tracker.nodes.spin import run_node
 
 from awalker_tools.bagio import (
@@ -514,29 +513,28 @@ def run_replay(executor: Any, replayer: Replayer) -> ReplaySummary:
 # ---------------------------------------------------------------------------------------------
 # The node and its console script
 # ---------------------------------------------------------------------------------------------
+_DEFAULTS = ReplayConfig()
+#: The node's ROS parameters (declared from here; listed by ``awalker_replay --help``).
+PARAMETERS = (
+    NodeParameter("bag", "", "path of the rosbag2 bag to replay (directory, .mcap or .db3; required)"),
+    NodeParameter("rate", _DEFAULTS.rate, "real-time factor in rate mode"),
+    NodeParameter("lockstep", _DEFAULTS.lockstep, "wait for an ack of each frame before the next"),
+    NodeParameter("ack_topic", _DEFAULTS.ack_topic, "std_msgs/Header acks carrying the frame stamp"),
+    NodeParameter("topics", Parameter.Type.STRING_ARRAY, "replay only these topics (unset: all)"),
+    NodeParameter("wait_for_subscribers", _DEFAULTS.wait_for_subscribers,
+                  "seconds to wait for subscribers before the first message (0: no wait)"),
+    NodeParameter("ack_timeout", _DEFAULTS.ack_timeout, "seconds to wait for one ack in lockstep"),
+    NodeParameter("frames_ahead", _DEFAULTS.frames_ahead, "lockstep: frames published beyond the oldest unacknowledged one"),
+)
+
+
 class ReplayNode(AwalkerNode):
     """rclpy node replaying the bag given by parameter ``bag`` (see ReplayConfig for the others)."""
 
     def __init__(self, node_name: str = "awalker_replay", **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        defaults = ReplayConfig()
-
-        def declare(name: str, value: Any, description: str) -> Any:
-            return self.declare_parameter(name, value, ParameterDescriptor(description=description)).value
-
-        bag = declare("bag", "", "path of the rosbag2 bag to replay (directory, .mcap or .db3)")
-        rate = declare("rate", defaults.rate, "real-time factor in rate mode")
-        lockstep = declare("lockstep", defaults.lockstep, "wait for an ack of each frame before the next")
-        ack_topic = declare("ack_topic", defaults.ack_topic, "std_msgs/Header acks carrying the frame stamp")
-        topics = self.declare_parameter(
-            "topics", Parameter.Type.STRING_ARRAY,
-            ParameterDescriptor(description="replay only these topics (unset: all)"),
-        ).value
-        wait = declare("wait_for_subscribers", defaults.wait_for_subscribers,
-                       "seconds to wait for subscribers before the first message (0: no wait)")
-        ack_timeout = declare("ack_timeout", defaults.ack_timeout, "seconds to wait for one ack in lockstep")
-        frames_ahead = declare("frames_ahead", defaults.frames_ahead,
-                               "lockstep: frames published beyond the oldest unacknowledged one")
+        values = declare_parameters(self, PARAMETERS)
+        bag, rate, lockstep, ack_topic, topics, wait, ack_timeout, frames_ahead = (values[p.name] for p in PARAMETERS)
         if not bag:
             raise InputError("parameter 'bag' is required (--ros-args -p bag:=PATH)")
         config = ReplayConfig(
@@ -582,7 +580,8 @@ def _spin_replay(node: ReplayNode) -> int:
 
 def main(args: list[str] | None = None) -> int:
     """Console script ``awalker_replay --ros-args -p bag:=PATH [-p lockstep:=true] ...``."""
-    return run_node("awalker_replay", ReplayNode, args, spin=_spin_replay)
+    return run_node("awalker_replay", ReplayNode, args, spin=_spin_replay, parameters=PARAMETERS,
+                    summary="Publish a bag's topics into ROS 2, at a real-time factor or in lockstep with acks.")
 
 
 

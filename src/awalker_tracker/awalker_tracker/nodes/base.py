@@ -8,8 +8,11 @@ against 58 at 500 particles (four alternate pairs; docs/speed.md, "Fewer returns
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -40,3 +43,59 @@ def private_node_options(overrides: list[Parameter] | None = None) -> dict[str, 
     parameter ``overrides`` and no QoS event handlers, parameter services or type description service."""
     return {"parameter_overrides": [*(overrides or []), Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, value=False)],
             "start_parameter_services": False, "qos_events": False}
+
+
+@dataclass(frozen=True)
+class NodeParameter:
+    """A ROS parameter of a node, declared from this one description (``declare_parameters``) and listed by its
+    console script's ``--help`` (``parameter_help``) without starting ROS.
+
+    ``default``: the value, a ``Parameter.Type`` for a parameter with no default (unset unless given), or a
+    ``Default`` that depends on another parameter declared before it (the tracker's profile)."""
+
+    name: str
+    default: Any
+    description: str
+
+
+@dataclass(frozen=True)
+class Default:
+    """A default computed from the value of an earlier parameter: ``compute(value)``; ``text`` shows it in
+    ``--help`` (e.g. "the profile's: accurate 15000, realtime 5000")."""
+
+    compute: Callable[[Any], Any]
+    text: str
+    after: str          # the parameter whose value it depends on
+
+
+def declare_parameters(node: Node, parameters: Sequence[NodeParameter]) -> dict[str, Any]:
+    """Declare ``parameters`` on ``node`` in order (with their descriptions); their values by name."""
+    values: dict[str, Any] = {}
+    for p in parameters:
+        default = p.default.compute(values[p.default.after]) if isinstance(p.default, Default) else p.default
+        values[p.name] = node.declare_parameter(p.name, default, ParameterDescriptor(description=p.description)).value
+    return values
+
+
+def _shown(default: Any) -> str:
+    if isinstance(default, Default):
+        return default.text
+    if isinstance(default, Parameter.Type):
+        return "unset"
+    if isinstance(default, bool):
+        return str(default).lower()
+    return '""' if default == "" else str(default)
+
+
+def parameter_help(program: str, summary: str, parameters: Sequence[NodeParameter]) -> str:
+    """The usage text of a node's console script: how to run it and each parameter with its default."""
+    width = max(len(p.name) for p in parameters)
+    lines = [f"usage: {program} [--ros-args -p NAME:=VALUE ...]", "", summary, "", "ROS parameters (default):"]
+    lines += [f"  {p.name:<{width}}  {p.description} ({_shown(p.default)})" for p in parameters]
+    return "\n".join(lines)
+
+
+def wants_help(args: Sequence[str]) -> bool:
+    """Whether the command line asks for ``-h``/``--help`` before any ``--ros-args`` (which ROS reads)."""
+    own = list(args)[: list(args).index("--ros-args")] if "--ros-args" in args else list(args)
+    return "-h" in own or "--help" in own

@@ -52,7 +52,6 @@ import numpy as np
 import rclpy
 from awalker_msgs.msg import FlowGrid as FlowGridMsg
 from awalker_msgs.msg import ImageFeatures
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
@@ -61,7 +60,7 @@ from std_msgs.msg import Header, String
 from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import PART_CLASSES, BodyDescription
 from awalker_tracker.model.walker import LEFT
-from awalker_tracker.nodes.base import AwalkerNode
+from awalker_tracker.nodes.base import AwalkerNode, NodeParameter, declare_parameters
 from awalker_tracker.nodes.convert import camera_from_msgs, stamp_to_ns
 from awalker_tracker.nodes.spin import run_node
 from awalker_tracker.vision.decode import decode_image, decode_mono8
@@ -145,6 +144,37 @@ class FeatureNodeStats:
     frames_without_mask: int = 0  # images processed without their occlusion mask on a camera that has masks
 
 
+#: The node's ROS parameters (declared from here; listed by ``awalker_features --help``).
+PARAMETERS = (
+    NodeParameter("camera_name", "", "camera name: /<camera_name>/image_raw[/compressed] (required)"),
+    NodeParameter("downsample", FeatureConfig.downsample,
+                  "likelihood-ratio map pixel = downsample x downsample image pixels (`awalker track`: "
+                  "vision.features.map_downsample, 2 at 320x240 with two cameras or more)"),
+    NodeParameter("flow_cell_size", 16, "flow grid cell side (px)"),
+    NodeParameter("flow_scale", 1.0, "dense flow computed at this image scale (0-1]"),
+    NodeParameter("flow_floor_std", 1.0, "px added to each flow cell's standard deviation"),
+    NodeParameter("background_frames", -1, "background-only frames at the start; -1: the start description's "
+                  "frame; 0: none (robust background from the walk itself)"),
+    NodeParameter("median_frames", FeatureConfig.median_frames, "frames (at 30 per second of the images' stamps) "
+                  "the robust background is first learned from when none are known"),
+    NodeParameter("outlier_probability", 0.02, "uniform outlier share of the appearance densities"),
+    NodeParameter("llr_clip", 25.0, "bound on each pixel's log-likelihood ratio"),
+    NodeParameter("adapt_rate", 0.0, "background adaptation rate per frame (0 = frozen)"),
+    NodeParameter("compensate_gain", True, "divide out global per-channel lighting changes"),
+    NodeParameter("start_pose_labels", True, "learn the foreground from the body projected at the start pose "
+                  "(needs camera_info and camera_pose)"),
+    NodeParameter("opencv_threads", 1, "OpenCV worker threads (process-wide; 1 is fastest when cores are shared, "
+                  "e.g. one features node per camera; 0 = OpenCV default)"),
+    NodeParameter("verbose", False, "log model learning to stderr"),
+    NodeParameter("mask_wait_s", 0.25, "s an image waits for its occlusion mask when the camera has masks"),
+    NodeParameter("start_description", "", "start YAML (background-only frames, start pose); empty: the "
+                  "/awalker/start_description topic"),
+    NodeParameter("body_description", "", "body YAML; empty: the /awalker/body_description topic or the default body"),
+    NodeParameter("use_start_description", True, "false: no start description (the tracker finds the person "
+                  "itself): robust background, foreground from height bands"),
+)
+
+
 class FeatureNode(AwalkerNode):
     """Image features for one camera (see the module docstring)."""
 
@@ -152,38 +182,18 @@ class FeatureNode(AwalkerNode):
         camera = next((p.value for p in kwargs.get("parameter_overrides", []) if p.name == "camera_name"), None)
         super().__init__(f"awalker_features_{camera}" if camera else "awalker_features", **kwargs)
 
-        def declare(name: str, value: Any, text: str) -> Any:
-            return self.declare_parameter(name, value, ParameterDescriptor(description=text)).value
-
-        self.camera_name = str(declare("camera_name", "", "camera name: /<camera_name>/image_raw[/compressed]"))
-        downsample = declare("downsample", FeatureConfig.downsample,
-                             "likelihood-ratio map pixel = downsample x downsample image pixels (`awalker track`: "
-                             "vision.features.map_downsample, 2 at 320x240 with two cameras or more)")
-        cell = declare("flow_cell_size", 16, "flow grid cell side (px)")
-        scale = declare("flow_scale", 1.0, "dense flow computed at this image scale (0-1]")
-        floor = declare("flow_floor_std", 1.0, "px added to each flow cell's standard deviation")
-        self.background_param = int(declare("background_frames", -1,
-                                            "background-only frames at the start; -1: the start description's "
-                                            "frame; 0: none (robust background from the walk itself)"))
-        median = declare("median_frames", FeatureConfig.median_frames, "frames (at 30 per second of the images' stamps) the robust "
-                         "background is first learned from when none are known")
-        outlier = declare("outlier_probability", 0.02, "uniform outlier share of the appearance densities")
-        clip = declare("llr_clip", 25.0, "bound on each pixel's log-likelihood ratio")
-        adapt = declare("adapt_rate", 0.0, "background adaptation rate per frame (0 = frozen)")
-        gain = declare("compensate_gain", True, "divide out global per-channel lighting changes")
-        self.use_start_pose = bool(declare("start_pose_labels", True, "learn the foreground from the body "
-                                           "projected at the start pose (needs camera_info and camera_pose)"))
-        threads = int(declare("opencv_threads", 1, "OpenCV worker threads (process-wide; 1 is fastest when "
-                                                   "cores are shared, e.g. one features node per camera; 0 = OpenCV default)"))
-        self.verbose = bool(declare("verbose", False, "log model learning to stderr"))
-        self.mask_wait_s = float(declare("mask_wait_s", 0.25, "s an image waits for its occlusion mask when the "
-                                                               "camera has masks"))
-        start_path = str(declare("start_description", "", "start YAML (background-only frames, start pose); "
-                                                          "empty: the /awalker/start_description topic"))
-        body_path = str(declare("body_description", "", "body YAML; empty: the /awalker/body_description topic "
-                                                        "or the default body"))
-        use_start = bool(declare("use_start_description", True, "false: no start description (the tracker finds the "
-                                 "person itself): robust background, foreground from height bands"))
+        v = declare_parameters(self, PARAMETERS)
+        self.camera_name = str(v["camera_name"])
+        downsample, cell, scale, floor = v["downsample"], v["flow_cell_size"], v["flow_scale"], v["flow_floor_std"]
+        self.background_param = int(v["background_frames"])
+        median, outlier, clip, adapt = v["median_frames"], v["outlier_probability"], v["llr_clip"], v["adapt_rate"]
+        gain = v["compensate_gain"]
+        self.use_start_pose = bool(v["start_pose_labels"])
+        threads = int(v["opencv_threads"])
+        self.verbose = bool(v["verbose"])
+        self.mask_wait_s = float(v["mask_wait_s"])
+        start_path, body_path = str(v["start_description"]), str(v["body_description"])
+        use_start = bool(v["use_start_description"])
         if not self.camera_name:
             raise InputError("parameter 'camera_name' is required (e.g. --ros-args -p camera_name:=cam0)")
         try:
@@ -420,5 +430,7 @@ class FeatureNode(AwalkerNode):
 
 def main(args: list[str] | None = None) -> int:
     """Console script ``awalker_features``; exit status 2 on bad parameters."""
-    return run_node("awalker_features", FeatureNode, args)
+    return run_node("awalker_features", FeatureNode, args, parameters=PARAMETERS,
+                    summary="One camera's images -> per-frame appearance likelihood-ratio maps and grid flow "
+                            "on /<camera_name>/features.")
 

@@ -28,7 +28,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from awalker_tracker.inference.gait import PosteriorSteps, Step
 from awalker_tracker.model.body import SKELETON_EDGES, BodyDescription
-from awalker_tracker.nodes.base import AwalkerNode
+from awalker_tracker.nodes.base import AwalkerNode, NodeParameter, declare_parameters
 from awalker_tracker.nodes.convert import (
     POSTERIOR_DEPTH, ns_to_stamp, particles_to_pointcloud2, points_from_msg, stamp_to_ns)
 from awalker_tracker.nodes.spin import run_node
@@ -164,27 +164,30 @@ class MarkerBuilder:
         return MarkerArray(markers=out)
 
 
+#: The node's ROS parameters (declared from here; listed by ``awalker_pose_publisher --help``).
+PARAMETERS = (
+    NodeParameter("posterior_topic", "/awalker/posterior", "awalker_msgs/PosteriorSummary input topic"),
+    NodeParameter("body_id", "walker", "REP 155 body id: /humans/bodies/<id>/..."),
+    NodeParameter("body_description", "", "body YAML (segment sizes, m) for the cylinders; empty = default"),
+    NodeParameter("publish_clouds", True, "publish the posterior particle clouds on /awalker/particles"),
+    NodeParameter("cloud_points", DEFAULT_CLOUD_POINTS,
+                  "samples per body marker's cloud on /awalker/particles (the heaviest)"),
+)
+
+
 class PosePublisherNode(AwalkerNode):
     """Publishes JointState / MarkerArray (and tf) for every posterior summary."""
 
     def __init__(self, **kwargs) -> None:
         super().__init__("awalker_pose_publisher", **kwargs)
-        self.declare_parameter("posterior_topic", "/awalker/posterior",
-                               descriptor_text("awalker_msgs/PosteriorSummary input topic"))
-        self.declare_parameter("body_id", "walker", descriptor_text("REP 155 body id: /humans/bodies/<id>/..."))
-        self.declare_parameter("body_description", "",
-                               descriptor_text("body YAML (segment sizes, m) for the cylinders; empty = default"))
-        self.declare_parameter("publish_clouds", True,
-                               descriptor_text("publish the posterior particle clouds on /awalker/particles"))
-        self.declare_parameter("cloud_points", DEFAULT_CLOUD_POINTS,
-                               descriptor_text("samples per body marker's cloud on /awalker/particles (the heaviest)"))
-        body_id = self.get_parameter("body_id").value
-        body_path = self.get_parameter("body_description").value
+        values = declare_parameters(self, PARAMETERS)
+        body_id = values["body_id"]
+        body_path = values["body_description"]
         self.body_id = body_id
         self.markers = MarkerBuilder(
             body_cylinders(BodyDescription.from_yaml(body_path) if body_path else BodyDescription.default()), body_id)
-        self.publish_clouds = bool(self.get_parameter("publish_clouds").value)
-        self.cloud_points = int(self.get_parameter("cloud_points").value)
+        self.publish_clouds = bool(values["publish_clouds"])
+        self.cloud_points = int(values["cloud_points"])
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.joint_pub = self.create_publisher(JointState, "/awalker/joint_states", qos)
         self.rep155_pub = self.create_publisher(JointState, f"/humans/bodies/{body_id}/joint_states", qos)
@@ -195,7 +198,7 @@ class PosePublisherNode(AwalkerNode):
         self._first_stamp_ns: int | None = None
         self.tf_broadcaster = _tf_broadcaster(self)
         self.count = 0
-        self.create_subscription(PosteriorSummary, self.get_parameter("posterior_topic").value, self.on_summary,
+        self.create_subscription(PosteriorSummary, values["posterior_topic"], self.on_summary,
                                  QoSProfile(depth=POSTERIOR_DEPTH, reliability=ReliabilityPolicy.RELIABLE))
 
     def set_body(self, body: BodyDescription) -> None:
@@ -227,12 +230,6 @@ class PosePublisherNode(AwalkerNode):
         self.count += 1
 
 
-def descriptor_text(text: str):
-    from rcl_interfaces.msg import ParameterDescriptor
-
-    return ParameterDescriptor(description=text)
-
-
 def _tf_broadcaster(node: Node):
     try:
         from tf2_ros import TransformBroadcaster
@@ -243,5 +240,6 @@ def _tf_broadcaster(node: Node):
 
 def main(args: list[str] | None = None) -> int:
     """Console script ``awalker_pose_publisher``; exit status 2 on bad parameters."""
-    return run_node("awalker_pose_publisher", PosePublisherNode, args)
+    return run_node("awalker_pose_publisher", PosePublisherNode, args, parameters=PARAMETERS,
+                    summary="Posterior summaries -> joint states, RViz markers, particle clouds and gait steps.")
 

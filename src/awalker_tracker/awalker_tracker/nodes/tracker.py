@@ -27,7 +27,6 @@ import numpy as np
 import rclpy
 from awalker_msgs.msg import ImageFeatures, PosteriorSummary
 from geometry_msgs.msg import PoseStamped
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo
@@ -44,7 +43,7 @@ from awalker_tracker.inference.tracker import (
     ImageObservation, StartDescription, Tracker, TrackerConfig, TrackerModel, image_likelihood)
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEG_NAMES
-from awalker_tracker.nodes.base import AwalkerNode
+from awalker_tracker.nodes.base import AwalkerNode, Default, NodeParameter, declare_parameters
 from awalker_tracker.nodes.convert import POSTERIOR_DEPTH, camera_from_msgs, header, stamp_to_ns, summary_to_msg
 from awalker_tracker.nodes.features import features_from_msg
 from awalker_tracker.nodes.spin import run_node
@@ -69,77 +68,102 @@ class TrackerNodeStats:
     seconds_in_filter: float = 0.0
 
 
+PROFILE_WHERE = "awalker_tracker: parameter 'profile'"
+
+
+def _profile(field: str) -> Default:
+    """The default of a setting the tracking profile gives (inference/profiles.py)."""
+    shown = ", ".join(f"{name} {getattr(p, field)}" for name, p in PROFILES.items())
+    return Default(lambda name: getattr(tracking_profile(str(name), PROFILE_WHERE), field),
+                   f"the profile's: {shown}", "profile")
+
+
+#: The node's ROS parameters (declared from here; listed by ``awalker_tracker_node --help``).
+PARAMETERS = (
+    NodeParameter("cameras", Parameter.Type.STRING_ARRAY, "camera names: /<cam>/features (required)"),
+    NodeParameter("calibration", "", "calibration YAML; empty: camera_info + camera_pose topics"),
+    NodeParameter("start_description", "", "start YAML; empty: /awalker/start_description topic"),
+    NodeParameter("body_description", "", "body YAML; empty: /awalker/body_description topic or default"),
+    NodeParameter("profile", DEFAULT_PROFILE, "defaults of the settings below, as `awalker track --profile` "
+                  f"(inference/profiles.py): {', '.join(PROFILES)}"),
+    NodeParameter("num_particles", _profile("num_particles"), "number of particles N (default: the profile's)"),
+    NodeParameter("lookahead", _profile("lookahead"), "look-ahead tau (frames)"),
+    NodeParameter("trust", _profile("trust"), "gamma: trust in look-ahead weights when resampling"),
+    NodeParameter("resample_fraction", _profile("resample_fraction"), "resample when N_eff < fraction * N"),
+    NodeParameter("resampling", _profile("resampling"), "systematic | stratified | multinomial"),
+    NodeParameter("seed", _profile("seed"), "random seed"),
+    NodeParameter("likelihood_scale", _profile("likelihood_scale"),
+                  "exponent (tempering) of the image likelihood; 0: images unused (dead reckoning)"),
+    NodeParameter("leg_scale_spread", _profile("leg_scale_spread"), "spread (log, std) of the particles' leg "
+                  "lengths around the body's (0: the body's own; TrackerConfig.leg_scale_spread)"),
+    NodeParameter("pelvis_ceiling", TrackerConfig.pelvis_ceiling, "with at least pelvis_ceiling_min_cameras "
+                  "cameras, each particle's pelvis at most its own fraction of the walker's hip height, drawn "
+                  "around this, the stance knee bending (0.85-1; 1: off; TrackerConfig.pelvis_ceiling)"),
+    NodeParameter("pelvis_ceiling_min_cameras", TrackerConfig.pelvis_ceiling_min_cameras,
+                  "fewer cameras than this: no pelvis ceiling"),
+    NodeParameter("auto_start", False, "no start description: find the walking person in the images "
+                  "(inference/autostart.py)"),
+    NodeParameter("follow_near", Parameter.Type.DOUBLE_ARRAY, "automatic start with several people in view: "
+                  "follow the one first seen near this world ground point [x, y] (m); unset: the first seen"),
+    NodeParameter("start_output", "", "write the start description used (given or found) to this YAML file; "
+                  "empty: do not"),
+    NodeParameter("fitted_start", "", "a start description fitted to these images before, its stance leg chosen "
+                  "(`awalker fitbody`, awalker track's first pass): a start that names no stance leg (found "
+                  "automatically, or 'unknown') takes its leg when it starts at the same frame; empty: none"),
+    NodeParameter("estimate_body", False, "no body description: with the automatic start, scale the default body "
+                  "to the person's height seen in the images"),
+    NodeParameter("body_output", "", "write an estimated body description to this YAML file"),
+    NodeParameter("depth_band_m", _profile("depth_band_m"), "one camera: walkers whose pelvis lies farther than "
+                  "this (m) from where the blob's feet row puts the person lose weight; 0: off "
+                  "(inference/recovery.py)"),
+    NodeParameter("reseed_fallen", _profile("reseed_fallen"), "re-seed walkers that fall (inference/recovery.py)"),
+    NodeParameter("reacquire", _profile("reacquire"), "re-acquire a lost track at the person seen in the images"),
+    NodeParameter("hold_still", _profile("hold_still"),
+                  "hold the walkers while the person seen in the images stands still"),
+    NodeParameter("frame_rate", 0.0, "frames/s; 0: from the first two frame stamps"),
+    NodeParameter("world_frame", "world", "world frame id of the outputs"),
+    NodeParameter("ack_topic", "/awalker/ack", "std_msgs/Header acks of processed frames"),
+    NodeParameter("idle_flush_s", 2.0, "complete pending frames after this idle time (s)"),
+    NodeParameter("sync_queue", 30, "incomplete frames kept while pairing cameras"),
+    NodeParameter("sync_timeout_s", 2.0, "give up (report, ack) on a frame missing a camera after this (s)"),
+)
+
+
 class TrackerNode(AwalkerNode):
     """Runs the physics-based particle filter on synchronised per-camera features."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("awalker_tracker", **kwargs)
 
-        def declare(name: str, value: Any, text: str) -> Any:
-            return self.declare_parameter(name, value, ParameterDescriptor(description=text)).value
-
-        cameras = self.declare_parameter("cameras", Parameter.Type.STRING_ARRAY,
-                                         ParameterDescriptor(description="camera names: /<cam>/features")).value
-        self.calibration_path = declare("calibration", "", "calibration YAML; empty: camera_info + camera_pose topics")
-        start_path = declare("start_description", "", "start YAML; empty: /awalker/start_description topic")
-        body_path = declare("body_description", "", "body YAML; empty: /awalker/body_description topic or default")
-        self.profile_name = str(declare("profile", DEFAULT_PROFILE, "defaults of the settings below, as `awalker "
-                                        f"track --profile` (inference/profiles.py): {', '.join(PROFILES)}"))
-        profile = tracking_profile(self.profile_name, "awalker_tracker: parameter 'profile'")
-        n = declare("num_particles", profile.num_particles, "number of particles N (default: the profile's)")
-        tau = declare("lookahead", profile.lookahead, "look-ahead tau (frames)")
-        gamma = declare("trust", profile.trust, "gamma: trust in look-ahead weights when resampling")
-        fraction = declare("resample_fraction", profile.resample_fraction, "resample when N_eff < fraction * N")
-        scheme = declare("resampling", profile.resampling, "systematic | stratified | multinomial")
-        seed = declare("seed", profile.seed, "random seed")
-        self.likelihood_scale = float(declare("likelihood_scale", profile.likelihood_scale,
-                                              "exponent (tempering) of the image likelihood; 0: images unused "
-                                              "(dead reckoning)"))
-        self.leg_scale_spread = float(declare("leg_scale_spread", profile.leg_scale_spread,
-                                              "spread (log, std) of the particles' leg lengths around the body's "
-                                              "(0: the body's own; TrackerConfig.leg_scale_spread)"))
-        self.pelvis_ceiling = float(declare("pelvis_ceiling", TrackerConfig.pelvis_ceiling,
-                                            "with at least pelvis_ceiling_min_cameras cameras, each particle's "
-                                            "pelvis at most its own fraction of the walker's hip height, drawn "
-                                            "around this, the stance knee bending (0.85-1; 1: off; "
-                                            "TrackerConfig.pelvis_ceiling)"))
-        self.pelvis_ceiling_min_cameras = int(declare("pelvis_ceiling_min_cameras",
-                                                      TrackerConfig.pelvis_ceiling_min_cameras,
-                                                      "fewer cameras than this: no pelvis ceiling"))
-        self.auto_start = bool(declare("auto_start", False, "no start description: find the walking person in the "
-                                       "images (inference/autostart.py)"))
-        follow = declare("follow_near", Parameter.Type.DOUBLE_ARRAY, "automatic start with several people in view: "
-                         "follow the one first seen near this world ground point [x, y] (m); unset: the first seen")
-        self.start_output = str(declare("start_output", "", "write the start description used (given or found) "
-                                        "to this YAML file; empty: do not"))
-        fitted_start = str(declare("fitted_start", "", "a start description fitted to these images before, its "
-                                   "stance leg chosen (`awalker fitbody`, awalker track's first pass): a start that "
-                                   "names no stance leg (found automatically, or 'unknown') takes its leg when it "
-                                   "starts at the same frame; empty: none"))
-        self.estimate_body = bool(declare("estimate_body", False, "no body description: with the automatic start, "
-                                          "scale the default body to the person's height seen in the images"))
-        self.body_output = str(declare("body_output", "", "write an estimated body description to this YAML file"))
-        depth_band = float(declare("depth_band_m", profile.depth_band_m, "one camera: walkers whose pelvis "
-                                   "lies farther than this (m) from where the blob's feet row puts the person lose "
-                                   "weight; 0: off (inference/recovery.py)"))
+        v = declare_parameters(self, PARAMETERS)
+        cameras = v["cameras"]
+        self.calibration_path = v["calibration"]
+        start_path, body_path = v["start_description"], v["body_description"]
+        self.profile_name = str(v["profile"])
+        n, tau, gamma, fraction = v["num_particles"], v["lookahead"], v["trust"], v["resample_fraction"]
+        scheme, seed = v["resampling"], v["seed"]
+        self.likelihood_scale = float(v["likelihood_scale"])
+        self.leg_scale_spread = float(v["leg_scale_spread"])
+        self.pelvis_ceiling = float(v["pelvis_ceiling"])
+        self.pelvis_ceiling_min_cameras = int(v["pelvis_ceiling_min_cameras"])
+        self.auto_start = bool(v["auto_start"])
+        follow = v["follow_near"]
+        self.start_output = str(v["start_output"])
+        fitted_start = str(v["fitted_start"])
+        self.estimate_body = bool(v["estimate_body"])
+        self.body_output = str(v["body_output"])
+        depth_band = float(v["depth_band_m"])
         try:
-            self.recovery = RecoveryConfig(
-                reseed_fallen=bool(declare("reseed_fallen", profile.reseed_fallen,
-                                           "re-seed walkers that fall (inference/recovery.py)")),
-                reacquire=bool(declare("reacquire", profile.reacquire,
-                                       "re-acquire a lost track at the person seen in the images")),
-                hold_still=bool(declare("hold_still", profile.hold_still,
-                                        "hold the walkers while the person seen in the images stands still")),
-                depth_band_m=depth_band)
+            self.recovery = RecoveryConfig(reseed_fallen=bool(v["reseed_fallen"]), reacquire=bool(v["reacquire"]),
+                                           hold_still=bool(v["hold_still"]), depth_band_m=depth_band)
         except ValueError as exc:
             raise InputError(f"awalker_tracker: parameter 'depth_band_m': {exc}") from None
-        self.frame_rate = float(declare("frame_rate", 0.0, "frames/s; 0: from the first two frame stamps"))
-        self.world_frame = declare("world_frame", "world", "world frame id of the outputs")
-        ack_topic = declare("ack_topic", "/awalker/ack", "std_msgs/Header acks of processed frames")
-        self.idle_flush_s = float(declare("idle_flush_s", 2.0, "complete pending frames after this idle time (s)"))
-        queue = declare("sync_queue", 30, "incomplete frames kept while pairing cameras")
-        self.sync_timeout_s = float(declare("sync_timeout_s", 2.0,
-                                            "give up (report, ack) on a frame missing a camera after this (s)"))
+        self.frame_rate = float(v["frame_rate"])
+        self.world_frame = v["world_frame"]
+        ack_topic = v["ack_topic"]
+        self.idle_flush_s = float(v["idle_flush_s"])
+        queue = v["sync_queue"]
+        self.sync_timeout_s = float(v["sync_timeout_s"])
         if not cameras:
             raise InputError("awalker_tracker: parameter 'cameras' is required (e.g. -p cameras:=[cam0])")
         try:
@@ -458,5 +482,7 @@ class TrackerNode(AwalkerNode):
 
 def main(args: list[str] | None = None) -> int:
     """Console script ``awalker_tracker_node``; exit status 2 on bad parameters."""
-    return run_node("awalker_tracker_node", TrackerNode, args)
+    return run_node("awalker_tracker_node", TrackerNode, args, parameters=PARAMETERS,
+                    summary="Per-camera image features -> the physics-based particle filter -> posterior "
+                            "summaries on /awalker/posterior.")
 
