@@ -68,6 +68,8 @@ MODULE_CONSTANTS = (
     "awalker_tools.pipeline.ACK_TIMEOUT_S", "awalker_tools.pipeline.RECORD_WAIT_S",
     "awalker_tools.pipeline.FIRST_PASS_PARTICLES", "awalker_tools.pipeline.FIT_FRAMES",
     "nodes.pose_publisher.DEFAULT_CLOUD_POINTS", "nodes.pose_publisher.CONTACT_MIN_PROBABILITY",
+    "inference.smc.MAX_PARTICLES", "inference.tracker.START_MAX_SPEED", "model.body.BODY_LEG_RANGE",
+    "awalker_tools.synth.MAX_IMAGE_SIDE", "awalker_tools.commands.gaits.MAX_GRID_POINTS",
 )
 
 

@@ -24,6 +24,7 @@ replay, feature and tracker nodes in one process and one executor.
 from __future__ import annotations
 
 import importlib
+import math
 import struct
 import sys
 import time
@@ -81,6 +82,11 @@ class ReplayConfig:
     def validated(self, where: str) -> "ReplayConfig":
         if not self.rate > 0:
             raise InputError(f"{where}: rate must be > 0 (real-time factor), got {self.rate}")
+        if not math.isfinite(self.rate):
+            raise InputError(f"{where}: rate must be finite, got {self.rate}")
+        if not all(math.isfinite(v) for v in (self.wait_for_subscribers, self.settle, self.ack_timeout)):
+            raise InputError(f"{where}: ack_timeout, wait_for_subscribers and settle must be finite seconds, got "
+                             f"{self.ack_timeout}, {self.wait_for_subscribers}, {self.settle}")
         if self.wait_for_subscribers < 0 or self.settle < 0 or self.ack_timeout <= 0 or self.depth < 1:
             raise InputError(f"{where}: wait_for_subscribers >= 0, settle >= 0, ack_timeout > 0 and depth >= 1 "
                              "expected")

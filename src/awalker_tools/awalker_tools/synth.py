@@ -41,6 +41,11 @@ ROOM_HALF_SIZE = 8.0   # m: the room spans [-8, 8] x [-8, 8]
 ROOM_HEIGHT = 4.0      # m
 TEXEL = 0.01           # m per texture pixel
 FIRST_STAMP_NS = 1_700_000_000_000_000_000
+#: The largest image side synth draws (pixels); 100000 x 100000 would need 30 GB a frame.
+MAX_IMAGE_SIDE = 4096
+#: A walk synth can make (m/s, m): the packaged gait table's 2-7 km/h and 0.3-1.2 m steps.
+SPEED_RANGE = (0.55, 1.95)
+STEP_RANGE = (0.3, 1.2)
 OCCLUDED_SHARE = 0.5   # --occluder's default: the share of the pelvis's path behind the box (``make_occluder``)
 
 
@@ -109,6 +114,16 @@ class SynthConfig:
                              f"{self.rate:g} Hz (the turn and a second after it), got {self.frames}")
         if self.width < 64 or self.height < 48:
             raise InputError(f"synth: image size {self.width}x{self.height} is too small")
+        if self.width > MAX_IMAGE_SIDE or self.height > MAX_IMAGE_SIDE:
+            raise InputError(f"synth: --size {self.width} {self.height}: at most {MAX_IMAGE_SIDE} pixels a side")
+        if not (np.isfinite(self.noise_sigma) and 0 <= self.noise_sigma <= 100):
+            raise InputError(f"synth: --noise must lie in 0-100 grey levels, got {self.noise_sigma:g}")
+        if not (np.isfinite(self.speed) and SPEED_RANGE[0] <= self.speed <= SPEED_RANGE[1]):
+            raise InputError(f"synth: --speed must lie in {SPEED_RANGE[0]:g}-{SPEED_RANGE[1]:g} m/s (a walk), "
+                             f"got {self.speed:g}")
+        if not (np.isfinite(self.step_length) and STEP_RANGE[0] <= self.step_length <= STEP_RANGE[1]):
+            raise InputError(f"synth: --step-length must lie in {STEP_RANGE[0]:g}-{STEP_RANGE[1]:g} m (the gait "
+                             f"table's), got {self.step_length:g}")
 
 
 # Mocap walk variants: (time-warp factor, (turn angle deg, turn start s, turn duration s) or None, shortest walk s)

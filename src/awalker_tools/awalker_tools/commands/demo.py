@@ -6,6 +6,9 @@ from pathlib import Path
 
 from awalker_tracker.errors import InputError
 from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES
+from awalker_tracker.inference.smc import MAX_PARTICLES
+
+from awalker_tools.outdir import whole_number
 
 REPO_ROOT = Path(__file__).resolve().parents[4]
 
@@ -28,6 +31,10 @@ def run(args: argparse.Namespace) -> int:
     from awalker_tools.outdir import output_path, prepare_output_dir
     from awalker_tools.pipeline import TRACK_OUTPUTS, TrackOptions, run_tracking
 
+    if not 1 <= args.particles <= MAX_PARTICLES:
+        raise InputError(f"--particles must lie in 1-{MAX_PARTICLES} (the most a filter takes), got {args.particles}")
+    if args.seed < 0:
+        raise InputError(f"--seed must be an integer >= 0, got {args.seed}")
     bag = Path(args.bag) if args.bag else find_sample_bag([Path.cwd() / "bags", REPO_ROOT / "bags"])
     out = output_path(args.out, "--out")
     # an earlier demo's files (its run.yaml lists them) are replaced with --force, the user's never
@@ -48,7 +55,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--force", action="store_true",
                         help="replace an earlier run's outputs in --out (those its run.yaml lists); other files stay")
     defaults = PROFILES[DEFAULT_PROFILE]
-    parser.add_argument("--particles", type=int, default=defaults.num_particles,
+    parser.add_argument("--particles", type=whole_number, default=defaults.num_particles,
                         help=f"number of particles (default {defaults.num_particles}, as awalker track)")
     parser.add_argument("--seed", type=int, default=defaults.seed, help=f"random seed (default {defaults.seed})")
     parser.set_defaults(func=run)

@@ -12,10 +12,20 @@ from pathlib import Path
 
 import yaml
 
+from awalker_tracker.errors import InputError
+from awalker_tracker.inference.smc import MAX_PARTICLES
+
 
 def run(args: argparse.Namespace) -> int:
     from awalker_tools.fit_body import fit_run_dir
 
+    for factor in args.factors or ():
+        if not 0.5 < factor < 1.5:          # also NaN; the fit's own range (inference/bodyfit.py)
+            raise InputError(f"--factors {factor}: each leg factor must lie in (0.5, 1.5)")
+    if not 1 <= args.particles <= MAX_PARTICLES:
+        raise InputError(f"--particles must lie in 1-{MAX_PARTICLES} (the most a filter takes), got {args.particles}")
+    if args.frames < 1 or args.seed < 0:
+        raise InputError(f"--frames must be >= 1 and --seed >= 0, got {args.frames} and {args.seed}")
     summary = fit_run_dir(Path(args.dir), args.factors, frames=args.frames, particles=args.particles, seed=args.seed)
     print(yaml.safe_dump({"fitbody": summary}, sort_keys=False), end="")
     return 0

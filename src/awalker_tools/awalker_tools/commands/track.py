@@ -2,12 +2,14 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from awalker_tracker.errors import InputError
 
-from awalker_tools.outdir import output_path
+from awalker_tools.outdir import output_path, whole_number
 from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES, tracking_profile
+from awalker_tracker.inference.smc import MAX_PARTICLES
 
 DEFAULTS = PROFILES[DEFAULT_PROFILE]
 
@@ -26,10 +28,12 @@ def run(args: argparse.Namespace) -> int:
     trust, seed = given(args.trust, profile.trust), given(args.seed, profile.seed)
     likelihood_scale = given(args.likelihood_scale, profile.likelihood_scale)
     leg_scale_spread = given(args.leg_scale_spread, profile.leg_scale_spread)
-    if particles < 1:
-        raise InputError(f"--particles must be >= 1, got {particles}")
-    if not likelihood_scale >= 0:
-        raise InputError(f"--likelihood-scale must be >= 0, got {likelihood_scale}")
+    if not 1 <= particles <= MAX_PARTICLES:
+        raise InputError(f"--particles must lie in 1-{MAX_PARTICLES} (the most a filter takes), got {particles}")
+    if seed < 0:
+        raise InputError(f"--seed must be an integer >= 0, got {seed}")
+    if not 0 <= likelihood_scale < math.inf:
+        raise InputError(f"--likelihood-scale must be finite and >= 0, got {likelihood_scale}")
     try:
         TrackerConfig(leg_scale_spread=leg_scale_spread)      # the tracker node's check, before anything starts
     except ValueError as exc:
@@ -89,7 +93,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "(inference/profiles.py): " + "; ".join(f"{name} {p.num_particles} particles"
                                                                      for name, p in PROFILES.items())
                              + f" (default {DEFAULT_PROFILE}; realtime runs about 3 times faster)")
-    parser.add_argument("--particles", type=int, default=None,
+    parser.add_argument("--particles", type=whole_number, default=None,
                         help=f"number of particles (default: the profile's, {DEFAULTS.num_particles})")
     parser.add_argument("--lookahead", type=int, default=None,
                         help=f"look-ahead tau in frames (default {DEFAULTS.lookahead})")

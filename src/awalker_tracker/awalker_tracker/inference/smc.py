@@ -54,6 +54,11 @@ class SMCModel(Protocol[States]):
 RESAMPLING_SCHEMES = ("systematic", "stratified", "multinomial")
 
 
+#: The most particles a filter takes: 200000 already hold about 2 GB of states and look-ahead copies and run
+#: at under a frame per second; more is a typing slip (1e8 would exhaust the memory), refused at once.
+MAX_PARTICLES = 200_000
+
+
 @dataclass(frozen=True)
 class SMCConfig:
     """Particle filter settings (paper values: N = 5000, tau = 3, gamma = 0.9, N_eff < N/10)."""
@@ -66,8 +71,11 @@ class SMCConfig:
     seed: int | None = 0
 
     def __post_init__(self) -> None:
-        if self.num_particles < 1:
-            raise ValueError(f"SMCConfig.num_particles must be >= 1, got {self.num_particles}")
+        if not 1 <= self.num_particles <= MAX_PARTICLES:
+            raise ValueError(f"SMCConfig.num_particles must lie in 1-{MAX_PARTICLES} (MAX_PARTICLES), "
+                             f"got {self.num_particles}")
+        if self.seed is not None and self.seed < 0:
+            raise ValueError(f"SMCConfig.seed must be >= 0, got {self.seed}")
         if self.lookahead < 0:
             raise ValueError(f"SMCConfig.lookahead (tau) must be >= 0, got {self.lookahead}")
         if not 0.0 <= self.trust <= 1.0:

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import yaml
 
-from awalker_tracker.errors import InputError
+from awalker_tracker.errors import InputError, read_text_file
 from awalker_tracker.inference.posterior import ParticleOutputs, PosteriorSummary, summarize
 from awalker_tracker.inference.recovery import (
     HELD, REACQUIRED, RESEEDED_FALLEN, LostTrackMonitor, RecoveryConfig, put_rows)
@@ -39,6 +39,12 @@ if TYPE_CHECKING:
 
 
 # ----------------------------------------------------------------------------- start description
+
+
+#: Ranges of a start description a person can have: m/s, m (a step), m from the world origin.
+START_MAX_SPEED = 3.0
+START_STEP_RANGE = (0.1, 1.5)
+START_MAX_DISTANCE = 1000.0
 
 
 @dataclass(frozen=True)
@@ -94,19 +100,27 @@ class StartDescription:
             raise InputError(f"{where}: start.position must be [x, y] and all values finite, got {s}")
         if frame < 0 or speed <= 0 or (step_length is not None and step_length <= 0):
             raise InputError(f"{where}: start.frame must be >= 0, speed and step_length > 0, got {s}")
+        if not 0 < speed <= START_MAX_SPEED:
+            raise InputError(f"{where}: start.speed {speed:g} m/s: expected a walking speed, 0-{START_MAX_SPEED:g} m/s")
+        if step_length is not None and not START_STEP_RANGE[0] <= step_length <= START_STEP_RANGE[1]:
+            raise InputError(f"{where}: start.step_length {step_length:g} m: expected a person's step, "
+                             f"{START_STEP_RANGE[0]:g}-{START_STEP_RANGE[1]:g} m")
+        if max(abs(v) for v in position) > START_MAX_DISTANCE:
+            raise InputError(f"{where}: start.position {list(position)}: expected within {START_MAX_DISTANCE:g} m "
+                             "of the world origin (the cameras' frame)")
         leg = str(s.get("stance_leg") or "unknown").lower()
         if leg not in ("left", "right", "unknown"):
             raise InputError(f"{where}: start.stance_leg must be 'left', 'right' or 'unknown', "
                              f"got {s['stance_leg']!r}")
+        if "frame" not in s:
+            raise InputError(f"{where}: start is missing frame (the first frame with the person in view; the "
+                             "frames before it are background only)")
         return cls(frame, position, heading, speed, step_length, {name: side for side, name in LEG_NAMES.items()}.get(leg))
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> "StartDescription":
         path = Path(path)
-        try:
-            return cls.from_yaml_text(path.read_text(), str(path))
-        except OSError as exc:
-            raise InputError(f"{path}: cannot read start description ({exc.strerror})") from None
+        return cls.from_yaml_text(read_text_file(path, "start description"), str(path))
 
     def to_yaml_text(self) -> str:
         start = {"frame": self.frame, "position": [float(v) for v in self.position], "heading": float(self.heading),

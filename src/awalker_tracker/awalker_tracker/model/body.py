@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from awalker_tracker.errors import InputError, parse_yaml
+from awalker_tracker.errors import InputError, parse_yaml, read_text_file
 from awalker_tracker.model.walker import WalkerParams
 
 MARKER_NAMES: tuple[str, ...] = (
@@ -231,18 +231,28 @@ class BodyDescription:
                     raise InputError(f"{where}: body.{key} must be a number (m), got {value!r}")
                 values[key] = float(value)
         try:
-            return replace(cls(), **values)
+            body = replace(cls(), **values)
         except ValueError as exc:
             raise InputError(f"{where}: {exc}") from None
+        for name, value, (low, high) in (("ankle_height", body.ankle_height, BODY_ANKLE_RANGE),
+                                         ("leg length (upper + lower leg + ankle height + sole)", body.leg_length,
+                                          BODY_LEG_RANGE),
+                                         ("height", body.height, BODY_HEIGHT_RANGE)):
+            if not low <= value <= high:
+                raise InputError(f"{where}: body {name} {value:.3g} m: expected a person's, {low:g}-{high:g} m")
+        return body
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> "BodyDescription":
         path = Path(path)
-        try:
-            text = path.read_text()
-        except OSError as exc:
-            raise InputError(f"{path}: cannot read body description ({exc.strerror})") from None
-        return cls.from_yaml_text(text, str(path))
+        return cls.from_yaml_text(read_text_file(path, "body description"), str(path))
+
+
+#: Sizes a body description may give (m): the walker's leg length, the ankle height and the standing height
+#: of people, children to the tallest adults; outside them a file's value is a slip (10 m legs tracked at 6 m error).
+BODY_LEG_RANGE = (0.4, 1.4)
+BODY_ANKLE_RANGE = (0.02, 0.2)
+BODY_HEIGHT_RANGE = (0.8, 2.6)
 
 
 def _is_number(value: Any) -> bool:

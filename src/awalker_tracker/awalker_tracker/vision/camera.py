@@ -28,7 +28,7 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from awalker_tracker.errors import InputError, parse_yaml
+from awalker_tracker.errors import InputError, parse_yaml, read_text_file
 
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 _DISTORTION_SIZES = (0, 4, 5, 8)
@@ -275,12 +275,7 @@ def camera_from_info(name: str, info: Any, position: Any, orientation: Any, info
 def load_calibration(path: str | Path) -> list[Camera]:
     """Read a calibration YAML (schema in this module's docstring) into cameras."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError:
-        raise InputError(f"{path}: calibration file not found") from None
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read calibration file ({exc.strerror})") from None
+    text = read_text_file(path, "calibration file")
     data = parse_yaml(text, str(path))
     if not isinstance(data, dict) or not isinstance(data.get("cameras"), list) or not data["cameras"]:
         raise InputError(f"{path}: expected a top-level 'cameras:' list with at least one camera")
