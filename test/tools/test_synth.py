@@ -168,8 +168,10 @@ def test_bad_options_are_one_line_errors(tmp_path, capsys, args, message):
 
 def test_existing_bag_is_not_overwritten(tmp_path, capsys):
     assert synth(tmp_path, "--frames", "3") == 0
+    before = {f: f.stat().st_mtime_ns for f in tmp_path.rglob("*") if f.is_file()}
     assert synth(tmp_path, "--frames", "3") == 2
-    assert "exists already" in capsys.readouterr().err
+    assert "expected a new or empty folder" in capsys.readouterr().err
+    assert {f: f.stat().st_mtime_ns for f in tmp_path.rglob("*") if f.is_file()} == before     # nothing rewritten
 
 
 MOCAP = ["--from-mocap", str(MOCAP_07 / "07.asf"), str(MOCAP_07 / "07_01.amc")]
