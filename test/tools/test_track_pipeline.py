@@ -258,7 +258,7 @@ def test_fit_body_input_errors(synth_bag: Path, tmp_path: Path, capsys):
     assert main(["fitbody", str(run)]) == 2
     assert "no /cam0/features" in capsys.readouterr().err
     assert main(["fitbody", str(run), "--factors", "2.0"]) == 2
-    assert "leg factors must lie in (0.5, 1.5)" in capsys.readouterr().err
+    assert "--factors 2.0: each leg factor must lie in (0.5, 1.5)" in capsys.readouterr().err
 
 
 def test_a_failure_in_the_feature_thread_stops_track_with_its_error(synth_bag: Path, tmp_path: Path, monkeypatch):
