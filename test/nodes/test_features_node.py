@@ -150,13 +150,18 @@ def test_node_publishes_features_for_every_image(ros_context):
             if k == 2:
                 bad = image_msg(rgb, stamp + 1)
                 bad.encoding = "yuv422"
-                image_pub.publish(bad)                      # logged, counted, skipped
-            while len(received) < k + 1 and time.monotonic() < deadline + 10:
+                image_pub.publish(bad)                      # logged, counted, a frame without evidence
+            while len(received) < k + 1 + (k >= 2) and time.monotonic() < deadline + 10:
                 executor.spin_once(timeout_sec=0.05)
         for _ in range(5):
             executor.spin_once(timeout_sec=0.05)
-        assert [stamp_to_ns(m.header.stamp) for m in received] == stamps
-        assert node.stats.skipped == 1 and node.stats.frames == len(frames)
+        assert [stamp_to_ns(m.header.stamp) for m in received] == stamps[:3] + [stamps[2] + 1] + stamps[3:]
+        assert node.stats.undecodable == 1 and node.stats.skipped == 0 and node.stats.frames == len(frames) + 1
+        # the undecodable image: zero maps and no flow, and the frame after it no flow across the gap
+        blank = features_from_msg(received.pop(3))
+        assert not blank.llr.any() and not blank.flow.valid.any() and blank.map_shape == (cam.height // 2, cam.width // 2)
+        assert not features_from_msg(received[3]).flow.valid.any()
+        # the frame that was to learn the foreground came after it: learned from the next one, from the start pose
         assert node.stats.foreground_from == "start pose"
         # Same maps as the core extractor fed the same frames (and the same start-pose labels).
         reference = FeatureExtractor(FeatureConfig(background_frames=3, downsample=2, flow=FlowConfig(cell_size=8)))
@@ -165,7 +170,7 @@ def test_node_publishes_features_for_every_image(ros_context):
         for msg, exp in zip(received, expected):
             got = features_from_msg(msg)
             assert msg.camera_name == "cam" and msg.header.frame_id == "cam_optical_frame"
-            assert np.allclose(got.llr, exp.llr) and np.array_equal(got.flow.valid, exp.flow.valid)
+            assert np.allclose(got.llr, exp.llr) and (msg is received[3] or np.array_equal(got.flow.valid, exp.flow.valid))
         assert not np.any(features_from_msg(received[2]).llr)        # background learning: no information
         assert features_from_msg(received[-1]).llr.max() > 5         # the person is seen
     finally:

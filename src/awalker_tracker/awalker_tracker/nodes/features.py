@@ -30,8 +30,10 @@ the image stamp, for every image it can decode — also during background learni
 so lockstep replay never waits. A frame's features are published, in the frames' order, once its
 flow is estimated on the extractor's thread (``FeatureExtractor.submit``), while the node decodes
 the next image and makes its maps; an unexpected error there is raised in the executor's thread.
-Undecodable images and out-of-order stamps are logged with the topic and counted (``stats``), and
-skipped.
+An image that cannot be decoded (or used: a size other than the first frames') is logged with the topic
+and counted (``stats.undecodable``), and its frame's features carry no evidence: zero maps, no flow
+(``FeatureExtractor.submit_blank``), so the tracker still counts the frame and acknowledges it. Images with
+out-of-order stamps are logged, counted (``stats.skipped``) and skipped.
 
 Message conversions (``features_to_msg``, ``features_from_msg``) are plain functions the tracker side
 reuses; images are decoded by ``vision.decode``, as the bag reader decodes them.
@@ -138,6 +140,9 @@ def features_from_msg(msg: ImageFeatures) -> FrameFeatures:
 class FeatureNodeStats:
     frames: int = 0
     skipped: int = 0
+    undecodable: int = 0          # images that could not be decoded: published as frames without evidence
+    decoded: int = 0              # images decoded and used
+    first_undecodable: str = ""   # why the first undecodable image could not be decoded
     seconds: float = 0.0
     foreground_from: str = ""     # "start pose", "label image" or "height bands" once learned
     background_from: str = ""     # how the background model was learned, once it was
@@ -378,6 +383,7 @@ class FeatureNode(AwalkerNode):
                 pending = self.extractor.submit(rgb, mask, start_labels, fill_with_bands=True, stamp_ns=stamp)
             else:
                 pending = self.extractor.submit(rgb, mask, self._labels, stamp_ns=stamp)
+            self.stats.decoded += 1
             if not had_background and self.extractor.background is not None:
                 frames = self.extractor.frame_index - 1
                 self.stats.background_from = (
@@ -391,11 +397,27 @@ class FeatureNode(AwalkerNode):
                                        f"foreground learned at frame {self.extractor.frame_index - 1} "
                                        f"(foreground labels: {self.stats.foreground_from})")
         except (InputError, ValueError) as exc:
-            self._skip(f"{topic} at {stamp} ns: {exc}")
-            return
+            # (the decoder's errors name the topic already)
+            pending = self._blank(f"{exc if isinstance(exc, InputError) else f'{topic}: {exc}'} (image at {stamp} ns)")
+            if pending is None:
+                return
         self._last_stamp = stamp
         hdr = Header(stamp=msg.header.stamp, frame_id=msg.header.frame_id or f"{self.camera_name}_optical_frame")
         pending.add_done_callback(lambda done: self._publish(done, hdr, f"{topic} at {stamp} ns", started))
+
+    def _blank(self, text: str) -> Future | None:
+        """An image that could not be decoded: counted, logged, and a frame without evidence of the size of the
+        frames before it (else the camera_info's); None (skipped) while neither size is known."""
+        self.stats.undecodable += 1
+        self.stats.first_undecodable = self.stats.first_undecodable or text
+        size = self.extractor.image_size or (
+            (int(self._info.width), int(self._info.height)) if self._info is not None and self._info.width > 0
+            and self._info.height > 0 else None)
+        if size is None:
+            self._skip(f"{text}; no frame size known yet")
+            return None
+        self.get_logger().error(f"{text}; tracked without this image ({self.stats.undecodable} so far)")
+        return self.extractor.submit_blank(*size)
 
     def _publish(self, done: Future, hdr: Header, where: str, started: float) -> None:
         """Publish a frame's features once its flow is estimated (called on the extractor's flow thread, in the

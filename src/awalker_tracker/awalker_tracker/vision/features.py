@@ -50,6 +50,7 @@ import sys
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -190,6 +191,7 @@ class FeatureExtractor:
         self._schedule_frame = 0                # frames so far at SCHEDULE_RATE_HZ (module doc)
         self._flow = GridFlow(config.flow)
         self._prev_grey: np.ndarray | None = None
+        self.image_size: tuple[int, int] | None = None   # (width, height) of the frames submitted so far
         self._pending: deque[Future] = deque()    # flows of submitted frames, oldest first (done ones too)
         self._flow_thread: ThreadPoolExecutor | None = None
         self._flow_thread_pid = 0       # the process that started it (a forked child starts its own)
@@ -232,13 +234,19 @@ class FeatureExtractor:
             self._pending.clear()
         return self._flow_thread
 
-    def _start_flow(self, image: np.ndarray, worker: ThreadPoolExecutor | None) -> Future:
-        """``_flow_step`` of this frame: on ``worker``, or done here without one (a future either way)."""
+    def _blank_flow_step(self, width: int, height: int) -> FlowGrid:
+        """The flow of a frame without an image: none; the next frame's flow starts afresh (not across the gap)."""
+        self._prev_grey = None
+        return FlowGrid.empty(height, width, self.config.flow.cell_size)
+
+    def _start_flow(self, worker: ThreadPoolExecutor | None, step: Any, *args: Any) -> Future:
+        """``step(*args)`` (a flow step of this frame): on ``worker``, or done here without one (a future either
+        way). Steps run in the frames' order."""
         if worker is not None:
-            return worker.submit(self._flow_step, image)
+            return worker.submit(step, *args)
         done: Future = Future()
         try:
-            done.set_result(self._flow_step(image))
+            done.set_result(step(*args))
         except Exception as exc:
             done.set_exception(exc)
         return done
@@ -300,12 +308,34 @@ class FeatureExtractor:
         worker = self._flow_worker()
         while len(self._pending) >= MAX_PENDING_FLOWS:
             self._pending.popleft().exception()     # waits; its own future carries any error
-        flow = self._start_flow(image, worker)
+        flow = self._start_flow(worker, self._flow_step, image)
         try:
             llr = self._maps(image, class_labels, fill_with_bands, self._schedule(stamp_ns))
         except BaseException:
             flow.exception()            # this frame's flow step still runs (and keeps its grey image)
             raise
+        self.image_size = (width, height)
+        return self._features(flow, llr, width, height, occlusion_mask)
+
+    def submit_blank(self, width: int, height: int) -> Future:
+        """A frame whose image could not be read (``submit``'s future): it counts as a frame (the background-only
+        frames and the frame numbers stay true), its maps are zero (no evidence either way), it has no flow and
+        the next frame's flow does not reach back across it; the models learn nothing from it (the frame that was
+        to teach the foreground hands that to the next frame)."""
+        cfg = self.config
+        if self.learns_foreground_next:
+            self.background_frames += 1
+        worker = self._flow_worker()
+        while len(self._pending) >= MAX_PENDING_FLOWS:
+            self._pending.popleft().exception()
+        flow = self._start_flow(worker, self._blank_flow_step, int(width), int(height))
+        llr = np.zeros((len(self.classes), int(height) // cfg.downsample, int(width) // cfg.downsample), np.float32)
+        return self._features(flow, llr, int(width), int(height), None)
+
+    def _features(self, flow: Future, llr: np.ndarray, width: int, height: int,
+                  occlusion_mask: np.ndarray | None) -> Future:
+        """Count the frame; a future of its FrameFeatures, done when its ``flow`` is."""
+        cfg = self.config
         self.frame_index += 1
         features: Future = Future()
 
