@@ -65,7 +65,7 @@ MODULE_CONSTANTS = (
     "vision.densities.SHADOW_DARKEST", "vision.densities.SHADOW_PRIOR", "vision.densities.SHADOW_EDGE_STD",
     "vision.background.DEFAULT_FLOOR_STD", "vision.background.CHI2_5_999", "vision.background.GAIN_STRIDE",
     "awalker_tools.pipeline.FRAMES_AHEAD", "awalker_tools.pipeline.GIL_SWITCH_INTERVAL_S",
-    "awalker_tools.pipeline.ACK_TIMEOUT_S", "awalker_tools.pipeline.RECORD_WAIT_S",
+    "awalker_tools.pipeline.ACK_TIMEOUT_S", "awalker_tools.pipeline.RECORD_WAIT_S", "awalker_tools.pipeline.UNDECODABLE_STOP",
     "awalker_tools.pipeline.FIRST_PASS_PARTICLES", "awalker_tools.pipeline.FIT_FRAMES",
     "nodes.pose_publisher.DEFAULT_CLOUD_POINTS", "nodes.pose_publisher.CONTACT_MIN_PROBABILITY",
     "inference.smc.MAX_PARTICLES", "inference.tracker.START_MAX_SPEED", "model.body.BODY_LEG_RANGE",

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
+from bag_helpers import rewrite_images
 
 from awalker_tools import evaluation, fit_body
 from awalker_tools.cli import main
@@ -613,30 +614,6 @@ def test_a_start_without_stance_leg_has_it_fitted_in_a_first_pass(synth_bag: Pat
     assert StartDescription.from_yaml(plain / "start.yaml").stance_leg is None
 
 
-def _rewrite_images(source: Path, target: Path, image: Any) -> None:
-    """``source`` copied to ``target`` message for message, each camera image replaced by ``image(rgb, msg)`` (a
-    (topic suffix, message type, message) triple: the same camera, another encoding or format string)."""
-    from rosbags.rosbag2 import Writer
-
-    from awalker_tools.bagio import COMPRESSED_IMAGE, IMAGE, SequenceReader, iter_messages
-    from awalker_tools.typestore import typestore
-    from awalker_tracker.vision.decode import decode_image
-
-    store = typestore()
-    with SequenceReader(source) as reader, Writer(target, version=9) as writer:
-        made: dict[str, Any] = {}
-        for conn, stamp, raw in iter_messages(reader.reader, source, reader.reader.connections):
-            topic, msgtype, msg = conn.topic, conn.msgtype, None
-            if msgtype in (IMAGE, COMPRESSED_IMAGE) and "/image_raw" in topic:
-                old = store.deserialize_cdr(raw, msgtype)
-                suffix, msgtype, msg = image(decode_image(old, topic), old)
-                topic = topic.split("/image_raw")[0] + "/image_raw" + suffix
-            if topic not in made:
-                made[topic] = writer.add_connection(topic, msgtype, typestore=store,
-                                                    offered_qos_profiles=conn.ext.offered_qos_profiles)
-            writer.write(made[topic], stamp, raw if msg is None else store.serialize_cdr(msg, msgtype))
-
-
 def test_rgba8_and_unnamed_jpeg_bags_track_with_overlays(synth_bag: Path, tmp_path: Path):
     """Images the tracker reads as the bag reader reads them (one decoder, vision.decode): an rgba8 bag and a JPEG
     bag whose format string names no codec both track to the end, overlays drawn and run.yaml written."""
@@ -659,7 +636,7 @@ def test_rgba8_and_unnamed_jpeg_bags_track_with_overlays(synth_bag: Path, tmp_pa
     for name, image in (("rgba8", rgba8), ("jpeg", unnamed_jpeg)):
         bag = tmp_path / name / "walk.bag"
         bag.parent.mkdir()
-        _rewrite_images(synth_bag, bag, image)
+        rewrite_images(synth_bag, bag, image)
         out = tmp_path / f"run_{name}"
         assert main(["track", str(bag), "--out", str(out), "--particles", "100"]) == 0, name
         run = yaml.safe_load((out / "run.yaml").read_text())

@@ -5,6 +5,7 @@ from pathlib import Path
 from typing import Any
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.vision.decode import UnsupportedEncoding
 
 from awalker_tools.bagio import (
     BODY_DESCRIPTION_TOPIC,
@@ -59,6 +60,8 @@ def bag_info(path: str | Path) -> dict[str, Any]:
                 missing.append(f"/{name}/image_raw: no images for camera {name} (Image or CompressedImage)")
             elif entry["frames"] == 0:
                 missing.append(f"{image[0]}: topic holds no images")
+            elif isinstance(error := seq.first_image_error(name), UnsupportedEncoding):
+                missing.append(str(error))
             info_msg = seq.first_message(camera_info_topic(name))
             tf = transforms.get(f"{name}_optical_frame")
             if info_msg is None:

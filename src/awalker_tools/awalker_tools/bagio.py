@@ -477,6 +477,19 @@ class SequenceReader:
                 return topic, msgtype
         return None
 
+    def first_image_error(self, cam: str) -> InputError | None:
+        """Why camera ``cam``'s first image cannot be decoded (``vision.decode``'s error, naming the topic), or
+        None: it can, or there is none."""
+        found = self.image_topic_of(cam)
+        msg = None if found is None else self.first_message(found[0])
+        if msg is None:
+            return None
+        try:
+            decode_image(msg, found[0])
+        except InputError as exc:
+            return exc
+        return None
+
     def camera_transforms(self) -> dict[str, Any]:
         """Child frame -> TransformStamped from /tf_static with parent ``world`` (last one wins)."""
         found: dict[str, Any] = {}

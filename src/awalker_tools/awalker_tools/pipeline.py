@@ -72,6 +72,10 @@ ACK_TIMEOUT_S = 600.0
 #: Seconds the pipeline waits, after the last frame, for the pose publisher's outputs of every posterior to
 #: reach the recorder; if some never do, it says which and how many (they are then missing from result.bag).
 RECORD_WAIT_S = 10.0
+#: A camera whose first this many images all fail to decode stops the run (a stream the tracker cannot read,
+#: found without waiting for the end of the bag); fewer, later or scattered ones are tracked without (run.yaml's
+#: ``undecodable_images``).
+UNDECODABLE_STOP = 10
 
 
 class _SpinThread:
@@ -161,6 +165,7 @@ class TrackResult:
     depth_band_m: float = 0.0       # the tracker's one-camera depth band (RecoveryConfig.depth_band_m)
     recorded: dict[str, int] = field(default_factory=dict)
     features: dict[str, dict[str, str]] = field(default_factory=dict)   # per camera: how its models were learned
+    undecodable: dict[str, int] = field(default_factory=dict)   # per camera: images that could not be decoded
 
     @property
     def frames_per_second(self) -> float:
@@ -269,6 +274,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     kept = prepare_output_dir(out, force=options.force, outputs=TRACK_OUTPUTS)
     try:
         with SequenceReader(bag) as reader:      # opened once for every pass (opening parses its metadata, ~30 ms)
+            _check_image_encodings(bag, reader)
             result = _run_passes(options, reader)
     except BaseException as exc:
         reason = " ".join(str(exc).split()) or type(exc).__name__
@@ -277,6 +283,27 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         raise
     record_written(out, kept)
     return result
+
+
+def _check_image_encodings(bag: Path, reader: Any) -> None:
+    """Refuse a camera whose images come in an encoding the tracker cannot decode (judged by its first image:
+    damaged data in one image is tracked without that image, an encoding holds for the whole stream)."""
+    from awalker_tracker.vision.decode import UnsupportedEncoding
+
+    for camera in reader.cameras:
+        if isinstance(error := reader.first_image_error(camera.name), UnsupportedEncoding):
+            raise InputError(f"{bag}: {error}")
+
+
+def _undecodable_camera(features: Sequence[Any], at_end: bool) -> str | None:
+    """Why the run cannot go on: a features node none of whose images decoded (its first ``UNDECODABLE_STOP``,
+    or with ``at_end`` all it got); None while each camera has decoded images."""
+    for node in features:
+        stats = node.stats
+        if stats.decoded == 0 and stats.undecodable and (at_end or stats.undecodable >= UNDECODABLE_STOP):
+            return (f"none of the first {stats.undecodable} images of camera {node.camera_name} could be decoded "
+                    f"(the first: {stats.first_undecodable})")
+    return None
 
 
 def _run_passes(options: TrackOptions, reader: Any) -> TrackResult:
@@ -460,6 +487,8 @@ def _track_once(options: TrackOptions, reader: Any, body_fit: dict | None = None
             while replayer.step():
                 executor.spin_once(timeout_sec=replayer.next_wait())
                 feature_thread.check()
+                if why := _undecodable_camera(features, at_end=False):
+                    raise InputError(f"{bag}: {why}")
                 if options.stop_after_frames and tracker.stats.frames_tracked >= options.stop_after_frames:
                     enough = True
                     break
@@ -472,6 +501,8 @@ def _track_once(options: TrackOptions, reader: Any, body_fit: dict | None = None
         finally:
             replayer.close()
         feature_thread.check()
+        if why := _undecodable_camera(features, at_end=True):
+            raise InputError(f"{bag}: {why}")
         if replayer.summary.stopped and not enough:
             raise InputError(f"{bag}: replay stopped: {replayer.summary.stopped}")
         tracker.flush()
@@ -506,6 +537,7 @@ def _track_once(options: TrackOptions, reader: Any, body_fit: dict | None = None
         result.recorded = dict(recorder.counts)
         result.features = {node.camera_name: {"background": node.stats.background_from,
                                               "foreground_labels": node.stats.foreground_from} for node in features}
+        result.undecodable = {node.camera_name: node.stats.undecodable for node in features}
         if body is None and tracker.body is not None:
             body = tracker.body
             body_src = f"scaled to the person's height seen in the images (written to {out / BODY_FILE})"
@@ -554,14 +586,23 @@ def _track_once(options: TrackOptions, reader: Any, body_fit: dict | None = None
         "frames": result.frames, "posteriors": result.summaries, "seconds": round(result.seconds, 3),
         "seconds_streaming": round(result.seconds_streaming, 3), "seconds_pictures": round(result.seconds_pictures, 3),
         "seconds_in_filter": round(result.seconds_in_filter, 3), "sync_issues": result.sync_issues,
-        "features": result.features, "recorded": result.recorded,
+        "features": result.features, "recorded": result.recorded, "undecodable_images": result.undecodable,
         **({"body_fit": body_fit} if body_fit is not None else {})}, sort_keys=False))
     _progress(options, f"awalker track: {result.summaries} frames tracked in {result.seconds:.1f} s "
                        f"({result.frames_per_second:.2f} frames/s end to end, "
                        f"{result.streaming_frames_per_second:.2f} while streaming, filter "
                        f"{result.summaries / max(result.seconds_in_filter, 1e-9):.2f} frames/s; pictures "
-                       f"{result.seconds_pictures:.1f} s more); outputs in {out}")
+                       f"{result.seconds_pictures:.1f} s more)" + _undecodable_note(result.undecodable)
+                       + f"; outputs in {out}")
     return result
+
+
+def _undecodable_note(undecodable: dict[str, int]) -> str:
+    """'; N undecodable images tracked without (cam0 N, ...)' for the final line, or '' when none."""
+    if not (total := sum(undecodable.values())):
+        return ""
+    return (f"; {total} undecodable image{'s' if total > 1 else ''} tracked without ("
+            + ", ".join(f"{cam} {n}" for cam, n in undecodable.items() if n) + ")")
 
 
 def write_outputs(out: Path, trajectory: Any, summaries: list[Any],
@@ -588,11 +629,13 @@ def write_outputs(out: Path, trajectory: Any, summaries: list[Any],
 
 
 def write_overlays(bag: Path, out: Path, camera: Any, body: BodyDescription, fps: float | None = None) -> Path | None:
-    """Draw the MAP markers on the first camera's frames: overlay/frame_*.png and overlay.mp4."""
+    """Draw the MAP markers on the first camera's frames: overlay/frame_*.png and overlay.mp4 (a frame whose image
+    cannot be decoded is left out of both)."""
     import cv2
 
     from awalker_tools.bagio import SequenceReader
     from awalker_tools.overlay import draw_body
+    from awalker_tracker.vision.decode import decode_image
 
     poses = evaluation.read_poses_csv(out / "poses.csv")
     by_stamp = {int(s): i for i, s in enumerate(poses.stamps_ns)}
@@ -604,8 +647,12 @@ def write_overlays(bag: Path, out: Path, camera: Any, body: BodyDescription, fps
         stamps = reader.frame_stamps
         if fps is None:
             fps = 1e9 / float(np.median(np.diff(stamps))) if len(stamps) > 1 else 30.0
-        for stamp, images in reader.frames():
-            image = images[camera.name]
+        topic, _ = reader.image_topic_of(camera.name)
+        for stamp, messages in reader.frames(decode=False):
+            try:
+                image = decode_image(messages[camera.name], topic)
+            except InputError:
+                continue             # counted in run.yaml's undecodable_images
             if int(stamp) in by_stamp:
                 image = draw_body(image, poses.markers[by_stamp[int(stamp)]], camera)
                 cv2.imwrite(str(folder / f"frame_{int(poses.frames[by_stamp[int(stamp)]]):05d}.png"), image[..., ::-1])

@@ -14,7 +14,8 @@ image without padding is returned as a view of the message's bytes (no copy).
 Compressed images (``decode_compressed``): JPEG (data starting FF D8 FF) and PNG (89 50 4E 47 0D 0A 1A 0A)
 are recognised by their bytes, whatever the message's ``format`` string says (drivers write "jpeg",
 "rgb8; jpeg compressed bgr8", "" or worse); anything else, and data that does not decode, is an
-``InputError`` naming the topic and what was expected.
+``InputError`` naming the topic and what was expected; a raw encoding not listed above is the subclass
+``UnsupportedEncoding`` (no image of that topic can be read, where corrupt data spoils one image).
 """
 from __future__ import annotations
 
@@ -30,6 +31,10 @@ RAW_ENCODINGS: dict[str, int] = {"rgb8": 3, "bgr8": 3, "mono8": 1, "rgba8": 4, "
 JPEG_MAGIC = b"\xff\xd8\xff"
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 _ENCODING_NAMES = {name.lower(): name for name in RAW_ENCODINGS}     # encodings are matched regardless of case
+
+
+class UnsupportedEncoding(InputError):
+    """A raw image encoding ``decode_raw`` cannot read (a property of the stream, not of one damaged image)."""
 
 
 def _bytes(data: Any) -> np.ndarray:
@@ -49,7 +54,7 @@ def decode_raw(encoding: str, width: int, height: int, step: int, data: Any, whe
     data shorter than ``step * height`` bytes."""
     name = _ENCODING_NAMES.get(str(encoding).lower())
     if name is None:
-        raise InputError(f"{where}: unsupported image encoding {encoding!r}; expected one of "
+        raise UnsupportedEncoding(f"{where}: unsupported image encoding {encoding!r}; expected one of "
                          f"{', '.join(RAW_ENCODINGS)} (or a CompressedImage)")
     channels = RAW_ENCODINGS[name]
     width, height, step = int(width), int(height), int(step)
