@@ -60,9 +60,10 @@ def main(argv: list[str] | None = None) -> int:
         # Output piped into e.g. `head`, which closed early: not an error of ours.
         sys.stderr.close()
         return 0
-    except KeyboardInterrupt:
-        print(f"awalker {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        # Ctrl-C (130), or `awalker track`'s pipeline.Interrupted: what it wrote, and 128 + the signal's number
+        print(f"awalker {args.command}: {' '.join(str(exc).split()) or 'interrupted'}", file=sys.stderr)
+        return int(getattr(exc, "exit_status", 130))
 
 
 if __name__ == "__main__":

@@ -24,6 +24,8 @@ from awalker_tracker.errors import InputError, parse_yaml
 RUN_FILE = "run.yaml"
 #: The key of ``run.yaml`` listing the files the run wrote, relative to its folder.
 WRITTEN_KEY = "written"
+#: The key of ``run.yaml`` saying why a run stopped before its end (absent when it ran to the end).
+INCOMPLETE_KEY = "incomplete"
 
 
 def output_path(text: str | Path, option: str) -> Path:
@@ -61,6 +63,13 @@ def _read_run_file(folder: Path) -> dict:
     if not isinstance(info, dict):
         raise InputError(f"{path}: expected a YAML mapping (the run.yaml of an awalker run)")
     return info
+
+
+def incomplete_reason(folder: Path) -> str | None:
+    """Why the run in ``folder`` stopped early (its run.yaml's ``incomplete``: an error, or SIGINT / SIGTERM), or
+    None: it ran to the end (or has no run.yaml)."""
+    reason = _read_run_file(folder).get(INCOMPLETE_KEY)
+    return None if reason is None else str(reason)
 
 
 def listed_outputs(folder: Path) -> set[Path]:

@@ -27,10 +27,12 @@ about once, not twice.
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -45,7 +47,7 @@ from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEG_NAMES
 
 from awalker_tools import evaluation
-from awalker_tools.outdir import files_under, prepare_output_dir, record_written
+from awalker_tools.outdir import INCOMPLETE_KEY, files_under, prepare_output_dir, record_written
 
 DEFAULTS = PROFILES[DEFAULT_PROFILE]
 START_FILE, BODY_FILE, CALIBRATION_FILE, RUN_FILE = "start.yaml", "body.yaml", "calibration.yaml", "run.yaml"
@@ -76,6 +78,54 @@ RECORD_WAIT_S = 10.0
 #: found without waiting for the end of the bag); fewer, later or scattered ones are tracked without (run.yaml's
 #: ``undecodable_images``).
 UNDECODABLE_STOP = 10
+
+
+class Interrupted(KeyboardInterrupt):
+    """`awalker track` stopped by SIGINT or SIGTERM (its outputs written for the frames done); the command's exit
+    status is ``exit_status``, 128 + the signal's number (130, 143)."""
+
+    def __init__(self, signum: int, message: str) -> None:
+        super().__init__(message)
+        self.exit_status = 128 + int(signum)
+
+
+class StopRequest:
+    """The first SIGINT or SIGTERM of a run (``_stop_on_signals``): the run stops after the frame in work, writes
+    its outputs for the frames done and raises ``Interrupted``."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+
+    def interrupted(self, what: str) -> Interrupted:
+        """The exception ending the run, ``what`` saying where it stopped."""
+        assert self.signum is not None
+        return Interrupted(self.signum, f"interrupted by {signal.Signals(self.signum).name} {what}")
+
+    def check(self, what: str) -> None:
+        """Raise ``interrupted(what)`` once a signal came."""
+        if self.signum is not None:
+            raise self.interrupted(what)
+
+
+@contextmanager
+def _stop_on_signals(stop: StopRequest) -> Iterator[None]:
+    """While the block runs (in the main thread), SIGINT and SIGTERM set ``stop``; a second one raises
+    ``Interrupted`` at once, wherever the main thread is. The previous handlers are restored afterwards."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: Any) -> None:
+        if stop.signum is not None:
+            raise Interrupted(signum, f"interrupted by {signal.Signals(signum).name} again: stopped at once")
+        stop.signum = signum
+
+    previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, old in previous.items():
+            signal.signal(s, old)
 
 
 class _SpinThread:
@@ -264,7 +314,9 @@ def run_tracking(options: TrackOptions) -> TrackResult:
     """Run the whole pipeline on ``options.bag``; write the outputs into ``options.out``. With a body
     to fit (``TrackOptions.fit_body``), a first pass into ``out/first_pass``, the fit, and the run.
     ``out`` must be new or empty (``TrackOptions.force``: see ``outdir.prepare_output_dir``); run.yaml lists
-    the files the run wrote, also when it stops on an error (with ``incomplete``: the reason)."""
+    the files the run wrote, also when it stops on an error (with ``incomplete``: the reason). SIGINT or SIGTERM
+    stops it after the frame in work, with poses.csv, summary.csv and gait.csv for the frames done, result.bag
+    closed and ``incomplete`` saying so: ``Interrupted`` (exit status 130 or 143)."""
     from awalker_tools.bagio import SequenceReader
 
     bag = Path(options.bag)
@@ -272,14 +324,16 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         raise InputError(f"{bag}: no such bag (expected a rosbag2 directory, .mcap or .db3)")
     out = Path(options.out)
     kept = prepare_output_dir(out, force=options.force, outputs=TRACK_OUTPUTS)
+    stop = StopRequest()
     try:
-        with SequenceReader(bag) as reader:      # opened once for every pass (opening parses its metadata, ~30 ms)
+        # (the reader is opened once for every pass: opening parses its metadata, ~30 ms)
+        with _stop_on_signals(stop), SequenceReader(bag) as reader:
             _check_image_encodings(bag, reader)
-            result = _run_passes(options, reader)
+            result = _run_passes(options, reader, stop)
     except BaseException as exc:
         reason = " ".join(str(exc).split()) or type(exc).__name__
         if out.is_dir() and files_under(out) - kept:
-            record_written(out, kept, {"input": str(bag.resolve()), "incomplete": reason})
+            record_written(out, kept, {"input": str(bag.resolve()), INCOMPLETE_KEY: reason})
         raise
     record_written(out, kept)
     return result
@@ -306,7 +360,7 @@ def _undecodable_camera(features: Sequence[Any], at_end: bool) -> str | None:
     return None
 
 
-def _run_passes(options: TrackOptions, reader: Any) -> TrackResult:
+def _run_passes(options: TrackOptions, reader: Any, stop: StopRequest) -> TrackResult:
     """``run_tracking`` on the bag open in ``reader`` (a ``bagio.SequenceReader``)."""
     from awalker_tools.fit_body import fit_run_dir
     from awalker_tracker.inference.bodyfit import BodyFitConfig
@@ -318,11 +372,11 @@ def _run_passes(options: TrackOptions, reader: Any) -> TrackResult:
         try:
             start, _, body, _ = resolve_descriptions(bag, reader, options.start, options.body, options.auto_start)
         except InputError:
-            return _track_once(options, reader)          # which reports what is missing
+            return _track_once(options, reader, stop)          # which reports what is missing
         fit_legs = fit_legs or body is None
         fit_stance = start is None or start.stance_leg is None
     if not (fit_legs or fit_stance):
-        return _track_once(options, reader)
+        return _track_once(options, reader, stop)
     if fit_legs and options.pelvis_ceiling is None:
         # A leg fitted to the walking person's images already carries the pelvis where they show it, where the
         # pelvis ceiling lowers a standing (tape) leg to where people walk; both passes keep the pelvis at the
@@ -342,7 +396,8 @@ def _run_passes(options: TrackOptions, reader: Any) -> TrackResult:
     # fit chose longer legs still (real walks hands off, 07_01 straight, seed 0: 0.917 m against 0.873, the
     # person's 0.807), the pelvis 86 mm high against 41 over 7 runs; the second pass tracks on the finer maps.
     _track_once(replace(options, out=first_dir, overlays=False, stop_after_frames=fit_frames,
-                        particles=FIRST_PASS_PARTICLES, map_downsample=FeatureConfig.downsample), reader)
+                        particles=FIRST_PASS_PARTICLES, map_downsample=FeatureConfig.downsample), reader, stop)
+    stop.check("after the first pass")
     _progress(options, f"awalker track: fitting {fitting} to the images of {first_dir}")
     # the fit's own particle count (BodyFitConfig: 5000; fewer pick less reliably), whatever the run's
     fitted = fit_run_dir(first_dir, None if fit_legs else (1.0,), seed=options.seed, frames=fit_frames)
@@ -353,13 +408,15 @@ def _run_passes(options: TrackOptions, reader: Any) -> TrackResult:
     fitted["seconds_first_pass_and_fit"] = round(time.monotonic() - started, 3)
     second = replace(options, body=Path(fitted["written"]) if fit_legs else options.body,
                      fitted_start=Path(fitted["start_written"]) if "start_written" in fitted else None)
-    return _track_once(second, reader, body_fit=fitted)
+    stop.check("after the first pass's fit")
+    return _track_once(second, reader, stop, body_fit=fitted)
 
 
-def _track_once(options: TrackOptions, reader: Any, body_fit: dict | None = None) -> TrackResult:
+def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit: dict | None = None) -> TrackResult:
     """One pass of the pipeline (``run_tracking``) on the bag open in ``reader`` (a ``bagio.SequenceReader``: its
     descriptions are read through it, and the replay reads the messages through it); ``body_fit``: the fit that
-    gave its body, for run.yaml."""
+    gave its body, for run.yaml; ``stop``: once a signal set it, the pass ends after the frame in work, writes
+    its outputs (no pictures) and raises ``Interrupted``."""
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -492,6 +549,8 @@ def _track_once(options: TrackOptions, reader: Any, body_fit: dict | None = None
                 if options.stop_after_frames and tracker.stats.frames_tracked >= options.stop_after_frames:
                     enough = True
                     break
+                if stop.signum is not None:
+                    break
                 if time.monotonic() - last > PROGRESS_PERIOD_S:
                     last = time.monotonic()
                     done = tracker.stats.frames_received
@@ -500,10 +559,11 @@ def _track_once(options: TrackOptions, reader: Any, body_fit: dict | None = None
                                        f"filter {rate:.1f} frames/s")
         finally:
             replayer.close()
+        interrupted = stop.signum is not None      # (the frames in work are still taken, then the outputs written)
         feature_thread.check()
         if why := _undecodable_camera(features, at_end=True):
             raise InputError(f"{bag}: {why}")
-        if replayer.summary.stopped and not enough:
+        if replayer.summary.stopped and not enough and not interrupted:
             raise InputError(f"{bag}: replay stopped: {replayer.summary.stopped}")
         tracker.flush()
         # let the pose publisher and the recorder receive everything published so far
@@ -548,6 +608,8 @@ def _track_once(options: TrackOptions, reader: Any, body_fit: dict | None = None
             start_src += (f"; stance leg {LEG_NAMES[tracker.start.stance_leg]} fitted to the first pass's images "
                           f"({options.fitted_start})")
         if tracker.tracker is None or not tracker.summaries:
+            if interrupted:
+                raise stop.interrupted(f"at frame {result.frames} of {num_frames}, before any frame was tracked")
             if tracker.start is None:
                 raise InputError(f"{bag}: no walking person found in {result.frames} frames (automatic start: "
                                  "a person wholly in view of a camera, moving steadily for 0.7 s); give a start "
@@ -568,10 +630,11 @@ def _track_once(options: TrackOptions, reader: Any, body_fit: dict | None = None
         context.try_shutdown()
         sys.setswitchinterval(switch_interval)
     result.seconds = time.monotonic() - started
-    # pictures after tracking, timed apart: they are not needed to keep up with a camera
-    evaluation.plot_gait_file(out, track, walk)
-    if options.overlays:
-        write_overlays(bag, out, cameras[0], body)
+    # pictures after tracking, timed apart: they are not needed to keep up with a camera (none when interrupted)
+    if not interrupted:
+        evaluation.plot_gait_file(out, track, walk)
+    if options.overlays and not interrupted:
+        write_overlays(bag, out, cameras[0], body, stop=stop)
     result.seconds_pictures = time.monotonic() - started - result.seconds
     (out / RUN_FILE).write_text(yaml.safe_dump({
         "input": str(bag.resolve()), "start_source": start_src, "body_source": body_src,
@@ -588,6 +651,10 @@ def _track_once(options: TrackOptions, reader: Any, body_fit: dict | None = None
         "seconds_in_filter": round(result.seconds_in_filter, 3), "sync_issues": result.sync_issues,
         "features": result.features, "recorded": result.recorded, "undecodable_images": result.undecodable,
         **({"body_fit": body_fit} if body_fit is not None else {})}, sort_keys=False))
+    if interrupted:
+        raise stop.interrupted(f"at frame {result.frames} of {num_frames}; poses.csv, summary.csv and gait.csv hold "
+                               f"the {result.summaries} frames tracked")
+    stop.check("after the last frame; the pictures may be incomplete")
     _progress(options, f"awalker track: {result.summaries} frames tracked in {result.seconds:.1f} s "
                        f"({result.frames_per_second:.2f} frames/s end to end, "
                        f"{result.streaming_frames_per_second:.2f} while streaming, filter "
@@ -628,9 +695,10 @@ def write_outputs(out: Path, trajectory: Any, summaries: list[Any],
     return track, evaluation.write_gait(out, track, trajectory.stance_leg, trajectory.strike_fraction, sides_known)
 
 
-def write_overlays(bag: Path, out: Path, camera: Any, body: BodyDescription, fps: float | None = None) -> Path | None:
+def write_overlays(bag: Path, out: Path, camera: Any, body: BodyDescription, fps: float | None = None,
+                   stop: StopRequest | None = None) -> Path | None:
     """Draw the MAP markers on the first camera's frames: overlay/frame_*.png and overlay.mp4 (a frame whose image
-    cannot be decoded is left out of both)."""
+    cannot be decoded is left out of both); ``stop``: once a signal set it, no further frames are drawn."""
     import cv2
 
     from awalker_tools.bagio import SequenceReader
@@ -649,6 +717,8 @@ def write_overlays(bag: Path, out: Path, camera: Any, body: BodyDescription, fps
             fps = 1e9 / float(np.median(np.diff(stamps))) if len(stamps) > 1 else 30.0
         topic, _ = reader.image_topic_of(camera.name)
         for stamp, messages in reader.frames(decode=False):
+            if stop is not None and stop.signum is not None:
+                break
             try:
                 image = decode_image(messages[camera.name], topic)
             except InputError:

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,7 @@ import yaml
 from awalker_tracker.errors import InputError
 
 from awalker_tools import evaluation, plots
-from awalker_tools.outdir import add_written, check_may_write, check_new_path
+from awalker_tools.outdir import add_written, check_may_write, check_new_path, incomplete_reason
 
 RUN_FILE = "run.yaml"   # written by `awalker track`: {input: bag path, ...}
 #: What eval writes into the run's folder (besides --json's file, DIR/eval.json by default).
@@ -58,6 +59,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         out = run_dir / "eval.json"
         check_may_write(run_dir, [out.name])
+    if (reason := incomplete_reason(run_dir)) is not None:
+        print(f"awalker eval: {run_dir} is incomplete ({reason}); evaluating the frames it holds", file=sys.stderr)
     estimate = evaluation.read_poses_csv(run_dir / "poses.csv")
     truth_path = find_truth(run_dir, Path(args.truth) if args.truth else None)
     truth = load_truth(truth_path)

@@ -13,6 +13,7 @@ import base64
 import csv
 import html
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,7 @@ import numpy as np
 from awalker_tracker.errors import InputError, parse_yaml
 
 from awalker_tools import evaluation, plots
-from awalker_tools.outdir import add_written, check_may_write
+from awalker_tools.outdir import add_written, check_may_write, incomplete_reason
 
 REPORT_FILE = "report.html"
 
@@ -83,6 +84,9 @@ def build_report(run_dir: Path) -> Path:
                                     summary["speed_std"], summary["stance_left_probability"])
         written.append("speed_stance.png")
     parts = [f"<h1>awalker: {html.escape(run_dir.name)}</h1>"]
+    if (reason := incomplete_reason(run_dir)) is not None:
+        parts.append(f"<p><strong>Incomplete run:</strong> {html.escape(reason)}; this page shows the frames it "
+                     "holds.</p>")
     frames = len(summary["frame"])
     sym = gait_summary.get("symmetry_left_over_right", {})
     parts.append("<h2>Gait</h2>")
@@ -140,6 +144,8 @@ def run(args: argparse.Namespace) -> int:
     if not run_dir.is_dir():
         raise InputError(f"{run_dir}: not a directory (expected the --out DIR of `awalker track`)")
     check_may_write(run_dir, [REPORT_FILE])      # an earlier report (listed in run.yaml) only
+    if (reason := incomplete_reason(run_dir)) is not None:
+        print(f"awalker report: {run_dir} is incomplete ({reason}); reporting the frames it holds", file=sys.stderr)
     print(f"wrote {build_report(run_dir)}")
     return 0
 

@@ -1,0 +1,97 @@
+"""`awalker track` stopped by SIGTERM or SIGINT (issue 57): it stops within seconds, writes poses.csv, summary.csv
+and gait.csv for the frames done, closes result.bag readable, marks run.yaml incomplete and exits 128 + the
+signal's number; `awalker eval` and `awalker report` say the folder is incomplete and work on what it holds."""
+from __future__ import annotations
+
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from awalker_tools import evaluation
+from awalker_tools.cli import main
+
+FRAMES, BACKGROUND = 150, 4
+
+
+@pytest.fixture(autouse=True)
+def isolated_ros(monkeypatch, ros_domain_id: int) -> None:
+    """`awalker track` (in a subprocess, which inherits the environment) apart from parallel test workers."""
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(ros_domain_id + 30))
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+
+
+@pytest.fixture(scope="module")
+def long_bag(tmp_path_factory) -> Path:
+    """A 160x120 one-camera synthetic walk of 150 frames with the person (5 s): long enough to interrupt."""
+    for seed in range(1, 15):
+        out = tmp_path_factory.mktemp(f"synth{seed}")
+        code = main(["synth", "--out", str(out), "--frames", str(FRAMES), "--background-frames", str(BACKGROUND),
+                     "--size", "160", "120", "--seed", str(seed)])
+        if code == 0:
+            return out / "synth.bag"
+    pytest.fail("awalker synth could not make a walk that does not fall")
+
+
+def _interrupt(bag: Path, out: Path, signum: int) -> tuple[int, str, float]:
+    """Run `awalker track` on ``bag``, send ``signum`` once its progress line counts posteriors; returns (exit
+    status, stderr, seconds from the signal to the exit)."""
+    proc = subprocess.Popen([sys.executable, "-m", "awalker_tools.cli", "track", str(bag), "--out", str(out),
+                             "--particles", "50"], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    lines = []
+    try:
+        for line in proc.stderr:
+            lines.append(line)
+            if re.search(r"frame \d+/\d+, [1-9]\d* posteriors", line):
+                break
+        else:
+            pytest.fail("awalker track ended before it was interrupted:\n" + "".join(lines))
+        proc.send_signal(signum)
+        sent = time.monotonic()
+        rest = proc.communicate(timeout=120)[1]
+        return proc.returncode, "".join(lines) + rest, time.monotonic() - sent
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_an_interrupted_run_writes_what_it_tracked(long_bag: Path, tmp_path: Path, signum: int, capsys):
+    from rosbags.rosbag2 import Reader
+
+    out = tmp_path / "run"
+    status, err, seconds = _interrupt(long_bag, out, signum)
+    name = signal.Signals(signum).name
+    assert status == 128 + signum, err
+    assert seconds < 10, seconds          # the frame in work, the look-ahead's last frames, the CSV files
+    assert "Traceback" not in err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith(f"awalker track: interrupted by {name} at frame ") and "poses.csv" in last, last
+    poses = evaluation.read_poses_csv(out / "poses.csv")
+    summary = evaluation.read_summary_csv(out / "summary.csv")
+    tracked = len(poses.frames)
+    assert 0 < tracked < FRAMES and len(summary["frame"]) == tracked
+    assert poses.frames.tolist() == list(range(BACKGROUND, BACKGROUND + tracked))
+    assert (out / "gait.csv").read_text().startswith("index,frame,stamp_ns")
+    with Reader(out / "result.bag") as reader:            # metadata written: the bag opens and reads
+        posteriors = [c for c in reader.connections if c.topic == "/awalker/posterior"]
+        assert posteriors and sum(1 for _ in reader.messages(connections=posteriors)) == tracked
+    run = yaml.safe_load((out / "run.yaml").read_text())
+    assert re.fullmatch(rf"interrupted by {name} at frame \d+ of {FRAMES + BACKGROUND}; poses.csv, summary.csv and "
+                        rf"gait.csv hold the {tracked} frames tracked", run["incomplete"]), run["incomplete"]
+    assert run["posteriors"] == tracked and {"poses.csv", "result.bag/metadata.yaml"} <= set(run["written"])
+    if signum == signal.SIGTERM:
+        # eval and report say so in one line, and work on what the folder holds
+        assert main(["eval", str(out)]) == 0
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"awalker eval: {out} is incomplete ({run['incomplete']}); evaluating the frames it holds"]
+        assert main(["report", str(out)]) == 0
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"awalker report: {out} is incomplete ({run['incomplete']}); reporting the frames it holds"]
+        assert "Incomplete run:</strong> interrupted by SIGTERM" in (out / "report.html").read_text()
