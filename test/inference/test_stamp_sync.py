@@ -1,4 +1,4 @@
-"""Exact-stamp camera synchroniser."""
+"""Nearest-stamp camera synchroniser."""
 from __future__ import annotations
 
 import numpy as np
@@ -23,21 +23,54 @@ def test_pairs_interleaved_cameras_in_order():
     assert issues == []
     assert [f.stamp_ns for f in emitted] == stamps
     assert all(f.items == (f"left{f.stamp_ns}", f"right{f.stamp_ns}", f"top{f.stamp_ns}") for f in emitted)
-    assert sync.flush() == []
+    assert sync.flush() == ([], [])
 
 
-def test_missing_camera_is_reported_not_silently_dropped():
+def test_a_frame_missing_a_camera_is_emitted_with_the_others_and_reported():
     sync = StampSynchronizer(["a", "b"])
     assert sync.add("a", 1, "a1") == ([], [])
     frames, issues = sync.add("a", 2, "a2")
     assert frames == [] and issues == []
     frames, issues = sync.add("b", 2, "b2")        # b never sent stamp 1
-    assert [f.stamp_ns for f in frames] == [2]
+    assert [(f.stamp_ns, f.items, f.stamps) for f in frames] == [(1, ("a1", None), (1, None)), (2, ("a2", "b2"), (2, 2))]
     assert len(issues) == 1 and issues[0].kind == "incomplete" and issues[0].cameras == ("b",)
-    assert "stamp 1 ns" in issues[0].message and "b" in issues[0].message
+    assert "stamp 1 ns" in issues[0].message and "without camera(s) b" in issues[0].message
     sync.add("a", 3, "a3")
-    end = sync.flush()
+    frames, end = sync.flush()
+    assert [f.items for f in frames] == [("a3", None)]
     assert [(i.kind, i.stamp_ns, i.cameras) for i in end] == [("incomplete", 3, ("b",))]
+
+
+def test_nearest_stamp_within_the_tolerance_makes_one_frame():
+    """Cameras 3 ms and 20 ms apart at 30 frames/s: a third of a frame (11 ms) pairs the first; the second
+    needs 0.7 of a frame. A camera missing every 5th frame: those frames come with the other camera alone."""
+    period = 33_333_333
+    for offset, tolerance in ((3_000_000, 1 / 3), (20_000_000, 0.7), (-3_000_000, 1 / 3)):
+        sync = StampSynchronizer(["a", "b"], tolerance=tolerance)
+        frames, issues = [], []
+        for k in range(10):
+            for cam, stamp in (("a", k * period), ("b", k * period + offset)):
+                if cam == "b" and k % 5 == 2:
+                    continue
+                f, i = sync.add(cam, stamp + 10**9, f"{cam}{k}")
+                frames += f
+                issues += i
+        f, i = sync.flush()
+        frames += f
+        issues += i
+        assert [f.items for f in frames] == [(f"a{k}", None if k % 5 == 2 else f"b{k}") for k in range(10)], offset
+        assert [f.stamp_ns for f in frames] == [k * period + 10**9 for k in range(10)]      # camera a's stamps
+        assert [f.last_stamp_ns for f in frames] == [k * period + 10**9 + (0 if k % 5 == 2 else max(offset, 0))
+                                                     for k in range(10)]
+        assert [(i.kind, i.cameras) for i in issues] == [("incomplete", ("b",))] * 2
+    # a third of a frame does not pair cameras 20 ms apart: each image is a frame of its own
+    sync = StampSynchronizer(["a", "b"], tolerance=1 / 3, period_ns=period)
+    frames = []
+    for k in range(3):
+        frames += sync.add("a", k * period, k)[0] + sync.add("b", k * period + 20_000_000, k)[0]
+    assert [f.stamps for f in frames][:2] == [(0, None), (None, 20_000_000)]
+    with pytest.raises(ValueError, match="tolerance"):
+        StampSynchronizer(["a"], tolerance=1.0)
 
 
 def test_out_of_order_duplicate_and_unknown_camera():
@@ -63,7 +96,7 @@ def test_bounded_queue_reports_overflow():
     issues = []
     for s in range(1, 6):
         issues += sync.add("a", s, s)[1]
-    assert [(i.kind, i.stamp_ns) for i in issues] == [("overflow", 1), ("overflow", 2)]
+    assert [(i.kind, i.stamp_ns) for i in issues] == [("overflow", 1), ("overflow", 2)]   # tracked with a alone
     assert sync.pending_stamps == [3, 4, 5]
 
 
@@ -76,10 +109,11 @@ def test_single_camera_passes_through_and_bad_setup():
         StampSynchronizer(["a", "a"])
 
 
-def test_discard_gives_up_on_a_frame():
+def test_expire_gives_up_waiting_for_a_camera():
     sync = StampSynchronizer(["a", "b"])
     sync.add("a", 1, "a1")
-    issue = sync.discard(1, "timed out")
-    assert issue.kind == "incomplete" and issue.cameras == ("b",) and "timed out" in issue.message
-    assert sync.discard(1) is None and sync.pending_stamps == []
+    frames, issues = sync.expire("timed out")
+    assert [f.items for f in frames] == [("a1", None)]
+    assert issues[0].kind == "incomplete" and issues[0].cameras == ("b",) and "timed out" in issues[0].message
+    assert sync.expire() == ([], []) and sync.pending_stamps == []
     assert sync.add("b", 1, "b1")[1][0].kind == "out_of_order"      # too late now

@@ -27,3 +27,36 @@ def rewrite_images(source: Path, target: Path, image: Any) -> None:
                 made[topic] = writer.add_connection(topic, msgtype, typestore=store,
                                                     offered_qos_profiles=conn.ext.offered_qos_profiles)
             writer.write(made[topic], stamp, raw if msg is None else store.serialize_cdr(msg, msgtype))
+
+
+def shift_camera(source: Path, target: Path, camera: str, offset_ns: int, drop_every: int = 0) -> None:
+    """``source`` copied to ``target`` with camera ``camera``'s images and camera_info stamped (header and bag
+    time) ``offset_ns`` later, and with ``drop_every`` > 0 its every ``drop_every``-th image (frames
+    drop_every - 1, 2 drop_every - 1, ...) and camera_info left out."""
+    import dataclasses
+
+    from rosbags.rosbag2 import Writer
+
+    from awalker_tools.bagio import SequenceReader, iter_messages
+    from awalker_tools.typestore import typestore
+
+    store = typestore()
+    Time = store.types["builtin_interfaces/msg/Time"]
+    counts: dict[str, int] = {}
+    with SequenceReader(source) as reader, Writer(target, version=9) as writer:
+        made: dict[str, Any] = {}
+        for conn, stamp, raw in iter_messages(reader.reader, source, reader.reader.connections):
+            if conn.topic.startswith(f"/{camera}/") and conn.topic.endswith(("/image_raw", "/compressed",
+                                                                             "/camera_info")):
+                k = counts[conn.topic] = counts.get(conn.topic, -1) + 1
+                if drop_every and k % drop_every == drop_every - 1:
+                    continue
+                msg = store.deserialize_cdr(raw, conn.msgtype)
+                shifted = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec + offset_ns
+                header = dataclasses.replace(msg.header, stamp=Time(sec=shifted // 1_000_000_000,
+                                                                    nanosec=shifted % 1_000_000_000))
+                raw, stamp = store.serialize_cdr(dataclasses.replace(msg, header=header), conn.msgtype), stamp + offset_ns
+            if conn.topic not in made:
+                made[conn.topic] = writer.add_connection(conn.topic, conn.msgtype, typestore=store,
+                                                         offered_qos_profiles=conn.ext.offered_qos_profiles)
+            writer.write(made[conn.topic], stamp, raw)

@@ -16,10 +16,12 @@ import sys
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from awalker_tracker.errors import InputError, parse_yaml
+from awalker_tracker.inference.sync import DEFAULT_TOLERANCE
 
 FITTED_FILE = "body_fitted.yaml"
 FITTED_START_FILE = "start_fitted.yaml"
@@ -32,16 +34,22 @@ HEIGHT_SCALED_FACTORS = (0.97, 1.0, 1.03, 1.06, 1.09, 1.12)
 KEEP_HEIGHT_CAMERAS = 2
 
 
-def _features(run_dir: Path, camera_names: list[str]) -> tuple[list[int], list[tuple]]:
-    """Stamps (ns) and per-frame feature tuples (camera order) recorded in DIR/result.bag."""
+def _features(run_dir: Path, cameras: list[Any], tolerance: float) -> tuple[list[int], list[tuple]]:
+    """Stamps (ns) and per-frame feature tuples (camera order) recorded in DIR/result.bag, paired as the tracker
+    pairs them (``inference.sync``, ``tolerance`` in frame periods); a camera a frame has none of gets features
+    carrying no evidence (``vision.features.blank_features``)."""
     from awalker_tools.bagio import iter_messages, open_reader, stamp_ns_of
     from awalker_tools.typestore import typestore
+    from awalker_tracker.inference.sync import StampSynchronizer
     from awalker_tracker.nodes.features import features_from_msg
+    from awalker_tracker.vision.features import blank_features
 
     bag = run_dir / "result.bag"
-    topics = {f"/{name}/features": k for k, name in enumerate(camera_names)}
+    camera_names = [c.name for c in cameras]
+    topics = {f"/{name}/features": name for name in camera_names}
     store = typestore()
-    per_camera: list[dict[int, object]] = [{} for _ in camera_names]
+    sync = StampSynchronizer(camera_names, max_pending=1_000_000, tolerance=tolerance)
+    frames = []
     reader = open_reader(bag)
     try:
         connections = [c for c in reader.connections if c.topic in topics]
@@ -51,13 +59,20 @@ def _features(run_dir: Path, camera_names: list[str]) -> tuple[list[int], list[t
                              f"records for cameras {', '.join(camera_names)})")
         for connection, _, raw in iter_messages(reader, bag, connections):
             msg = store.deserialize_cdr(raw, connection.msgtype)
-            per_camera[topics[connection.topic]][stamp_ns_of(msg.header)] = features_from_msg(msg)
+            frames += sync.add(topics[connection.topic], stamp_ns_of(msg.header), features_from_msg(msg))[0]
     finally:
         reader.close()
-    stamps = sorted(set.intersection(*(set(c) for c in per_camera)))
-    if len(stamps) < 2:
-        raise InputError(f"{bag}: {len(stamps)} frame(s) with features from every camera; at least 2 needed")
-    return stamps, [tuple(c[s] for c in per_camera) for s in stamps]
+    frames += sync.flush()[0]
+    if len(frames) < 2:
+        raise InputError(f"{bag}: {len(frames)} frame(s) with features; at least 2 needed")
+    latest: dict[str, Any] = {}
+    filled = []
+    for frame in frames:
+        latest.update({name: item for name, item in zip(camera_names, frame.items) if item is not None})
+        like = next(item for item in frame.items if item is not None)
+        filled.append(tuple(item if item is not None else blank_features(latest.get(c.name, like), c.width, c.height)
+                            for c, item in zip(cameras, frame.items)))
+    return [f.stamp_ns for f in frames], filled
 
 
 def _required(path: Path) -> Path:
@@ -108,7 +123,7 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
         raise InputError(f"fitbody options: {exc}") from None
     start = StartDescription.from_yaml(run_dir / "start.yaml")
     body = BodyDescription.from_yaml(run_dir / "body.yaml")
-    stamps, features = _features(run_dir, [c.name for c in cameras])
+    stamps, features = _features(run_dir, cameras, float(info.get("sync_tolerance", DEFAULT_TOLERANCE)))
     dt = float(np.median(np.diff(stamps))) * 1e-9
     first = start.frame
     if first >= len(features) - 1:

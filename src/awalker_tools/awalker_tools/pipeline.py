@@ -42,6 +42,7 @@ import yaml
 
 from awalker_tracker.errors import InputError
 from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES
+from awalker_tracker.inference.sync import DEFAULT_TOLERANCE
 from awalker_tracker.inference.tracker import StartDescription, TrackerConfig
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEG_NAMES
@@ -201,6 +202,9 @@ class TrackOptions:
     # ``out`` may hold files: those a previous run listed in its run.yaml are replaced, the others kept
     # (``outdir.prepare_output_dir``); False: ``out`` must be new or empty
     force: bool = False
+    # frame periods: images of the cameras whose stamps differ by less make one frame (nearest stamp; 0: equal
+    # stamps only); a frame missing a camera is tracked with the others
+    sync_tolerance: float = DEFAULT_TOLERANCE
 
 
 @dataclass
@@ -329,6 +333,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         # (the reader is opened once for every pass: opening parses its metadata, ~30 ms)
         with _stop_on_signals(stop), SequenceReader(bag) as reader:
             _check_image_encodings(bag, reader)
+            _check_camera_sync(bag, reader, options.sync_tolerance)
             result = _run_passes(options, reader, stop)
     except BaseException as exc:
         reason = " ".join(str(exc).split()) or type(exc).__name__
@@ -347,6 +352,43 @@ def _check_image_encodings(bag: Path, reader: Any) -> None:
     for camera in reader.cameras:
         if isinstance(error := reader.first_image_error(camera.name), UnsupportedEncoding):
             raise InputError(f"{bag}: {error}")
+
+
+#: Images per camera whose stamps ``_check_camera_sync`` compares.
+SYNC_CHECK_IMAGES = 30
+
+
+def _check_camera_sync(bag: Path, reader: Any, tolerance: float) -> None:
+    """Refuse cameras whose images would not pair into frames: another camera's first ``SYNC_CHECK_IMAGES`` images
+    lying a median of more than ``tolerance`` frame periods from the first camera's nearest (each would be a
+    frame of its own, twice as many frames as there are)."""
+    from awalker_tools.bagio import stamp_ns_of
+
+    def first_stamps(camera: Any) -> tuple[str, np.ndarray]:
+        topic, _ = reader.image_topic_of(camera.name)
+        stamps = []
+        for _, _, _, msg in reader.messages([topic]):
+            stamps.append(stamp_ns_of(msg.header))
+            if len(stamps) == SYNC_CHECK_IMAGES:
+                break
+        return topic, np.asarray(stamps, np.int64)
+
+    cameras = reader.cameras
+    if len(cameras) < 2:
+        return
+    first_topic, first = first_stamps(cameras[0])
+    if len(first) < 2:
+        return
+    period = float(np.median(np.diff(first)))
+    for camera in cameras[1:]:
+        topic, stamps = first_stamps(camera)
+        if not len(stamps):
+            continue
+        apart = float(np.median(np.min(np.abs(stamps[:, None] - first[None, :]), axis=1)))
+        if apart > tolerance * period:
+            raise InputError(f"{bag}: the images of {topic} lie a median {apart * 1e-6:.1f} ms from the nearest of "
+                             f"{first_topic}, more than --sync-tolerance {tolerance:.3g} of a {period * 1e-6:.1f} ms "
+                             f"frame; pass --sync-tolerance above {apart / period:.2f} (below 1) to pair them")
 
 
 def _undecodable_camera(features: Sequence[Any], at_end: bool) -> str | None:
@@ -505,6 +547,7 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
             Parameter("reseed_fallen", value=bool(options.recovery)), Parameter("reacquire", value=bool(options.recovery)),
             Parameter("hold_still", value=bool(options.recovery)),
             *([Parameter("depth_band_m", value=float(band))] if band is not None else []),
+            Parameter("sync_tolerance", value=float(options.sync_tolerance)),
             Parameter("idle_flush_s", value=1.0e9)]))
         tracker.keep_summaries = True
         nodes.append(tracker)
@@ -536,7 +579,8 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
         feature_thread = _SpinThread(SingleThreadedExecutor(context=context), features, "awalker_features")
         # every reader is in this process: start once they have matched, with no settle time
         replayer = Replayer(driver, bag, ReplayConfig(lockstep=True, wait_for_subscribers=10.0,
-                                                        ack_timeout=ACK_TIMEOUT_S, frames_ahead=FRAMES_AHEAD),
+                                                        ack_timeout=ACK_TIMEOUT_S, frames_ahead=FRAMES_AHEAD,
+                                                        sync_tolerance=options.sync_tolerance),
                             local_nodes=nodes, reader=reader.reader)
         last = streaming = time.monotonic()
         enough = False          # options.stop_after_frames filtered: the replay is stopped on purpose
@@ -644,7 +688,7 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
         "pelvis_ceiling": (options.pelvis_ceiling if options.pelvis_ceiling is not None
                            else TrackerConfig().pelvis_ceiling_for(len(cameras))[0]),
         "recovery": options.recovery, "depth_band_m": result.depth_band_m,
-        "map_downsample": downsample,
+        "map_downsample": downsample, "sync_tolerance": options.sync_tolerance,
         **({"stopped_after_frames": options.stop_after_frames} if enough else {}),
         "frames": result.frames, "posteriors": result.summaries, "seconds": round(result.seconds, 3),
         "seconds_streaming": round(result.seconds_streaming, 3), "seconds_pictures": round(result.seconds_pictures, 3),
@@ -712,17 +756,18 @@ def write_overlays(bag: Path, out: Path, camera: Any, body: BodyDescription, fps
     video = None
     path = out / "overlay.mp4"
     with SequenceReader(bag) as reader:
-        stamps = reader.frame_stamps
+        topic, _ = reader.image_topic_of(camera.name)
+        stamps = reader.frame_stamps        # (the first camera's, as ``camera``)
         if fps is None:
             fps = 1e9 / float(np.median(np.diff(stamps))) if len(stamps) > 1 else 30.0
-        topic, _ = reader.image_topic_of(camera.name)
-        for stamp, messages in reader.frames(decode=False):
+        for _, _, _, msg in reader.messages([topic]):
             if stop is not None and stop.signum is not None:
                 break
             try:
-                image = decode_image(messages[camera.name], topic)
+                image = decode_image(msg, topic)
             except InputError:
                 continue             # counted in run.yaml's undecodable_images
+            stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
             if int(stamp) in by_stamp:
                 image = draw_body(image, poses.markers[by_stamp[int(stamp)]], camera)
                 cv2.imwrite(str(folder / f"frame_{int(poses.frames[by_stamp[int(stamp)]]):05d}.png"), image[..., ::-1])

@@ -3,8 +3,8 @@
 Two modes:
 
 - rate mode: messages go out at their bag times scaled by ``rate`` (real-time factor);
-- lockstep: one frame at a time (all messages up to and including the images that share a
-  stamp), then wait for an acknowledgement (std_msgs/Header on ``ack_topic`` whose stamp is the
+- lockstep: one frame at a time (all messages up to and including the images of one frame: paired by
+  nearest stamp within ``sync_tolerance`` of a frame period, as the tracker pairs them), then wait for an acknowledgement (std_msgs/Header on ``ack_topic`` whose stamp is the
   frame's image stamp) before the next frame, so offline processing drops nothing and is
   deterministic. ``frames_ahead`` lets that many further frames out before the oldest is
   acknowledged, so the feature nodes work on the next frame while the tracker works on this one.
@@ -44,6 +44,7 @@ from rosbags.interfaces import Connection
 from rosbags.rosbag2 import Reader
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.inference.sync import DEFAULT_TOLERANCE, StampSynchronizer
 from awalker_tracker.nodes.base import AwalkerNode, NodeParameter, declare_parameters
 from awalker_tracker.nodes.spin import run_node
 
@@ -77,6 +78,7 @@ class ReplayConfig:
     settle: float = 0.5                 # s to wait after the subscribers matched (discovery is asymmetric)
     ack_timeout: float = 60.0           # s to wait for one ack before giving up (lockstep)
     frames_ahead: int = 0               # lockstep: frames published beyond the oldest unacknowledged one
+    sync_tolerance: float = DEFAULT_TOLERANCE   # frame periods: images nearer in stamp make one frame (0: equal)
     depth: int = 100                    # history depth of the volatile publishers (reliable)
 
     def validated(self, where: str) -> "ReplayConfig":
@@ -90,6 +92,8 @@ class ReplayConfig:
         if self.wait_for_subscribers < 0 or self.settle < 0 or self.ack_timeout <= 0 or self.depth < 1:
             raise InputError(f"{where}: wait_for_subscribers >= 0, settle >= 0, ack_timeout > 0 and depth >= 1 "
                              "expected")
+        if not 0.0 <= self.sync_tolerance < 1.0:
+            raise InputError(f"{where}: sync_tolerance must lie in [0, 1) frame periods, got {self.sync_tolerance}")
         if not 0 <= self.frames_ahead < self.depth:
             raise InputError(f"{where}: frames_ahead must lie in [0, depth = {self.depth}), got {self.frames_ahead}")
         return self
@@ -143,63 +147,73 @@ def is_camera_image_topic(topic: str, msgtype: str) -> bool:
 
 
 def iter_batches(
-    messages: Iterator[tuple[Connection, int, bytes]], image_topics: set[str]
+    messages: Iterator[tuple[Connection, int, bytes]], image_topics: set[str], tolerance: float = DEFAULT_TOLERANCE
 ) -> Iterator[Batch]:
     """Group bag messages into frames (batches), in stamp order.
 
-    A frame is opened by the first image (of ``image_topics``) with a new header stamp and holds
-    every image with that stamp; other messages join the frame of the latest image (messages
-    before the first image join the first frame). A frame is emitted once a newer image has
-    arrived and it is complete (every image topic delivered), or a newer frame is complete (a
-    camera skipped it). So camera streams interleaved out of stamp order in the bag (recorded
-    with receive times) still give whole frames. Without image topics every message is its
-    own batch.
+    The images (of ``image_topics``) are paired into frames by nearest stamp, as the tracker pairs their
+    features (``inference.sync.StampSynchronizer``, ``tolerance`` in frame periods: cameras whose stamps
+    differ by less make one frame; a frame a camera skipped holds the others). Other messages join the
+    frame of the latest image before them (messages before the first image join the first frame). A frame
+    is emitted once a newer image has arrived after it is decided, with its messages in bag order; its
+    stamp is its earliest image's (the tracker acknowledges a frame with its latest). So camera streams
+    interleaved out of stamp order in the bag (recorded with receive times) still give whole frames.
+    Without image topics every message is its own batch.
     """
     if not image_topics:
         for conn, log_ns, raw in messages:
             yield Batch(log_ns, None, ((conn, bytes(raw)),))
         return
-    frames: dict[int, tuple[int, list[tuple[Connection, bytes]], set[str]]] = {}  # stamp -> (log, msgs, topics)
-    before_first: list[tuple[Connection, bytes]] = []  # messages waiting for the next frame
-    before_first_log = 0  # bag time of the first of them
-    latest: int | None = None
+    sync = StampSynchronizer(sorted(image_topics), max_pending=1_000_000, tolerance=tolerance)
+    side: dict[int, list[tuple[int, int, Connection, bytes]]] = {}    # image stamp -> messages after it
+    held: list[tuple[int, list[tuple[int, int, Connection, bytes]]]] = []   # decided frames: (stamp, messages)
+    latest: int | None = None    # stamp of the latest image: the key of the messages after it
+    held_stamps: dict[int, int] = {}    # image stamp of a held frame -> index in ``held``
 
-    def complete(stamp: int) -> bool:
-        return frames[stamp][2] == image_topics
+    def batch(stamp: int, msgs: list[tuple[int, int, Connection, bytes]]) -> Batch:
+        msgs.sort(key=lambda m: m[0])
+        return Batch(msgs[0][1], stamp, tuple((conn, raw) for _, _, conn, raw in msgs))
 
-    def ready() -> Iterator[Batch]:
-        while frames:
-            oldest = min(frames)
-            if oldest == latest:
-                return
-            if not complete(oldest) and not any(complete(s) for s in frames if s not in (oldest, latest)):
-                return
-            log_ns, msgs, _ = frames.pop(oldest)
-            yield Batch(log_ns, oldest, tuple(msgs))
+    def decide(frames: list[Any]) -> None:
+        for frame in frames:
+            msgs = [item for item in frame.items if item is not None]
+            for stamp in frame.stamps:
+                if stamp is not None:
+                    msgs += side.pop(stamp, [])
+                    held_stamps[stamp] = len(held)
+            held.append((min(s for s in frame.stamps if s is not None), msgs))
 
-    for conn, log_ns, raw in messages:
-        raw = bytes(raw)
+    first: list[tuple[int, int, Connection, bytes]] = []    # messages before the first image
+    for seq, (conn, log_ns, raw) in enumerate(messages):
+        message = (seq, log_ns, conn, bytes(raw))
         if conn.topic in image_topics:
-            stamp = header_stamp_ns(raw)
-            if stamp not in frames:
-                frames[stamp] = (before_first_log if before_first else log_ns, before_first, set())
-                before_first = []
-            frames[stamp][1].append((conn, raw))
-            frames[stamp][2].add(conn.topic)
-            latest = stamp
-            yield from ready()
-        elif latest is None or latest not in frames:
-            if not before_first:  # before any image, or after the latest image's frame was emitted
-                before_first_log = log_ns
-            before_first.append((conn, raw))
+            stamp = header_stamp_ns(message[3])
+            frames, issues = sync.add(conn.topic, stamp, message)     # (the tracker reports the issues)
+            # an image refused (a late or repeated stamp) goes out like the messages beside it
+            if not any(i.kind in ("duplicate", "out_of_order") for i in issues):
+                for held_stamp, msgs in held:
+                    yield batch(held_stamp, msgs)
+                held.clear()
+                held_stamps.clear()
+                latest = stamp
+                if first:
+                    side.setdefault(latest, []).extend(first)
+                    first = []
+                decide(frames)
+                continue
+        if latest is None:
+            first.append(message)
+        elif latest in held_stamps:
+            held[held_stamps[latest]][1].append(message)
         else:
-            frames[latest][1].append((conn, raw))
-    latest = None
-    for stamp in sorted(frames):
-        log_ns, msgs, _ = frames.pop(stamp)
-        yield Batch(log_ns, stamp, tuple(msgs))
-    if before_first:  # trailing messages with no frame after them
-        yield Batch(before_first_log, None, tuple(before_first))
+            side.setdefault(latest, []).append(message)
+    decide(sync.flush()[0])
+    for stamp, msgs in held:
+        yield batch(stamp, msgs)
+    leftover = [m for msgs in side.values() for m in msgs] + first
+    if leftover:  # messages whose image was refused (a late or duplicate stamp), or no image at all
+        leftover.sort(key=lambda m: m[0])
+        yield Batch(leftover[0][1], None, tuple((conn, raw) for _, _, conn, raw in leftover))
 
 
 def message_class(msgtype: str) -> type:
@@ -331,7 +345,8 @@ class Replayer:
             self._ack_sub = self.node.create_subscription(
                 Header, cfg.ack_topic, self._on_ack, _qos(False, max(cfg.depth, 10))
             )
-        self._batches = iter_batches(iter_messages(self._reader, self.path, read), self._image_topics)
+        self._batches = iter_batches(iter_messages(self._reader, self.path, read), self._image_topics,
+                                     cfg.sync_tolerance)
         self._next: Batch | None = None
         self._exhausted = False
         self._awaiting: deque[tuple[int, float]] = deque()   # (frame stamp ns, published at) not yet acked
@@ -531,6 +546,8 @@ PARAMETERS = (
                   "seconds to wait for subscribers before the first message (0: no wait)"),
     NodeParameter("ack_timeout", _DEFAULTS.ack_timeout, "seconds to wait for one ack in lockstep"),
     NodeParameter("frames_ahead", _DEFAULTS.frames_ahead, "lockstep: frames published beyond the oldest unacknowledged one"),
+    NodeParameter("sync_tolerance", _DEFAULTS.sync_tolerance, "images whose stamps differ by less than this fraction "
+                  "of a frame make one frame (0: equal stamps only)"),
 )
 
 
@@ -540,12 +557,14 @@ class ReplayNode(AwalkerNode):
     def __init__(self, node_name: str = "awalker_replay", **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         values = declare_parameters(self, PARAMETERS)
-        bag, rate, lockstep, ack_topic, topics, wait, ack_timeout, frames_ahead = (values[p.name] for p in PARAMETERS)
+        bag, rate, lockstep, ack_topic, topics, wait, ack_timeout, frames_ahead, tolerance = (
+            values[p.name] for p in PARAMETERS)
         if not bag:
             raise InputError("parameter 'bag' is required (--ros-args -p bag:=PATH)")
         config = ReplayConfig(
             rate=float(rate), lockstep=bool(lockstep), ack_topic=str(ack_topic), topics=tuple(topics or ()),
             wait_for_subscribers=float(wait), ack_timeout=float(ack_timeout), frames_ahead=int(frames_ahead),
+            sync_tolerance=float(tolerance),
         )
         self.replayer = Replayer(self, bag, config)
 
@@ -561,6 +580,7 @@ def replay_main(bag: str, config: ReplayConfig, args: list[str] | None = None) -
             Parameter("wait_for_subscribers", value=float(config.wait_for_subscribers)),
             Parameter("ack_timeout", value=float(config.ack_timeout)),
             Parameter("frames_ahead", value=int(config.frames_ahead)),
+            Parameter("sync_tolerance", value=float(config.sync_tolerance)),
             *([Parameter("topics", value=list(config.topics))] if config.topics else []),
         ])
         return _spin_replay(node)

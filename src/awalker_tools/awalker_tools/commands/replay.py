@@ -27,6 +27,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--frames-ahead", type=int, default=defaults.frames_ahead, metavar="N",
                         help="with --lockstep: publish up to N frames beyond the oldest unacknowledged one, so "
                         f"feature extraction overlaps tracking (default {defaults.frames_ahead})")
+    parser.add_argument("--sync-tolerance", type=float, default=defaults.sync_tolerance, metavar="F",
+                        help="cameras' images whose stamps differ by less than F frame periods make one frame "
+                        "(default 1/3; 0: equal stamps only)")
     parser.add_argument("--topics", nargs="+", default=[], metavar="TOPIC", help="replay only these topics")
     parser.add_argument("--wait-for-subscribers", type=float, default=defaults.wait_for_subscribers, metavar="SEC",
                         help="wait this long for subscribers before the first message (0: no wait; "
@@ -38,5 +41,6 @@ def run(args: argparse.Namespace) -> int:
     config = ReplayConfig(
         rate=args.rate, lockstep=args.lockstep, ack_topic=args.ack_topic, topics=tuple(args.topics),
         wait_for_subscribers=args.wait_for_subscribers, ack_timeout=args.ack_timeout, frames_ahead=args.frames_ahead,
+        sync_tolerance=args.sync_tolerance,
     ).validated("awalker replay")
     return replay_main(args.bag, config)

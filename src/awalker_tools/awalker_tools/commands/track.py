@@ -10,6 +10,7 @@ from awalker_tracker.errors import InputError
 from awalker_tools.outdir import output_path, whole_number
 from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES, tracking_profile
 from awalker_tracker.inference.smc import MAX_PARTICLES
+from awalker_tracker.inference.sync import DEFAULT_TOLERANCE
 
 DEFAULTS = PROFILES[DEFAULT_PROFILE]
 
@@ -49,6 +50,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--trust (gamma) must lie in [0, 1], got {trust}")
     if lookahead < 0:
         raise InputError(f"--lookahead must be >= 0, got {lookahead}")
+    if not 0.0 <= args.sync_tolerance < 1.0:
+        raise InputError(f"--sync-tolerance must lie in [0, 1) frame periods, got {args.sync_tolerance}")
     follow_near = tuple(args.follow_near) if args.follow_near is not None else None
     try:
         AutoStartConfig(follow_near=follow_near)      # the tracker node's check, before anything starts
@@ -62,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         recovery=profile.recovery and not args.no_recovery, depth_band_m=args.depth_band,
         auto_start=args.auto_start or args.follow_near is not None,
         follow_near=follow_near, overlays=not args.no_overlay, fit_body=args.fit_body,
-        storage=args.storage, force=args.force,
+        storage=args.storage, force=args.force, sync_tolerance=args.sync_tolerance,
         share_topics=args.share_topics))
     return 0
 
@@ -120,6 +123,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--no-recovery", action="store_true",
                         help="never re-seed fallen walkers, re-acquire a lost track, hold the walkers while the person "
                              "stands still or hold one camera's depth by the feet row (the exact filter of the paper)")
+    parser.add_argument("--sync-tolerance", type=float, default=DEFAULT_TOLERANCE, metavar="F",
+                        help="cameras' images whose stamps differ by less than F frame periods make one frame (nearest "
+                             "stamp; default 1/3; 0: equal stamps only); a frame missing a camera is tracked with the "
+                             "others")
     parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="result bag storage")
     parser.add_argument("--no-overlay", action="store_true", help="skip overlay images and video")
     parser.add_argument("--fit-body", action=argparse.BooleanOptionalAction, default=None,

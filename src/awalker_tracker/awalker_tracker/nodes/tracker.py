@@ -1,12 +1,13 @@
 """Tracker node: per-camera image features -> particle filter -> posterior summaries.
 
 Subscribes ``/<cam>/features`` (awalker_msgs/ImageFeatures) of every camera in the ``cameras``
-parameter, pairs them by stamp (``inference.sync``), steps the filter and publishes
-``/awalker/posterior`` (awalker_msgs/PosteriorSummary, stamped with the image stamp). Each
-frame is acknowledged on ``/awalker/ack`` (std_msgs/Header with its stamp) once the filter has
-taken it, so a lockstep replay can send the next. Because of the look-ahead, the summary of
-frame t is published when frame t + tau arrives; after ``idle_flush_s`` without new frames
-(or on ``flush()``) the remaining frames are completed.
+parameter, pairs them by nearest stamp within ``sync_tolerance`` of a frame (``inference.sync``; a frame
+missing a camera is tracked with the others, that camera's features carrying no evidence), steps the
+filter and publishes ``/awalker/posterior`` (awalker_msgs/PosteriorSummary, stamped with the image
+stamp). Each frame is acknowledged on ``/awalker/ack`` (std_msgs/Header with the frame's latest image
+stamp) once the filter has taken it, so a lockstep replay can send the next. Because of
+the look-ahead, the summary of frame t is published when frame t + tau arrives; after ``idle_flush_s``
+without new frames (or on ``flush()``) the remaining frames are completed.
 
 Cameras come from the ``calibration`` YAML or from ``/<cam>/camera_info`` + ``/<cam>/camera_pose``
 (as the replay publishes them); start and body descriptions from YAML files or the latched
@@ -38,7 +39,7 @@ from awalker_tracker.inference.posterior import PosteriorSummary as CoreSummary
 from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES, tracking_profile
 from awalker_tracker.inference.recovery import RecoveryConfig
 from awalker_tracker.inference.smc import SMCConfig
-from awalker_tracker.inference.sync import StampSynchronizer
+from awalker_tracker.inference.sync import DEFAULT_TOLERANCE, StampSynchronizer
 from awalker_tracker.inference.tracker import (
     ImageObservation, StartDescription, Tracker, TrackerConfig, TrackerModel, image_likelihood)
 from awalker_tracker.model.body import BodyDescription
@@ -124,8 +125,10 @@ PARAMETERS = (
     NodeParameter("world_frame", "world", "world frame id of the outputs"),
     NodeParameter("ack_topic", "/awalker/ack", "std_msgs/Header acks of processed frames"),
     NodeParameter("idle_flush_s", 2.0, "complete pending frames after this idle time (s)"),
-    NodeParameter("sync_queue", 30, "incomplete frames kept while pairing cameras"),
-    NodeParameter("sync_timeout_s", 2.0, "give up (report, ack) on a frame missing a camera after this (s)"),
+    NodeParameter("sync_queue", 30, "features kept per camera while pairing cameras"),
+    NodeParameter("sync_timeout_s", 2.0, "track a frame without the cameras still missing after this (s)"),
+    NodeParameter("sync_tolerance", DEFAULT_TOLERANCE, "images of one frame may lie this fraction of a frame period apart "
+                  "(paired by nearest stamp; 0: equal stamps only; the period from frame_rate, else the stamps)"),
 )
 
 
@@ -164,6 +167,7 @@ class TrackerNode(AwalkerNode):
         self.idle_flush_s = float(v["idle_flush_s"])
         queue = v["sync_queue"]
         self.sync_timeout_s = float(v["sync_timeout_s"])
+        sync_tolerance = float(v["sync_tolerance"])
         if not cameras:
             raise InputError("awalker_tracker: parameter 'cameras' is required (e.g. -p cameras:=[cam0])")
         try:
@@ -184,7 +188,11 @@ class TrackerNode(AwalkerNode):
             TrackerConfig(pelvis_ceiling=self.pelvis_ceiling, pelvis_ceiling_min_cameras=self.pelvis_ceiling_min_cameras)
         except ValueError as exc:
             raise InputError(f"awalker_tracker: parameters 'pelvis_ceiling', 'pelvis_ceiling_min_cameras': {exc}") from None
-        self.sync = StampSynchronizer(self.camera_names, max_pending=int(queue))
+        try:
+            self.sync = StampSynchronizer(self.camera_names, max_pending=int(queue), tolerance=sync_tolerance,
+                                          period_ns=round(1e9 / self.frame_rate) if self.frame_rate > 0 else None)
+        except ValueError as exc:
+            raise InputError(f"awalker_tracker: parameters 'sync_queue', 'sync_tolerance': {exc}") from None
         self.stats = TrackerNodeStats()
         self.tracker: Tracker | None = None
         self.summaries: list[CoreSummary] = []
@@ -192,7 +200,8 @@ class TrackerNode(AwalkerNode):
         self._person_still = False     # the last summary said the person stands still (logged on change)
         self._pending: list[_Pending] = []
         self._frame_counter = 0                     # frame index = distinct stamps seen, dropped ones included
-        self._arrivals: dict[int, float] = {}       # stamp -> arrival time of its first camera message
+        self._arrivals: dict[int, float] = {}       # stamp -> arrival time of the items waiting to be paired
+        self._last_features: dict[str, Any] = {}   # camera -> its latest features (the shape of a frame it misses)
         self._first_stamps: list[int] = []
         self._last_frame_time = time.monotonic()
         self._dirty = False   # frames pushed since the last flush
@@ -292,28 +301,42 @@ class TrackerNode(AwalkerNode):
             self._ack(stamp)
             return
         self._arrivals.setdefault(stamp, time.monotonic())
-        frames, issues = self.sync.add(cam, stamp, item)
-        self._report(issues)
+        self._last_features[cam] = item
+        self._take(*self.sync.add(cam, stamp, item))
+        self._last_frame_time = time.monotonic()
+
+    def _take(self, frames: list[Any], issues: list[Any]) -> None:
+        """Log the synchroniser's issues; queue, filter and acknowledge (with its latest stamp) each frame, also one
+        missing a camera (tracked with the others)."""
+        for issue in issues:
+            self.stats.sync_issues.append(issue.message)
+            self.get_logger().warning(issue.message)
+        waiting = set(self.sync.pending_stamps)
+        self._arrivals = {s: t for s, t in self._arrivals.items() if s in waiting}
         for frame in frames:
-            self._arrivals.pop(frame.stamp_ns, None)
             self._pending.append(_Pending(frame.stamp_ns, self._frame_counter, frame.items))
             self._frame_counter += 1
             self.stats.frames_received += 1
             if len(self._first_stamps) < 2:
                 self._first_stamps.append(frame.stamp_ns)
             self._process_pending()
-            self._ack(frame.stamp_ns)
-        self._last_frame_time = time.monotonic()
+            self._ack(frame.last_stamp_ns)
 
-    def _report(self, issues: list) -> None:
-        """Log synchronisation problems; frames given up on still count and are acknowledged."""
-        for issue in issues:
-            self.stats.sync_issues.append(issue.message)
-            self.get_logger().warning(issue.message)
-            if issue.kind in ("incomplete", "overflow"):
-                self._arrivals.pop(issue.stamp_ns, None)
-                self._frame_counter += 1
-                self._ack(issue.stamp_ns)
+    def _filled(self, items: tuple[Any, ...]) -> tuple[Any, ...]:
+        """A frame's features with features carrying no evidence for each camera it has none of
+        (``vision.features.blank_features``, shaped as that camera's latest, else as another camera's)."""
+        if all(item is not None for item in items):
+            return items
+        from awalker_tracker.vision.features import blank_features
+
+        present = next(item for item in items if item is not None)
+        filled = []
+        for cam, item in zip(self.camera_names, items):
+            if item is None:
+                camera = self.cameras[cam]
+                item = blank_features(self._last_features.get(cam, present), camera.width, camera.height)
+            filled.append(item)
+        return tuple(filled)
 
     def _ack(self, stamp_ns: int) -> None:
         self.ack_pub.publish(header(stamp_ns, self.world_frame))
@@ -424,6 +447,8 @@ class TrackerNode(AwalkerNode):
     def _process_pending(self, final: bool = False) -> None:
         if not self.ready() or not self._pending:
             return
+        for item in self._pending:
+            item.messages = self._filled(item.messages)
         if self.start is None and not self._find_start(final):
             return
         if self.tracker is None and not self._make_tracker():
@@ -460,7 +485,8 @@ class TrackerNode(AwalkerNode):
                 self.summaries.append(s)
 
     def flush(self) -> int:
-        """Complete all frames still waiting for look-ahead data; returns how many were published."""
+        """Complete all frames still waiting for a camera or for look-ahead data; returns how many were published."""
+        self._take(*self.sync.flush())
         self._process_pending(final=True)
         if self.tracker is None or not self._dirty:
             return 0
@@ -471,11 +497,9 @@ class TrackerNode(AwalkerNode):
 
     def _on_timer(self) -> None:
         now = time.monotonic()
-        for stamp in [s for s, t in self._arrivals.items() if now - t > self.sync_timeout_s]:
-            issue = self.sync.discard(stamp, f"waited {self.sync_timeout_s:.1f} s")
-            self._arrivals.pop(stamp, None)
-            if issue is not None:
-                self._report([issue])
+        waiting = self.sync.pending_stamps
+        if waiting and now - self._arrivals.get(waiting[0], now) > self.sync_timeout_s:
+            self._take(*self.sync.expire(f"waited {self.sync_timeout_s:.1f} s"))
         if self._dirty and time.monotonic() - self._last_frame_time > self.idle_flush_s:
             self.flush()
 

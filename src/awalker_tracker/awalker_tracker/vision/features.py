@@ -138,6 +138,14 @@ class FrameFeatures:
         return int(self.llr.shape[1]), int(self.llr.shape[2])
 
 
+def blank_features(like: FrameFeatures, width: int, height: int) -> FrameFeatures:
+    """Features that carry no evidence (zero maps, no valid flow) of a ``width`` x ``height`` image, with ``like``'s
+    part classes, map downsampling and flow cells: a frame a camera has no image in."""
+    d = like.downsample
+    return FrameFeatures(like.classes, np.zeros((len(like.classes), height // d, width // d), np.float32), d,
+                         width, height, FlowGrid.empty(height, width, like.flow.cell_size))
+
+
 def occlusion_map_mask(mask: np.ndarray | None, downsample: int, shape: tuple[int, int]) -> np.ndarray | None:
     """A full-resolution occlusion mask -> (h, w) bool: any occluded pixel in a block occludes it."""
     if mask is None:
