@@ -254,3 +254,28 @@ def test_a_zero_likelihood_scale_is_dead_reckoning(walk):
     assert not np.array_equal(map_markers(1e-9, markers), map_markers(1e-9, shifted))
     with pytest.raises(ValueError, match="likelihood_scale"):
         TrackerConfig(likelihood_scale=-0.1)
+
+
+def test_the_filter_steps_through_a_gap_in_the_stamps(walk):
+    """Every 5th frame missing from the stamps (no camera delivered it): the filter walks its walkers through the
+    gap (``Tracker.push`` takes the step from the stamps), where stepping one frame per observation slipped behind
+    the person. Measured: median pelvis error 40-75 mm with the gaps walked through, 168-174 mm without."""
+    body, markers, _, _ = walk
+    start = StartDescription(0, tuple(markers[0, 0, :2]), 0.4, 1.3, 0.7, LEFT)
+    kept = [k for k in range(len(markers)) if k % 5 != 4]
+
+    def pelvis_error(stamp_frames: list[int], seed: int) -> float:
+        config = TrackerConfig(smc=SMCConfig(num_particles=300, seed=seed), dt=1 / 30, likelihood_scale=1.0)
+        tracker = Tracker(TrackerModel(body, start, marker_likelihood(0.03), config))
+        rng = np.random.default_rng(5)
+        for i, (k, f) in enumerate(zip(kept, stamp_frames)):
+            tracker.push(i, 1_000 + f * 33_333_333, markers[k] + 0.01 * rng.standard_normal(markers[k].shape))
+        tracker.finish()
+        assert tracker.model.frames_per_step == (2 if stamp_frames[-1] - stamp_frames[-2] == 2 else 1)
+        track = tracker.map_trajectory().markers
+        return float(np.median(np.linalg.norm(track[:, 0] - markers[kept][:, 0], axis=1)))
+
+    for seed in (0, 1):
+        walked = pelvis_error(kept, seed)                         # the stamps as they came, gaps included
+        slipped = pelvis_error(list(range(len(kept))), seed)      # the same images one frame apart
+        assert walked < 0.09 and walked < 0.6 * slipped, (seed, walked, slipped)

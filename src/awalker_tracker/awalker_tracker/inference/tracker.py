@@ -393,6 +393,8 @@ class TrackerModel:
         self.monitor = (LostTrackMonitor(cameras, config.recovery, config.dt, body_height_m=self.body.height)
                         if cameras and (config.recovery.reacquire or config.recovery.hold_still) else None)
         self.reseeded_fallen = 0     # particles re-seeded after a fall, over the run
+        # frame periods the next transition spans (``Tracker.push``: from the stamps; > 1 over frames no image came for)
+        self.frames_per_step = 1
         self._depth_band_centre: np.ndarray | None = None   # this frame's, one camera (rejuvenate)
 
     # -- SMC protocol ---------------------------------------------------------------------
@@ -489,6 +491,33 @@ class TrackerModel:
         return walker, control
 
     def transition(self, states: TrackerStates, rng: np.random.Generator) -> tuple[TrackerStates, Any]:
+        """``frames_per_step`` frames of the dynamics (``_transition_frame``): a gap in the stamps is walked
+        through, not skipped; the frames' re-seedings, jumps, label flips and heel strikes are merged (a strike's
+        ``strike_fraction`` then a fraction of the whole step, the last strike's)."""
+        new, events = self._transition_frame(states, rng)
+        k = self.frames_per_step
+        if k == 1:
+            return new, events
+        fraction = np.where(events.heel_strike, events.strike_fraction / k, events.strike_fraction)
+        merged = replace(events, heel_strike=events.heel_strike.copy(), fallen=events.fallen.copy(),
+                         strike_fraction=fraction, strike_position=events.strike_position.copy(),
+                         toe_off_impulse=events.toe_off_impulse.copy(), pre_strike_rates=events.pre_strike_rates.copy())
+        for j in range(1, k):
+            more, later = self._transition_frame(new, rng)
+            new = replace(more, reseeded=np.where(more.reseeded != 0, more.reseeded, new.reseeded),
+                          jump=new.jump + more.jump, flipped=new.flipped | more.flipped)
+            hit = np.asarray(later.heel_strike, bool)
+            merged.heel_strike |= hit
+            merged.fallen |= np.asarray(later.fallen, bool)
+            merged.strike_fraction[hit] = (j + later.strike_fraction[hit]) / k
+            merged.strike_position[hit] = later.strike_position[hit]
+            merged.toe_off_impulse[hit] = later.toe_off_impulse[hit]
+            merged.pre_strike_rates[hit] = later.pre_strike_rates[hit]
+            merged.time_since_strike = later.time_since_strike
+        return new, merged
+
+    def _transition_frame(self, states: TrackerStates, rng: np.random.Generator) -> tuple[TrackerStates, Any]:
+        """One frame period of the dynamics, s_t ~ p(s_t | s_{t-1})."""
         walker, control, events = self._control.sample_transition(
             self.params, self.prior, states.walker, states.control, self.config.dt, rng)
         kin, pose = self._kin.sample_posed_kinematics(self.kin_config, self.body, self.params, walker,
@@ -777,6 +806,10 @@ class Tracker:
         """Add the observation of one frame; returns the summaries completed (in frame order)."""
         if self._frames and stamp_ns <= self._frames[-1][1]:
             raise ValueError(f"frame stamps must increase: {stamp_ns} after {self._frames[-1][1]}")
+        # the filter's step from the stamps: a gap of k frame periods (frames no camera delivered) is k frames of the
+        # walker's motion, so the track does not slip in time; jitter within half a period is not a gap
+        self.model.frames_per_step = (max(1, round((stamp_ns - self._frames[-1][1]) * 1e-9 / self.config.dt))
+                                      if self._frames else 1)
         self._frames.append((int(frame_index), int(stamp_ns)))
         return [self._summarize(s) for s in self.filter.push(obs)]
 
