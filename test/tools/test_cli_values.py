@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from awalker_tools import cli, pipeline
+from awalker_tools import cli, convert, pipeline
 from awalker_tools.commands import gaits as gaits_command
 from awalker_tools.commands import synth as synth_command
 from awalker_tracker.errors import InputError
@@ -15,6 +15,7 @@ from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.vision.camera import load_calibration
 
 TRACK = ["track", "x.bag", "--out", "run"]
+CONVERT = ["convert", "--calibration", "cal.yaml", "--out", "out.bag", "--images", "cam0=frames"]
 BAD = [
     (TRACK + ["--seed", "-1"], "--seed"),
     (TRACK + ["--likelihood-scale", "inf"], "--likelihood-scale"),
@@ -31,15 +32,29 @@ BAD = [
     (["gaits", "solve", "--out", "t.json", "--speeds", "2:7:100000"], "at most 2000"),
     (["fitbody", "run", "--factors", "nan"], "--factors"),
     (["replay", "x.bag", "--lockstep", "--ack-timeout", "nan"], "ack_timeout"),
+    (CONVERT + ["--fps", "1e-9"], "--fps must lie in 0.1-10000 frames/s, got 1e-09"),
+    (CONVERT + ["--fps", "0"], "--fps must lie in 0.1-10000"),
+    (CONVERT + ["--fps", "-25"], "--fps must lie in 0.1-10000"),
+    (CONVERT + ["--fps", "nan"], "--fps must lie in 0.1-10000"),
+    (CONVERT + ["--fps", "inf"], "--fps must lie in 0.1-10000"),
+    (CONVERT + ["--fps", "25", "--start-time", "-5"], "--start-time must lie in 0-2147483648 s"),
+    (CONVERT + ["--fps", "25", "--start-time", "nan"], "--start-time must lie in 0-2147483648 s"),
+    (CONVERT + ["--fps", "25", "--start-time", "1e10"], "--start-time must lie in 0-2147483648 s"),
+    (CONVERT + ["--timestamps", "stamps_1e10.txt"], "stamps_1e10.txt:2: stamp 1e+10 s: expected seconds since 1970 "
+                                                     "below 2147483648"),
 ]
+#: Input files the bad commands read (written before each; a bad value must be refused before their work).
+INPUTS = {"stamps_1e10.txt": "0\n1e10\n"}
 
 
 @pytest.mark.parametrize("argv, needle", BAD, ids=[" ".join(a[:1] + a[-2:]) for a, _ in BAD])
 def test_bad_value_is_one_line_exit_2(argv: list[str], needle: str, tmp_path: Path, monkeypatch, capsys) -> None:
     monkeypatch.chdir(tmp_path)
+    for name, text in INPUTS.items():
+        (tmp_path / name).write_text(text)
     # the work itself: reaching any of it means the value was not checked first
     for target, name in ((pipeline, "run_tracking"), (synth_command, "synthesise"),
-                         (gaits_command.gaits, "solve_grid")):
+                         (gaits_command.gaits, "solve_grid"), (convert, "load_calibration")):
         monkeypatch.setattr(target, name, lambda *a, **k: pytest.fail(f"{name} reached"))
     rc = cli.main(argv)
     err = capsys.readouterr().err
@@ -47,7 +62,7 @@ def test_bad_value_is_one_line_exit_2(argv: list[str], needle: str, tmp_path: Pa
     assert rc == 2, err
     assert len(lines) == 1 and "Traceback" not in err, err
     assert lines[0].startswith(f"awalker {argv[0]}: error: ") and needle in lines[0], lines[0]
-    assert list(tmp_path.iterdir()) == []            # nothing written
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(INPUTS)       # nothing written
 
 
 @pytest.mark.parametrize("load, what", [(StartDescription.from_yaml, "start description"),

@@ -26,6 +26,10 @@ from awalker_tools.bagio import BODY_DESCRIPTION_TOPIC, START_DESCRIPTION_TOPIC,
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm")
 PROGRESS_PERIOD_S = 2.0
+#: A ROS stamp's seconds are an int32 (builtin_interfaces/Time): stamps must lie before 2^31 s, 2038-01-19.
+MAX_STAMP_S = 2**31
+#: Frame rates ``--fps`` takes (frames/s): a frame every 10 s up to a high-speed camera's.
+FPS_RANGE = (0.1, 10000.0)
 
 
 @dataclass(frozen=True)
@@ -109,6 +113,24 @@ def video_fps(path: Path) -> float:
         capture.release()
 
 
+def check_timing(fps: float | None, start_time: float) -> None:
+    """``--fps`` within ``FPS_RANGE`` (when given) and ``--start-time`` a stamp ROS can hold: one-line
+    ``InputError`` naming the option and the range (NaN and infinities included)."""
+    if fps is not None and not FPS_RANGE[0] <= fps <= FPS_RANGE[1]:
+        raise InputError(f"--fps must lie in {FPS_RANGE[0]:g}-{FPS_RANGE[1]:g} frames/s, got {fps:g}")
+    if not 0 <= start_time < MAX_STAMP_S:
+        raise InputError(f"--start-time must lie in 0-{MAX_STAMP_S} s (a ROS stamp: seconds since 1970, before "
+                         f"2038-01-19), got {start_time:g}")
+
+
+def check_stamp(stamp_ns: int, where: str) -> int:
+    """``stamp_ns`` if a ROS stamp can hold it (before ``MAX_STAMP_S``), else a one-line ``InputError``."""
+    if not 0 <= stamp_ns < MAX_STAMP_S * 1_000_000_000:
+        raise InputError(f"{where}: stamp {stamp_ns / 1e9:.9g} s: expected seconds since 1970 below {MAX_STAMP_S} "
+                         "(2^31, 2038-01-19), the most a ROS stamp holds")
+    return stamp_ns
+
+
 def read_timestamps(path: Path) -> list[int]:
     """Timestamps file: one stamp per frame in seconds (decimal), '#' comments; -> ns, strictly increasing."""
     try:
@@ -126,7 +148,7 @@ def read_timestamps(path: Path) -> list[int]:
             raise InputError(f"{path}:{number}: expected a timestamp in seconds, got {line.strip()!r}") from None
         if not value.is_finite() or value < 0:
             raise InputError(f"{path}:{number}: timestamp must be a finite number >= 0 s, got {text!r}")
-        ns = int(value * 1_000_000_000)
+        ns = check_stamp(int(value * 1_000_000_000), f"{path}:{number}")
         if stamps and ns <= stamps[-1]:
             raise InputError(f"{path}:{number}: timestamps must increase strictly, {text} s is not after the "
                              f"previous one ({stamps[-1] / 1e9:.9f} s)")
@@ -163,6 +185,8 @@ def convert(
     """Write the bag; returns the number of frames. Progress lines go to stderr."""
     if not sources:
         raise InputError("convert: give at least one --video CAM=PATH or --images CAM=DIR")
+    check_timing(fps, start_time)
+    stamps = read_timestamps(timestamps) if timestamps is not None else None
     cameras = {c.name: c for c in load_calibration(calibration)}
     seen: set[str] = set()
     for source in sources:
@@ -172,9 +196,6 @@ def convert(
         if source.camera in seen:
             raise InputError(f"convert: camera {source.camera} given twice")
         seen.add(source.camera)
-    if fps is not None and not fps > 0:
-        raise InputError(f"convert: --fps must be > 0, got {fps}")
-    stamps = read_timestamps(timestamps) if timestamps is not None else None
     if stamps is None and fps is None:
         rates = {s.path: video_fps(s.path) for s in sources if s.kind == "video"}
         if not rates or any(r <= 0 for r in rates.values()):
@@ -213,7 +234,7 @@ def convert(
                     raise InputError(f"{timestamps}: {len(stamps)} timestamps but the sources have more frames")
                 stamp = stamps[frames]
             else:
-                stamp = start_ns + round(frames * 1e9 / fps)  # type: ignore[operator]
+                stamp = check_stamp(start_ns + round(frames * 1e9 / fps), f"frame {frames}")  # type: ignore[operator]
             if frames == 0:
                 for topic, text in texts.items():
                     writer.write_text(topic, stamp, text)
