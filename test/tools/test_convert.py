@@ -124,3 +124,79 @@ def test_image_files_natural_order_and_timestamps_parser(tmp_path: Path) -> None
     stamps.write_text("0.5\nabc\n")
     with pytest.raises(InputError, match=r"t.txt:2: expected a timestamp in seconds"):
         read_timestamps(stamps)
+
+
+def mjpg_video(tmp_path: Path, frames: int = 20) -> tuple[Path, Path]:
+    """A 64x48 MJPG .avi of ``frames`` random frames at 25 fps, and its calibration."""
+    path = tmp_path / "calibration64.yaml"
+    save_calibration([Camera.look_at("cam0", 64, 48, 40.0, [5.0, 0.0, 1.5], [0.0, 0.0, 1.0])], path)
+    video = tmp_path / "walk.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 25.0, (64, 48))
+    rng = np.random.default_rng(3)
+    for _ in range(frames):
+        writer.write(rng.integers(0, 256, (48, 64, 3), dtype=np.uint8))
+    writer.release()
+    return video, path
+
+
+def jpeg_chunks(data: bytes) -> list[tuple[int, int]]:
+    """(offset, size) of each compressed frame of an AVI: its '00dc' chunks holding a JPEG (not the index's)."""
+    chunks, at = [], data.find(b"00dc")
+    while at >= 0:
+        size = int.from_bytes(data[at + 4:at + 8], "little")
+        if data[at + 8:at + 10] == b"\xff\xd8":
+            chunks.append((at + 8, size))
+        at = data.find(b"00dc", at + 8)
+    return chunks
+
+
+def convert_video(video: Path, cal: Path, out: Path, capsys) -> tuple[int, list[str]]:
+    rc = cli.main(["convert", "--calibration", str(cal), "--out", str(out), "--video", f"cam0={video}"])
+    return rc, [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+
+
+def test_cut_off_video_warns_with_the_counts(tmp_path: Path, capsys) -> None:
+    """A video cut off half way (issue 57: 23 of 48 frames were silently missing): the frames read against the
+    20 its container states, in one warning line at the end; exit 0; the frames keep their stamps."""
+    video, cal = mjpg_video(tmp_path)
+    data = video.read_bytes()
+    video.write_bytes(data[:len(data) // 2])
+    rc, lines = convert_video(video, cal, tmp_path / "out", capsys)
+    assert rc == 0, lines
+    with SequenceReader(tmp_path / "out") as reader:
+        stamps = reader.frame_stamps
+    read = len(stamps)
+    assert 0 < read < 20
+    assert lines[-1] == (f"convert: warning: {video}: {read} of the 20 frames its container states could be "
+                         f"decoded, the other {20 - read} are not in the bag (the frames written keep the stamps "
+                         "of their index)"), lines
+    assert list(stamps) == [i * 40_000_000 for i in range(read)]
+
+
+def test_undecodable_frame_inside_a_video_keeps_the_later_stamps(tmp_path: Path, capsys) -> None:
+    """Frame 5 undecodable: the 14 after it are still read (before, the video ended there), at their own stamps."""
+    video, cal = mjpg_video(tmp_path)
+    data = bytearray(video.read_bytes())
+    offset, size = jpeg_chunks(bytes(data))[5]
+    data[offset:offset + size] = bytes(size)
+    video.write_bytes(bytes(data))
+    rc, lines = convert_video(video, cal, tmp_path / "out", capsys)
+    assert rc == 0, lines
+    assert "19 of the 20 frames its container states could be decoded, the other 1 are" in lines[-1], lines
+    with SequenceReader(tmp_path / "out") as reader:
+        assert list(reader.frame_stamps) == [i * 40_000_000 for i in range(20) if i != 5]
+
+
+def test_video_with_no_decodable_frame_is_refused(tmp_path: Path, capsys) -> None:
+    video, cal = mjpg_video(tmp_path)
+    data = bytearray(video.read_bytes())
+    chunks = jpeg_chunks(bytes(data))
+    assert len(chunks) == 20
+    for offset, size in chunks:
+        data[offset:offset + size] = bytes(size)
+    video.write_bytes(bytes(data))
+    rc, lines = convert_video(video, cal, tmp_path / "out", capsys)
+    assert rc == 2
+    assert lines == [f"awalker convert: error: {video}: no frame of the video can be decoded (its container "
+                     "states 20)"]
+    assert not (tmp_path / "out").exists()

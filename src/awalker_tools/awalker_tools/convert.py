@@ -1,6 +1,8 @@
 """Convert videos or image folders plus a calibration YAML into a sequence bag.
 
-Several cameras are synchronised by frame index: frame i of every source gets the same stamp.
+Several cameras are synchronised by frame index: frame i of every source gets the same stamp. A video frame
+the decoder cannot read is left out (with the other cameras' frame of that index) and counted in a warning
+against the frame count the container states; the frames written keep the stamps of their index.
 Stamps come from a timestamps file (one per frame, seconds, increasing) or from the frame rate
 (the video's, or ``fps``) starting at ``start_time``.
 """
@@ -30,6 +32,9 @@ PROGRESS_PERIOD_S = 2.0
 MAX_STAMP_S = 2**31
 #: Frame rates ``--fps`` takes (frames/s): a frame every 10 s up to a high-speed camera's.
 FPS_RANGE = (0.1, 10000.0)
+#: Undecodable video frames in a row after which the rest of a video counts as cut off (a header stating 2^31
+#: frames would otherwise be read to its end; a failed read takes some microseconds).
+UNREADABLE_RUN_STOP = 10000
 
 
 @dataclass(frozen=True)
@@ -71,26 +76,49 @@ def _check_size(rgb: np.ndarray, camera: Camera, where: str) -> np.ndarray:
     return rgb
 
 
-def read_frames(source: Source, camera: Camera) -> Iterator[np.ndarray]:
-    """HxWx3 uint8 RGB frames of a source, checked against the camera's size."""
+@dataclass
+class FrameTally:
+    """What a source gave: frames decoded, and for a video the frame count its container states (None when it
+    states none)."""
+
+    read: int = 0
+    stated: int | None = None
+    ended: bool = False         # read to its end (not stopped early by a shorter camera)
+
+
+def read_frames(source: Source, camera: Camera, tally: FrameTally | None = None) -> Iterator[tuple[int, np.ndarray]]:
+    """(frame index, HxWx3 uint8 RGB frame) of a source, checked against the camera's size. A video frame the
+    decoder cannot read is left out and its index skipped (up to the count the container states; without one
+    the video ends there); counts go to ``tally``. A video none of whose frames decode is an ``InputError``."""
+    tally = tally if tally is not None else FrameTally()
     if source.kind == "images":
-        for path in image_files(source.path):
+        for index, path in enumerate(image_files(source.path)):
             bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
             if bgr is None:
                 raise InputError(f"{path}: cannot read image")
-            yield _check_size(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), camera, str(path))
+            yield index, _check_size(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), camera, str(path))
+            tally.read += 1
         return
     capture = open_video(source.path)
     try:
-        index = 0
+        stated = int(capture.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+        tally.stated = stated if stated > 0 else None
+        index = failed = 0
         while True:
             ok, bgr = capture.read()
-            if not ok:
-                break
-            yield _check_size(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), camera, f"{source.path} frame {index}")
+            if ok:
+                tally.read += 1
+                failed = 0
+                yield index, _check_size(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), camera, f"{source.path} frame {index}")
+            elif index >= stated - 1 or failed >= UNREADABLE_RUN_STOP:   # the container's last frame (or it states
+                break                                                  # none), or cut off: the video ends here
+            else:
+                failed += 1
             index += 1
-        if index == 0:
-            raise InputError(f"{source.path}: video has no readable frames")
+        tally.ended = True
+        if tally.read == 0:
+            raise InputError(f"{source.path}: no frame of the video can be decoded"
+                             + (f" (its container states {stated})" if stated > 0 else ""))
     finally:
         capture.release()
 
@@ -210,40 +238,61 @@ def convert(
     if body_description is not None:
         texts[BODY_DESCRIPTION_TOPIC] = read_description(body_description, "body")
     # Open every source before creating the bag, so a bad one fails without leaving output behind.
+    counts = []
     for source in sources:
         if source.kind == "video":
-            open_video(source.path).release()
+            capture = open_video(source.path)
+            counts.append(int(capture.get(cv2.CAP_PROP_FRAME_COUNT) or 0))
+            capture.release()
         else:
-            image_files(source.path)
-    used = [cameras[s.camera] for s in sources]
-    streams = {s.camera: read_frames(s, cameras[s.camera]) for s in sources}
+            counts.append(len(image_files(source.path)))
     start_ns = int(Decimal(str(start_time)) * 1_000_000_000)
-    frames = 0
+    if stamps is None and max(counts) > 1:     # the last frame's stamp too, before any work
+        check_stamp(start_ns + round((max(counts) - 1) * 1e9 / fps), f"--fps {fps:g} with --start-time "  # type: ignore[operator]
+                    f"{start_time:.10g}: frame {max(counts) - 1}")
+    used = [cameras[s.camera] for s in sources]
+    tallies = {s.camera: FrameTally() for s in sources}
+    streams = {s.camera: read_frames(s, cameras[s.camera], tallies[s.camera]) for s in sources}
+    frames = end = 0
     last_print = time.monotonic()
     with SequenceWriter(out, used, storage=storage, compressed=compressed, image_format=image_format) as writer:
+        heads = {cam: next(stream, None) for cam, stream in streams.items()}
         while True:
-            images = {cam: next(stream, None) for cam, stream in streams.items()}
-            ended = sorted(cam for cam, img in images.items() if img is None)
+            ended = sorted(cam for cam, head in heads.items() if head is None)
             if ended:
-                if len(ended) < len(images):
+                if len(ended) < len(heads):
                     print(f"convert: {', '.join(ended)} ended after {frames} frames; stopping there "
                           "(cameras are synchronised by frame index)", file=sys.stderr)
                 break
+            index = max(head[0] for head in heads.values())  # type: ignore[index]
+            if any(head[0] != index for head in heads.values()):  # type: ignore[index]
+                # a camera's frame could not be decoded: the frame index is left out for every camera
+                heads = {cam: head if head[0] == index else next(streams[cam], None)  # type: ignore[index]
+                         for cam, head in heads.items()}
+                continue
             if stamps is not None:
-                if frames >= len(stamps):
+                if index >= len(stamps):
                     raise InputError(f"{timestamps}: {len(stamps)} timestamps but the sources have more frames")
-                stamp = stamps[frames]
+                stamp = stamps[index]
             else:
-                stamp = check_stamp(start_ns + round(frames * 1e9 / fps), f"frame {frames}")  # type: ignore[operator]
+                stamp = check_stamp(start_ns + round(index * 1e9 / fps), f"frame {index}")  # type: ignore[operator]
             if frames == 0:
                 for topic, text in texts.items():
                     writer.write_text(topic, stamp, text)
-            writer.write_frame(stamp, images)  # type: ignore[arg-type]
+            writer.write_frame(stamp, {cam: head[1] for cam, head in heads.items()})  # type: ignore[index]
             frames += 1
+            end = index + 1
+            heads = {cam: next(stream, None) for cam, stream in streams.items()}
             if time.monotonic() - last_print >= PROGRESS_PERIOD_S:
                 last_print = time.monotonic()
                 print(f"convert: {frames} frames written", file=sys.stderr)
-        if stamps is not None and frames < len(stamps):
-            print(f"convert: note: {len(stamps)} timestamps for {frames} frames; the rest are unused", file=sys.stderr)
+        if stamps is not None and end < len(stamps):
+            print(f"convert: note: {len(stamps)} timestamps for {end} frames; the rest are unused", file=sys.stderr)
     print(f"convert: wrote {frames} frames from {len(sources)} camera(s) to {out}", file=sys.stderr)
+    short = [f"{source.path}: {tally.read} of the {tally.stated} frames its container states could be decoded, "
+             f"the other {tally.stated - tally.read} are not in the bag" for source in sources
+             if (tally := tallies[source.camera]).ended and (tally.stated or 0) > tally.read]
+    if short:
+        print(f"convert: warning: {'; '.join(short)} (the frames written keep the stamps of their index)",
+              file=sys.stderr)
     return frames
