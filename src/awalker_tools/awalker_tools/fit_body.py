@@ -8,7 +8,8 @@ again with ``awalker track BAG --body DIR/body_fitted.yaml``. A body scaled to t
 images keeps that height in the fit when two or more cameras saw it (``KEEP_HEIGHT_CAMERAS``). When the start
 names no stance leg (found automatically, or ``stance_leg: unknown``), it then weighs the two legs with the
 fitted body the same way and writes DIR/start_fitted.yaml, the start with the leg chosen (``awalker track``
-hands it to its second pass's tracker: ``TrackOptions.fitted_start``).
+hands it to its second pass's tracker: ``TrackOptions.fitted_start``). Its files follow ``outdir``'s rule: each
+is new or one the run's run.yaml lists (checked before the fit), and is added to that list once written.
 """
 from __future__ import annotations
 
@@ -22,6 +23,8 @@ import numpy as np
 
 from awalker_tracker.errors import InputError, parse_yaml
 from awalker_tracker.inference.sync import DEFAULT_TOLERANCE
+
+from awalker_tools.outdir import add_written, check_may_write
 
 FITTED_FILE = "body_fitted.yaml"
 FITTED_START_FILE = "start_fitted.yaml"
@@ -123,6 +126,8 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
         raise InputError(f"fitbody options: {exc}") from None
     start = StartDescription.from_yaml(run_dir / "start.yaml")
     body = BodyDescription.from_yaml(run_dir / "body.yaml")
+    # never over a file the run did not write (outdir's rule), checked before the fit's minutes of work
+    check_may_write(run_dir, [FITTED_FILE] + ([FITTED_START_FILE] if start.stance_leg is None else []))
     stamps, features = _features(run_dir, cameras, float(info.get("sync_tolerance", DEFAULT_TOLERANCE)))
     dt = float(np.median(np.diff(stamps))) * 1e-9
     first = start.frame
@@ -166,6 +171,7 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
                    "log_evidence": {f"{k:.2f}": round(v, 2) for k, v in fit.log_evidence.items()}}
     out = run_dir / FITTED_FILE
     out.write_text(fitted_body.to_yaml_text())
+    add_written(run_dir, [FITTED_FILE])
     summary.update({"given_leg_length_m": round(body.leg_length, 4), "frames": frames, "written": str(out)})
     if start.stance_leg is None:
         print(f"awalker fitbody: the start names no stance leg; both legs x {frames} frames from frame {first}, "
@@ -177,6 +183,7 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
         fitted_start = replace(start, stance_leg=stance.leg)
         start_out = run_dir / FITTED_START_FILE
         start_out.write_text(fitted_start.to_yaml_text())
+        add_written(run_dir, [FITTED_START_FILE])
         summary.update({"stance_leg": LEG_NAMES[stance.leg],
                         "stance_log_evidence": {LEG_NAMES[k]: round(v, 2) for k, v in stance.log_evidence.items()},
                         "stance_filters_per_leg": stance.filters,
