@@ -88,3 +88,20 @@ def test_bag_without_cameras_poses_or_images(tmp_path: Path, capsys) -> None:
     info = json.loads(capsys.readouterr().out)
     assert info["cameras"] == [] and info["frames"] == 0
     assert any("no /<cam>/camera_info topic" in m for m in info["missing"])
+
+
+def test_cameras_whose_stamps_do_not_pair_are_missing(tmp_path: Path, capsys) -> None:
+    """A second camera 20 ms behind at 20 fps (more than a third of a 50 ms frame): `awalker track` refuses the
+    bag, and info says why, with track's own words (pipeline.check_camera_sync); 3 ms behind pairs."""
+    from bag_helpers import shift_camera
+
+    complete_bag(tmp_path / "ok", frames=8)
+    shift_camera(tmp_path / "ok", tmp_path / "apart20", "side", 20_000_000)
+    assert cli.main(["info", str(tmp_path / "apart20")]) == 0
+    missing = [line for line in capsys.readouterr().out.splitlines() if line.startswith("MISSING")]
+    assert missing == ["MISSING: cameras out of sync: the images of /side/image_raw/compressed lie a median 20.0 ms "
+                       "from the nearest of /cam0/image_raw/compressed, more than --sync-tolerance 0.333 of a 50.0 ms "
+                       "frame; pass --sync-tolerance above 0.40 (below 1) to pair them"], missing
+    shift_camera(tmp_path / "ok", tmp_path / "apart3", "side", 3_000_000)
+    assert cli.main(["info", str(tmp_path / "apart3")]) == 0
+    assert "ready for tracking: nothing missing" in capsys.readouterr().out

@@ -5,6 +5,7 @@ from pathlib import Path
 from typing import Any
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.inference.sync import DEFAULT_TOLERANCE
 from awalker_tracker.vision.decode import UnsupportedEncoding
 
 from awalker_tools.bagio import (
@@ -22,7 +23,10 @@ from awalker_tools.bagio import (
 
 
 def bag_info(path: str | Path) -> dict[str, Any]:
-    """Topics, counts, duration, cameras and MISSING items of a bag, as plain data (JSON-ready)."""
+    """Topics, counts, duration, cameras and MISSING items of a bag, as plain data (JSON-ready); cameras whose
+    stamps do not pair into frames within ``awalker track``'s default sync tolerance are a MISSING item."""
+    from awalker_tools.pipeline import check_camera_sync
+
     path = Path(path)
     with SequenceReader(path) as seq:
         reader = seq.reader
@@ -78,6 +82,11 @@ def bag_info(path: str | Path) -> dict[str, Any]:
                 except InputError as exc:
                     missing.append(f"camera {name}: invalid calibration ({exc})")
             info["cameras"].append(entry)
+        if len(names) > 1 and all(c["frames"] for c in info["cameras"]):
+            try:      # the cameras pair into frames as `awalker track` pairs them, or it refuses the bag
+                check_camera_sync(path, seq, DEFAULT_TOLERANCE)
+            except InputError as exc:
+                missing.append(f"cameras out of sync: {str(exc).removeprefix(f'{path}: ')}")
         frame_counts = {c["frames"] for c in info["cameras"] if c["frames"]}
         if len(frame_counts) > 1:
             info["notes"].append(f"cameras have different frame counts {sorted(frame_counts)}")

@@ -333,7 +333,7 @@ def run_tracking(options: TrackOptions) -> TrackResult:
         # (the reader is opened once for every pass: opening parses its metadata, ~30 ms)
         with _stop_on_signals(stop), SequenceReader(bag) as reader:
             _check_image_encodings(bag, reader)
-            _check_camera_sync(bag, reader, options.sync_tolerance)
+            check_camera_sync(bag, reader, options.sync_tolerance)
             result = _run_passes(options, reader, stop)
     except BaseException as exc:
         reason = " ".join(str(exc).split()) or type(exc).__name__
@@ -354,14 +354,14 @@ def _check_image_encodings(bag: Path, reader: Any) -> None:
             raise InputError(f"{bag}: {error}")
 
 
-#: Images per camera whose stamps ``_check_camera_sync`` compares.
+#: Images per camera whose stamps ``check_camera_sync`` compares.
 SYNC_CHECK_IMAGES = 30
 
 
-def _check_camera_sync(bag: Path, reader: Any, tolerance: float) -> None:
+def check_camera_sync(bag: Path, reader: Any, tolerance: float) -> None:
     """Refuse cameras whose images would not pair into frames: another camera's first ``SYNC_CHECK_IMAGES`` images
     lying a median of more than ``tolerance`` frame periods from the first camera's nearest (each would be a
-    frame of its own, twice as many frames as there are)."""
+    frame of its own, twice as many frames as there are). Also ``awalker info``'s check (``baginfo``)."""
     from awalker_tools.bagio import stamp_ns_of
 
     def first_stamps(camera: Any) -> tuple[str, np.ndarray]:
