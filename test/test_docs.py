@@ -70,6 +70,7 @@ MODULE_CONSTANTS = (
     "nodes.pose_publisher.DEFAULT_CLOUD_POINTS", "nodes.pose_publisher.CONTACT_MIN_PROBABILITY",
     "inference.smc.MAX_PARTICLES", "inference.tracker.START_MAX_SPEED", "model.body.BODY_LEG_RANGE",
     "awalker_tools.synth.MAX_IMAGE_SIDE", "awalker_tools.commands.gaits.MAX_GRID_POINTS",
+    "awalker_tools.convert.FPS_RANGE", "awalker_tools.convert.UNREADABLE_RUN_STOP",
 )
 
 
