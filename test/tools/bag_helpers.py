@@ -1,8 +1,33 @@
-"""Shared by the tracking tests: a bag copied message for message with its camera images replaced."""
+"""Shared by the tracking tests: small synthetic walks, each test worker's own DDS domain, and bags copied
+message for message with their camera images replaced."""
 from __future__ import annotations
 
 from pathlib import Path
 from typing import Any
+
+import pytest
+
+
+@pytest.fixture(autouse=True)
+def isolated_ros(monkeypatch, ros_domain_id: int) -> None:
+    """`awalker track` runs its nodes in this process (or a child, which inherits the environment): keep parallel
+    test workers apart. Autouse in every module that imports it."""
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(ros_domain_id + 30))
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+
+
+def synth_walk(tmp_path_factory, frames: int, background: int, *options: str) -> Path:
+    """A 160x120 synthetic walk of ``frames`` frames with the person after ``background`` empty ones (``options``:
+    more `awalker synth` options), from the first synth seed whose walker does not fall; its bag."""
+    from awalker_tools.cli import main
+
+    for seed in range(1, 15):
+        out = tmp_path_factory.mktemp(f"synth{seed}")
+        code = main(["synth", "--out", str(out), *options, "--frames", str(frames), "--background-frames",
+                     str(background), "--size", "160", "120", "--seed", str(seed)])
+        if code == 0:
+            return out / "synth.bag"
+    pytest.fail("awalker synth could not make a walk that does not fall")
 
 
 def rewrite_images(source: Path, target: Path, image: Any) -> None:

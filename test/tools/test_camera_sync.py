@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from bag_helpers import shift_camera
+from bag_helpers import isolated_ros, shift_camera, synth_walk  # noqa: F401 (isolated_ros: an autouse fixture)
 
 from awalker_tools import evaluation
 from awalker_tools.bagio import SequenceReader
@@ -17,23 +17,11 @@ FRAMES, BACKGROUND = 10, 4
 PARTICLES = "50"
 
 
-@pytest.fixture(autouse=True)
-def isolated_ros(monkeypatch, ros_domain_id: int) -> None:
-    """`awalker track` runs its nodes in this process: keep parallel test workers apart."""
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(ros_domain_id + 30))
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
-
 
 @pytest.fixture(scope="module")
 def two_cameras(tmp_path_factory) -> Path:
     """A 160x120 two-camera synthetic walk, 4 background frames and 10 with the person."""
-    for seed in range(1, 15):
-        out = tmp_path_factory.mktemp(f"synth{seed}")
-        code = main(["synth", "--out", str(out), "--cameras", "2", "--frames", str(FRAMES), "--background-frames",
-                     str(BACKGROUND), "--size", "160", "120", "--seed", str(seed)])
-        if code == 0:
-            return out / "synth.bag"
-    pytest.fail("awalker synth could not make a walk that does not fall")
+    return synth_walk(tmp_path_factory, FRAMES, BACKGROUND, "--cameras", "2")
 
 
 def _track(bag: Path, out: Path, *options: str) -> int:

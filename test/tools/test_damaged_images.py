@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from bag_helpers import rewrite_images
+from bag_helpers import isolated_ros, rewrite_images, synth_walk  # noqa: F401 (isolated_ros: an autouse fixture)
 
 from awalker_tools import evaluation
 from awalker_tools.bagio import IMAGE, SequenceReader
@@ -21,23 +21,11 @@ FRAMES, BACKGROUND = 10, 4
 PARTICLES = "50"
 
 
-@pytest.fixture(autouse=True)
-def isolated_ros(monkeypatch, ros_domain_id: int) -> None:
-    """`awalker track` runs its nodes in this process: keep parallel test workers apart."""
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(ros_domain_id + 30))
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
-
 
 @pytest.fixture(scope="module")
 def synth_bag(tmp_path_factory) -> Path:
     """A 160x120 one-camera synthetic walk, 4 background frames and 10 with the person."""
-    for seed in range(1, 15):
-        out = tmp_path_factory.mktemp(f"synth{seed}")
-        code = main(["synth", "--out", str(out), "--frames", str(FRAMES), "--background-frames", str(BACKGROUND),
-                     "--size", "160", "120", "--seed", str(seed)])
-        if code == 0:
-            return out / "synth.bag"
-    pytest.fail("awalker synth could not make a walk that does not fall")
+    return synth_walk(tmp_path_factory, FRAMES, BACKGROUND)
 
 
 @pytest.fixture(scope="module")

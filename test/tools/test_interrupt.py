@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from bag_helpers import isolated_ros, synth_walk  # noqa: F401 (isolated_ros: an autouse fixture)
 
 from awalker_tools import evaluation
 from awalker_tools.cli import main
@@ -19,23 +20,11 @@ from awalker_tools.cli import main
 FRAMES, BACKGROUND = 150, 4
 
 
-@pytest.fixture(autouse=True)
-def isolated_ros(monkeypatch, ros_domain_id: int) -> None:
-    """`awalker track` (in a subprocess, which inherits the environment) apart from parallel test workers."""
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(ros_domain_id + 30))
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
-
 
 @pytest.fixture(scope="module")
 def long_bag(tmp_path_factory) -> Path:
     """A 160x120 one-camera synthetic walk of 150 frames with the person (5 s): long enough to interrupt."""
-    for seed in range(1, 15):
-        out = tmp_path_factory.mktemp(f"synth{seed}")
-        code = main(["synth", "--out", str(out), "--frames", str(FRAMES), "--background-frames", str(BACKGROUND),
-                     "--size", "160", "120", "--seed", str(seed)])
-        if code == 0:
-            return out / "synth.bag"
-    pytest.fail("awalker synth could not make a walk that does not fall")
+    return synth_walk(tmp_path_factory, FRAMES, BACKGROUND)
 
 
 def _interrupt(bag: Path, out: Path, signum: int) -> tuple[int, str, float]:
