@@ -169,6 +169,9 @@ def markdown(report: dict) -> str:
         lambda x, s, m: f"{x['runs_legs_swapped']} of {x['runs']}")
     row("largest pelvis step between frames, MAP path / live (m/s)",
         lambda x, s, m: f"{x['largest_map_step_m_s']:.1f} / {x['largest_live_step_m_s']:.1f}")
+    row("starts naming the wrong stance leg, worst walk",
+        lambda x, s, m: max(x["start_leg_wrong"].values(), key=lambda v: int(v.split("/")[0]) / max(int(v.split("/")[1]), 1))
+        if x.get("start_leg_wrong") else "-")
     row("runs ending on the person (runs that never started)",
         lambda x, s, m: f"{x['runs_ended_on_person']} of {x['runs']} ({x['runs_failed']})")
     walks = sorted({w for s, m in columns for w in report["summary"][f"{s} {m}"]["walk_medians_mm"]})
