@@ -19,7 +19,7 @@ from pathlib import Path
 
 import yaml
 
-from awalker_tracker.errors import InputError, parse_yaml
+from awalker_tracker.errors import InputError, parse_yaml, read_text_file
 
 RUN_FILE = "run.yaml"
 #: The key of ``run.yaml`` listing the files the run wrote, relative to its folder.
@@ -56,10 +56,7 @@ def _read_run_file(folder: Path) -> dict:
     path = folder / RUN_FILE
     if not path.is_file():
         return {}
-    try:
-        info = parse_yaml(path.read_bytes().decode("utf-8"), str(path))
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a text file (expected the run.yaml of an awalker run)") from None
+    info = parse_yaml(read_text_file(path, "run.yaml of an awalker run"), str(path))
     if not isinstance(info, dict):
         raise InputError(f"{path}: expected a YAML mapping (the run.yaml of an awalker run)")
     return info
