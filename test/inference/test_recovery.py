@@ -96,7 +96,7 @@ def test_monitor_orders_reacquisition_after_the_lost_time_then_waits_the_cooldow
     camera, features, markers = seen
     config = RecoveryConfig(lost_after_s=0.09, cooldown_s=0.5)
     monitor = LostTrackMonitor([camera], config, dt=1 / 30)
-    away = markers[PELVIS] + np.array([2.0, 0.0, 0.0])          # the particles walk 2 m beside the person
+    away = markers[PELVIS] + np.array([1.5, 0.0, 0.0])          # the particles walk 1.5 m beside the person
     orders = {f: monitor.update(f, [features], away) for f in range(30)}
     fired = [f for f, o in orders.items() if o is not None]
     assert fired == [2, 17]                                      # 3 frames off, then 15 frames of cooldown
@@ -105,6 +105,17 @@ def test_monitor_orders_reacquisition_after_the_lost_time_then_waits_the_cooldow
     assert np.linalg.norm(orders[2].position - truth) < 0.25
     assert orders[2].heading is None and orders[17].heading is None      # a person standing still: no heading
     assert monitor.update(17, [features], away) is orders[17] and monitor.reacquisitions == 2   # re-asked: same answer
+
+
+def test_a_body_gone_out_of_the_image_is_not_moved_onto_a_person_in_view(seen):
+    """Particles whose pelvis has left the image are a person walking out of view (the track ends,
+    inference.visibility): nobody else in view is re-acquired in their place."""
+    camera, features, markers = seen
+    monitor = LostTrackMonitor([camera], RecoveryConfig(lost_after_s=0.09, cooldown_s=0.5), dt=1 / 30)
+    gone = markers[PELVIS] + np.array([2.5, 0.0, 0.0])
+    assert not camera.in_image(gone)
+    assert all(monitor.update(f, [features], gone) is None for f in range(30))
+    assert monitor.reacquisitions == 0
 
 
 def test_monitor_keeps_a_track_on_the_person(seen):
@@ -185,7 +196,7 @@ def test_a_second_larger_person_does_not_count_as_losing_the_first():
     monitor = LostTrackMonitor([camera], RecoveryConfig(lost_after_s=0.0), dt=1 / 30)
     assert all(monitor.update(f, [features], pelvis) is None for f in range(5))
     lost = LostTrackMonitor([camera], RecoveryConfig(lost_after_s=0.0), dt=1 / 30)
-    assert lost.update(0, [features], pelvis + np.array([2.5, 0.0, 0.0])) is not None
+    assert lost.update(0, [features], pelvis + np.array([1.5, 0.0, 0.0])) is not None
 
 
 @pytest.fixture(scope="module")

@@ -85,3 +85,43 @@ def shift_camera(source: Path, target: Path, camera: str, offset_ns: int, drop_e
                 made[conn.topic] = writer.add_connection(conn.topic, conn.msgtype, typestore=store,
                                                          offered_qos_profiles=conn.ext.offered_qos_profiles)
             writer.write(made[conn.topic], stamp, raw)
+
+
+def walks_bag(out: Path, walks: list[tuple[tuple[float, float], float, int, float]], camera_position: tuple[float, ...],
+              camera_target: tuple[float, ...], size: tuple[int, int] = (320, 240), background: int = 30) -> Path:
+    """A one-camera bag (``out``/synth.bag, calibration.yaml and ground_truth.csv beside it) of walks one after the
+    other, each ((x, y) start m, heading rad, frames, speed m/s) a walker of its own (30 Hz), seen by a camera at
+    ``camera_position`` looking at ``camera_target`` (world m); the truth is whoever walks at the frame."""
+    import numpy as np
+
+    from awalker_tools import synth
+    from awalker_tracker.errors import InputError
+    from awalker_tracker.model.body import BodySegments
+    from awalker_tracker.vision.camera import Camera, save_calibration
+
+    width, height = size
+    camera = Camera.look_at("cam0", width, height, 0.82 * width, np.array(camera_position, float),
+                            np.array(camera_target, float))
+    rng = np.random.default_rng(1)
+    motions = []
+    for k, (xy, heading, frames, speed) in enumerate(walks):
+        for seed in range(1, 15):
+            try:
+                config = synth.SynthConfig(out_dir=out, frames=frames, seed=seed + 10 * k, speed=speed,
+                                           step_length=0.7 * (speed / 1.3) ** 0.42)
+                motions.append(synth.walker_motion(config,
+                                                   np.array(xy, float), heading, np.random.default_rng(seed + 10 * k)))
+                break
+            except InputError:       # that walker fell: the next seed
+                continue
+    first = motions[0]
+    motion = synth.Motion(np.concatenate([m.markers for m in motions]),
+                          BodySegments(np.concatenate([m.segments.origin for m in motions]),
+                                       np.concatenate([m.segments.rotation for m in motions])),
+                          first.body, np.concatenate([m.joint_angles for m in motions]), first.start)
+    scene = synth.Scene([camera], [synth.render_room(camera, synth.make_textures(rng))])
+    out.mkdir(parents=True, exist_ok=True)
+    save_calibration([camera], out / "calibration.yaml")
+    synth.write_sequence(out, "synth", motion, scene, synth.Lighting(change=0.0, noise_sigma=3.0), 30.0, background,
+                         rng, progress=False)
+    return out / "synth.bag"

@@ -245,6 +245,10 @@ def test_a_person_who_stops_is_held_where_they_stand(tracked, tmp_path, isolated
     last = summary["stamp_ns"] >= summary["stamp_ns"][-1] - 500_000_000
     within("two_stop.still_fraction", summary["person_still"][last].mean())
     within("two_stop.end_m", result["walk"]["end"]["pelvis_ground_error_m"])
+    # standing still inside the view is not leaving it: one track, to the last frame, the person in view there
+    tracks = yaml.safe_load((Path(result["run_dir"]) / "run.yaml").read_text())["tracks"]
+    assert len(tracks) == 1 and tracks[0]["ended"] is None, tracks
+    assert summary["in_view"][last].all() and summary["track"].max() == 1
     walked_on = run(CASES["two_stop"], Path(result["sequence_dir"]) / "synth.bag", tmp_path / "run",
                     extra=("--no-recovery",))
     assert walked_on["walk"]["end"]["pelvis_ground_error_m"] > 0.5, walked_on["walk"]["end"]

@@ -67,7 +67,7 @@ def test_an_interrupted_run_writes_what_it_tracked(long_bag: Path, tmp_path: Pat
     tracked = len(poses.frames)
     assert 0 < tracked < FRAMES and len(summary["frame"]) == tracked
     assert poses.frames.tolist() == list(range(BACKGROUND, BACKGROUND + tracked))
-    assert (out / "gait.csv").read_text().startswith("index,frame,stamp_ns")
+    assert (out / "gait.csv").read_text().startswith("track,index,frame,stamp_ns")
     with Reader(out / "result.bag") as reader:            # metadata written: the bag opens and reads
         posteriors = [c for c in reader.connections if c.topic == "/awalker/posterior"]
         assert posteriors and sum(1 for _ in reader.messages(connections=posteriors)) == tracked

@@ -88,7 +88,7 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys, monkeypat
     # gait analytics of the MAP trajectory, and the one-page report
     with open(out / "gait.csv") as fh:
         steps = fh.read().strip().splitlines()
-    assert steps[0].startswith("index,frame,stamp_ns,time_s,foot")      # 10 frames: perhaps no heel strike yet
+    assert steps[0].startswith("track,index,frame,stamp_ns,time_s,foot")      # 10 frames: perhaps no heel strike yet
     assert main(["report", str(out)]) == 0
     page = (out / "report.html").read_text()
     assert "<h2>Gait</h2>" in page and "Tracking quality" in page and "Against ground truth" in page

@@ -3,10 +3,12 @@
 Files (one row per frame and marker, metres, world frame z up):
     poses.csv / ground_truth.csv: ``frame,stamp_ns,marker,x,y,z``
     summary.csv: ``frame,stamp_ns,speed,speed_std,stance_left_probability,effective_sample_size,
-                  resampled,heel_strike,stance_leg,reseeded_fallen,reacquired,person_still,strike_fraction``
+                  resampled,heel_strike,stance_leg,reseeded_fallen,reacquired,person_still,strike_fraction,
+                  track,in_view,cameras_in_view``
                   (particles re-seeded at that frame after a fall / at the detected person, 1 where the
-                  person stood still and the walkers were held, and when in the period before the frame
-                  the MAP walker struck, 0-1, NaN where it did not)
+                  person stood still and the walkers were held, when in the period before the frame
+                  the MAP walker struck, 0-1, NaN where it did not; which track of the run, from 1; 1 where
+                  the person was in view of some camera, and the cameras that saw them, space-separated)
 Metrics:
 - absolute error: per frame, mean 3D distance (mm) over pelvis, thorax, hips, knees, ankles;
 - relative error: the same after translating the estimated pelvis onto the true one;
@@ -38,9 +40,11 @@ FOOT_MARKERS = {"left": ("left_heel", "left_toe"), "right": ("right_heel", "righ
 POSE_COLUMNS = ("frame", "stamp_ns", "marker", "x", "y", "z")
 SUMMARY_COLUMNS = ("frame", "stamp_ns", "speed", "speed_std", "stance_left_probability",
                    "effective_sample_size", "resampled", "heel_strike", "stance_leg", "reseeded_fallen", "reacquired",
-                   "person_still", "strike_fraction")
-# columns later versions added, read as 0 (strike_fraction: NaN, a strike at the frame) from older files
-OPTIONAL_SUMMARY_COLUMNS = {"reseeded_fallen": "0", "reacquired": "0", "person_still": "0", "strike_fraction": "nan"}
+                   "person_still", "strike_fraction", "track", "in_view", "cameras_in_view")
+# columns later versions added, read as 0 (strike_fraction: NaN, a strike at the frame; track 1, in view) from
+# older files
+OPTIONAL_SUMMARY_COLUMNS = {"reseeded_fallen": "0", "reacquired": "0", "person_still": "0", "strike_fraction": "nan",
+                            "track": "1", "in_view": "1", "cameras_in_view": ""}
 
 
 @dataclass(frozen=True)
@@ -132,9 +136,9 @@ def read_summary_csv(path: Path) -> dict[str, np.ndarray]:
     try:
         for key in SUMMARY_COLUMNS:
             col = [r.get(key) or OPTIONAL_SUMMARY_COLUMNS.get(key, "") for r in rows]
-            if key in ("heel_strike", "stance_leg"):
+            if key in ("heel_strike", "stance_leg", "cameras_in_view"):
                 out[key] = np.array(col, dtype=object)
-            elif key in ("frame", "stamp_ns", "reseeded_fallen", "reacquired", "person_still"):
+            elif key in ("frame", "stamp_ns", "reseeded_fallen", "reacquired", "person_still", "track", "in_view"):
                 out[key] = np.array(col, np.int64)
             elif key == "resampled":
                 out[key] = np.array([c.strip().lower() in ("1", "true") for c in col])
@@ -325,7 +329,19 @@ def live_track_from_bag(path: Path) -> PoseTrack | None:
 def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarray] | None = None,
              live: PoseTrack | None = None) -> dict[str, object]:
     """All metrics as a JSON-ready dict (per-frame series included); ``live``: the pose published frame by
-    frame (``live_track_from_bag``), whose continuity is scored beside the MAP trajectory's."""
+    frame (``live_track_from_bag``), whose continuity is scored beside the MAP trajectory's. Only the frames
+    summary.csv has in view are scored (``frames_out_of_view_left_out`` says how many were not)."""
+    left_out = 0
+    if summary is not None:
+        seen = set(summary["stamp_ns"][summary["in_view"] > 0].tolist())
+        keep = np.array([int(s) in seen for s in estimate.stamps_ns], bool)
+        left_out = int(np.sum(~keep))
+        if left_out == len(keep):
+            raise InputError(f"none of the {len(keep)} estimated frames had the person in view (summary.csv "
+                             "in_view): nothing to score")
+        if left_out:
+            estimate = PoseTrack(estimate.frames[keep], estimate.stamps_ns[keep], estimate.marker_names,
+                                 estimate.markers[keep])
     errors = marker_errors(estimate, truth)
     stance_left = replaced = None
     if summary is not None:
@@ -349,6 +365,7 @@ def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarra
                       "absolute_mm": errors["absolute_mm"].round(3).tolist(),
                       "relative_mm": errors["relative_mm"].round(3).tolist()},
     }
+    result["frames_out_of_view_left_out"] = left_out
     if len(truth.stamps_ns) > 1:
         result["truth_speed_m_s"] = float(np.nanmedian(track_speed(truth)))
     if summary is not None:
@@ -391,22 +408,52 @@ def track_steps(track: PoseTrack, stance_leg: np.ndarray | None = None,
                       gait.WALKER_STRIKE_DELAY)
 
 
-def write_gait(out: Path, track: PoseTrack, stance_leg: np.ndarray, strike_fraction: np.ndarray | None = None,
-               sides_known: bool = True) -> list:
-    """gait.csv (one row per step, ``GAIT_COLUMNS``) and gait.json (``inference.gait.summary``; ``sides_known``
-    False: with its note that left and right may be swapped); returns the steps (``plot_gait_file`` draws them)."""
+@dataclass(frozen=True)
+class TrackedWalk:
+    """One track of a run for the gait outputs: its MAP poses, stance leg (0/1) and strike fraction per frame,
+    and whether the person was in view (``inference.visibility``)."""
+
+    track_id: int
+    poses: PoseTrack
+    stance_leg: np.ndarray
+    strike_fraction: np.ndarray | None = None
+    in_view: np.ndarray | None = None
+
+
+def write_gait(out: Path, walks: Sequence[TrackedWalk], sides_known: bool = True) -> list:
+    """gait.csv (one row per step seen, ``GAIT_COLUMNS`` and its track) and gait.json (``inference.gait.summary``
+    of the track with the most steps seen, and with several tracks each one's under ``tracks``; ``sides_known``
+    False: with its note that left and right may be swapped). A step whose heel strike fell on a frame with the
+    person out of every camera's view was predicted, not seen: it is left out of both, and counted
+    (``steps_out_of_view``). Returns the steps seen (``plot_gait_file`` draws them)."""
     import json
 
     from awalker_tracker.inference import gait
 
-    walk = track_steps(track, stance_leg, strike_fraction)
+    seen_by_track: list[tuple[int, list]] = []
+    left_out = 0
+    for w in walks:
+        steps = track_steps(w.poses, w.stance_leg, w.strike_fraction)
+        if w.in_view is not None:
+            in_view = dict(zip(w.poses.frames.tolist(), np.asarray(w.in_view, bool).tolist()))
+            kept = [st for st in steps if in_view.get(st.frame, True)]
+            left_out += len(steps) - len(kept)
+            steps = kept
+        seen_by_track.append((w.track_id, steps))
     with open(out / "gait.csv", "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=GAIT_COLUMNS)
+        writer = csv.DictWriter(fh, fieldnames=("track",) + GAIT_COLUMNS)
         writer.writeheader()
-        for row in gait.as_rows(walk):
-            writer.writerow({k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in row.items()})
-    (out / "gait.json").write_text(json.dumps(gait.summary(walk, sides_known), indent=1))
-    return walk
+        for track_id, steps in seen_by_track:
+            for row in gait.as_rows(steps):
+                writer.writerow({"track": track_id,
+                                 **{k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in row.items()}})
+    main_id, main = max(seen_by_track, key=lambda t: len(t[1]), default=(1, []))
+    summary: dict[str, object] = {"track": main_id, **gait.summary(main, sides_known), "steps_out_of_view": left_out}
+    if len(seen_by_track) > 1:
+        summary["tracks"] = [{"track": track_id, **gait.summary(steps, sides_known)}
+                             for track_id, steps in seen_by_track]
+    (out / "gait.json").write_text(json.dumps(summary, indent=1))
+    return [st for _, steps in seen_by_track for st in steps]
 
 
 def plot_gait_file(out: Path, track: PoseTrack, walk: list) -> Path:
@@ -510,6 +557,8 @@ def format_table(result: dict[str, object], label: str = "") -> str:
         f"{label or 'sequence':<24} {'median':>8} {'mean +- std':>16}   (mm, {a['frames']} frames)",
         f"{'absolute':<24} {a['median']:8.1f} {a['mean']:8.1f} +- {a['std']:5.1f}",
         f"{'relative (pelvis)':<24} {r['median']:8.1f} {r['mean']:8.1f} +- {r['std']:5.1f}",
+        *([f"{result['frames_out_of_view_left_out']} frames with the person out of view left out"]
+          if result.get("frames_out_of_view_left_out") else []),
         f"foot skate {feet['skate_mm']['mean']:.1f} mm mean ({feet['skate_mm']['max']:.1f} max), "
         f"penetration {feet['penetration_mm']['max']:.1f} mm max, float {feet['float_mm']['mean']:.1f} mm mean",
     ]

@@ -220,6 +220,7 @@ class TrackResult:
     recorded: dict[str, int] = field(default_factory=dict)
     features: dict[str, dict[str, str]] = field(default_factory=dict)   # per camera: how its models were learned
     undecodable: dict[str, int] = field(default_factory=dict)   # per camera: images that could not be decoded
+    tracks: list[dict[str, object]] = field(default_factory=list)   # per track: frames and how it ended (track_record)
 
     @property
     def frames_per_second(self) -> float:
@@ -651,7 +652,7 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
                 and (start is None or start.stance_leg is None):
             start_src += (f"; stance leg {LEG_NAMES[tracker.start.stance_leg]} fitted to the first pass's images "
                           f"({options.fitted_start})")
-        if tracker.tracker is None or not tracker.summaries:
+        if not tracker.summaries:
             if interrupted:
                 raise stop.interrupted(f"at frame {result.frames} of {num_frames}, before any frame was tracked")
             if tracker.start is None:
@@ -663,7 +664,10 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
         # one camera cannot tell the near leg from the far one: unless the start named the standing foot, say
         # that left and right may be swapped (a leg fitted to the images, fitted_start, is evidence, not knowledge)
         sides_known = len(cameras) > 1 or (start is not None and start.stance_leg is not None)
-        track, walk = write_outputs(out, tracker.tracker.map_trajectory(), tracker.summaries, sides_known)
+        tracks = [t for t in tracker.all_tracks() if t.completed_frames]
+        track, walk = write_outputs(out, [(t.track_id, t.map_trajectory()) for t in tracks], tracker.summaries,
+                                    sides_known)
+        result.tracks = [track_record(t) for t in tracks]
     finally:
         if feature_thread is not None:
             feature_thread.stop()
@@ -694,7 +698,7 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
         "seconds_streaming": round(result.seconds_streaming, 3), "seconds_pictures": round(result.seconds_pictures, 3),
         "seconds_in_filter": round(result.seconds_in_filter, 3), "sync_issues": result.sync_issues,
         "features": result.features, "recorded": result.recorded, "undecodable_images": result.undecodable,
-        **({"body_fit": body_fit} if body_fit is not None else {})}, sort_keys=False))
+        "tracks": result.tracks, **({"body_fit": body_fit} if body_fit is not None else {})}, sort_keys=False))
     if interrupted:
         raise stop.interrupted(f"at frame {result.frames} of {num_frames}; poses.csv, summary.csv and gait.csv hold "
                                f"the {result.summaries} frames tracked")
@@ -703,9 +707,32 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
                        f"({result.frames_per_second:.2f} frames/s end to end, "
                        f"{result.streaming_frames_per_second:.2f} while streaming, filter "
                        f"{result.summaries / max(result.seconds_in_filter, 1e-9):.2f} frames/s; pictures "
-                       f"{result.seconds_pictures:.1f} s more)" + _undecodable_note(result.undecodable)
+                       f"{result.seconds_pictures:.1f} s more)" + _tracks_note(result.tracks)
+                       + _undecodable_note(result.undecodable)
                        + f"; outputs in {out}")
     return result
+
+
+def track_record(tracker: Any) -> dict[str, object]:
+    """run.yaml's entry for one track (an ``inference.tracker.Tracker``): its first and last frame, the frames the
+    person was in view, and how it ended: where the person left (frame, reason, last frame in view), or
+    ``ended: null``, tracked to the end of the input."""
+    frames = tracker.map_trajectory().frames
+    end = tracker.ended
+    return {"track": tracker.track_id, "first_frame": int(frames[0]), "last_frame": int(frames[-1]),
+            "frames_in_view": int(sum(tracker.in_view_frames)),
+            "ended": None if end is None else {"frame": end.frame_index, "reason": end.reason,
+                                               "last_in_view_frame": end.last_in_view_frame}}
+
+
+def _tracks_note(tracks: list[dict[str, object]]) -> str:
+    """'; N tracks (track 1 frames a-b, the person left the view of every camera at frame c; ...)' for the final
+    line when a track ended, or ''."""
+    if not any(t["ended"] for t in tracks):
+        return ""
+    parts = [f"track {t['track']} frames {t['first_frame']}-{t['last_frame']}"
+             + (f", ended: the person {t['ended']['reason']}" if t["ended"] else "") for t in tracks]
+    return f"; {len(tracks)} track{'s' if len(tracks) > 1 else ''} ({'; '.join(parts)})"
 
 
 def _undecodable_note(undecodable: dict[str, int]) -> str:
@@ -716,27 +743,33 @@ def _undecodable_note(undecodable: dict[str, int]) -> str:
             + ", ".join(f"{cam} {n}" for cam, n in undecodable.items() if n) + ")")
 
 
-def write_outputs(out: Path, trajectory: Any, summaries: list[Any],
+def write_outputs(out: Path, trajectories: Sequence[Any], summaries: list[Any],
                   sides_known: bool = True) -> tuple[evaluation.PoseTrack, list]:
-    """poses.csv (MAP trajectory), summary.csv (per-frame posterior summaries) and the gait analytics of
-    the MAP trajectory: gait.csv (one row per step) and gait.json (summary; ``sides_known`` False: with the
-    note that left and right may be swapped). Returns the MAP pose track and its steps, for the footprint
-    picture (``evaluation.plot_gait_file``)."""
-    track = evaluation.PoseTrack(trajectory.frames, trajectory.stamps_ns, tuple(trajectory.marker_names),
-                                 trajectory.markers)
+    """poses.csv (the MAP trajectories of the run's tracks, one after the other), summary.csv (per-frame posterior
+    summaries) and the gait analytics of the MAP trajectories: gait.csv (one row per step seen) and gait.json
+    (``evaluation.write_gait``; ``sides_known`` False: with the note that left and right may be swapped).
+    ``trajectories``: (track id, ``MapTrajectory``) per track. Returns the MAP pose track and its steps, for the
+    footprint picture (``evaluation.plot_gait_file``)."""
+    walks = [evaluation.TrackedWalk(track_id, evaluation.PoseTrack(t.frames, t.stamps_ns, tuple(t.marker_names),
+                                                                    t.markers), t.stance_leg, t.strike_fraction,
+                                    t.in_view) for track_id, t in trajectories]
+    track = evaluation.PoseTrack(np.concatenate([w.poses.frames for w in walks]),
+                                 np.concatenate([w.poses.stamps_ns for w in walks]), walks[0].poses.marker_names,
+                                 np.concatenate([w.poses.markers for w in walks]))
     evaluation.write_poses_csv(out / "poses.csv", track)
-    map_leg = dict(zip(trajectory.stamps_ns.tolist(), trajectory.stance_leg.tolist()))
-    map_strike = dict(zip(trajectory.stamps_ns.tolist(), trajectory.strike_fraction.tolist()))
+    map_leg = {int(s): int(leg) for _, t in trajectories for s, leg in zip(t.stamps_ns, t.stance_leg)}
+    map_strike = {int(s): float(f) for _, t in trajectories for s, f in zip(t.stamps_ns, t.strike_fraction)}
     rows = [{"frame": s.frame_index, "stamp_ns": s.stamp_ns, "speed": f"{s.speed:.4f}",
              "speed_std": f"{s.speed_std:.4f}", "stance_left_probability": f"{s.stance_left_probability:.4f}",
              "effective_sample_size": f"{s.effective_sample_size:.1f}", "resampled": int(s.resampled),
              "heel_strike": s.heel_strike_foot,
              "stance_leg": "left" if map_leg.get(s.stamp_ns, s.map_stance_leg) == 0 else "right",
              "reseeded_fallen": s.reseeded_fallen, "reacquired": s.reacquired, "person_still": int(s.person_still),
-             "strike_fraction": f"{map_strike.get(s.stamp_ns, float('nan')):.4f}"}
+             "strike_fraction": f"{map_strike.get(s.stamp_ns, float('nan')):.4f}", "track": s.track_id,
+             "in_view": int(s.person_in_view), "cameras_in_view": " ".join(s.cameras_in_view)}
             for s in summaries]
     evaluation.write_summary_csv(out / "summary.csv", rows)
-    return track, evaluation.write_gait(out, track, trajectory.stance_leg, trajectory.strike_fraction, sides_known)
+    return track, evaluation.write_gait(out, walks, sides_known)
 
 
 def write_overlays(bag: Path, out: Path, camera: Any, body: BodyDescription, fps: float | None = None,

@@ -37,11 +37,24 @@ def plot_errors(path: Path, frames: np.ndarray, absolute_mm: np.ndarray, relativ
 
 def plot_speed_and_stance(path: Path, frames: np.ndarray, speed: np.ndarray, speed_std: np.ndarray,
                           stance_left_probability: np.ndarray, true_speed: np.ndarray | None = None,
-                          true_frames: np.ndarray | None = None, title: str = "") -> Path:
+                          true_frames: np.ndarray | None = None, title: str = "",
+                          in_view: np.ndarray | None = None) -> Path:
     """Posterior walking speed (mean +- std, m/s; ``true_speed``: the truth's by the same definition,
-    ``inference.speed``) and P(left leg is stance) per frame."""
+    ``inference.speed``) and P(left leg is stance) per frame; ``in_view`` (per frame, bool): the frames with the
+    person out of every camera's view are shaded, and the lines break where frames are missing (between tracks)."""
     plt = _pyplot()
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
+    frames = np.asarray(frames, float)
+    if frames.size > 1 and np.any(np.diff(frames) > 1):      # a gap between tracks: NaN rows break the lines
+        cut = np.nonzero(np.diff(frames) > 1)[0] + 1
+        frames, speed, speed_std, stance_left_probability = (
+            np.insert(np.asarray(a, float), cut, np.nan) for a in (frames, speed, speed_std, stance_left_probability))
+        if in_view is not None:
+            in_view = np.insert(np.asarray(in_view, bool), cut, True)
+    if in_view is not None and not np.all(in_view):
+        for axis in (top, bottom):
+            axis.fill_between(frames, 0, 1, where=~np.asarray(in_view, bool), step="mid", color="0.8",
+                              transform=axis.get_xaxis_transform(), label="out of view")
     top.plot(frames, speed, color="tab:green", label="estimated")
     top.fill_between(frames, speed - speed_std, speed + speed_std, color="tab:green", alpha=0.25)
     if true_speed is not None:

@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
         pngs.append(plots.plot_speed_and_stance(
             run_dir / "speed_stance.png", summary["frame"], summary["speed"], summary["speed_std"],
             summary["stance_left_probability"], true_speed=evaluation.track_speed(truth),
-            true_frames=truth.frames, title=f"speed and stance leg: {run_dir.name}"))
+            true_frames=truth.frames, title=f"speed and stance leg: {run_dir.name}", in_view=summary["in_view"] > 0))
     stance = None
     if summary is not None and len(summary["stamp_ns"]) == len(estimate.stamps_ns):
         stance = np.array([0 if leg == "left" else 1 for leg in summary["stance_leg"]])

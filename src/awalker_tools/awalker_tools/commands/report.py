@@ -67,6 +67,21 @@ def _start_section(run_yaml: Path) -> list[str]:
     return ["<h2>How it started</h2>", _table([row], columns)]
 
 
+def _tracks_section(run_yaml: Path) -> list[str]:
+    """The run's tracks (run.yaml ``tracks``): frames, frames in view, and where and why each ended."""
+    if not run_yaml.is_file():
+        return []
+    info = parse_yaml(run_yaml.read_text(), str(run_yaml))
+    tracks = info.get("tracks") if isinstance(info, dict) else None
+    if not isinstance(tracks, list) or not tracks:
+        return []
+    rows = [{"track": t["track"], "frames": f"{t['first_frame']}-{t['last_frame']}", "in view": t["frames_in_view"],
+             "ended": ("tracked to the end" if not t["ended"] else
+                       f"frame {t['ended']['frame']}: the person {t['ended']['reason']} (last in view at frame "
+                       f"{t['ended']['last_in_view_frame']})")} for t in tracks]
+    return ["<h2>Tracks</h2>", _table(rows, ["track", "frames", "in view", "ended"])]
+
+
 def build_report(run_dir: Path) -> Path:
     """Write run_dir/report.html from the files `awalker track` (and `awalker eval`) wrote; returns its path."""
     run_dir = Path(run_dir)
@@ -81,7 +96,8 @@ def build_report(run_dir: Path) -> Path:
     written = [REPORT_FILE]
     if not (run_dir / "speed_stance.png").is_file():
         plots.plot_speed_and_stance(run_dir / "speed_stance.png", summary["frame"], summary["speed"],
-                                    summary["speed_std"], summary["stance_left_probability"])
+                                    summary["speed_std"], summary["stance_left_probability"],
+                                    in_view=summary["in_view"] > 0)
         written.append("speed_stance.png")
     parts = [f"<h1>awalker: {html.escape(run_dir.name)}</h1>"]
     if (reason := incomplete_reason(run_dir)) is not None:
@@ -98,16 +114,26 @@ def build_report(run_dir: Path) -> Path:
         "symmetry L/R length": _fmt(sym.get("step_length_m")), "symmetry L/R time": _fmt(sym.get("step_time_s")),
     }], ["steps", "step length (m)", "step width (m)", "step time (s)", "cadence (steps/min)", "speed (m/s)",
          "symmetry L/R length", "symmetry L/R time"]))
+    if gait_summary.get("steps_out_of_view"):
+        parts.append(f"<p>{gait_summary['steps_out_of_view']} step(s) predicted while the person was out of view "
+                     "are left out of the steps and the medians.</p>")
+    if "tracks" in gait_summary:
+        parts.append(f"<p>The medians above are track {gait_summary['track']}'s (the most steps seen); per track:</p>")
+        parts.append(_table([{"track": t["track"], "steps": t["steps"], "step length (m)": _fmt(t["step_length_m"]),
+                              "cadence (steps/min)": _fmt(t["cadence_steps_min"], 0), "speed (m/s)": _fmt(t["speed_m_s"])}
+                             for t in gait_summary["tracks"]],
+                            ["track", "steps", "step length (m)", "cadence (steps/min)", "speed (m/s)"]))
     if "sides_note" in gait_summary:
         parts.append(f"<p><strong>Left and right:</strong> {html.escape(gait_summary['sides_note'])}.</p>")
     parts.append(f"<p>{html.escape(gait_summary['stance_note'])}.</p>")
-    step_rows = [{k: (_fmt(float(v), 3) if k not in ("index", "frame", "foot", "stamp_ns") else v)
+    step_rows = [{k: (_fmt(float(v), 3) if k not in ("track", "index", "frame", "foot", "stamp_ns") else v)
                   for k, v in s.items()} for s in steps]
-    parts.append(_table(step_rows, ["index", "time_s", "foot", "x", "y", "step_length_m", "step_width_m",
+    parts.append(_table(step_rows, ["track", "index", "time_s", "foot", "x", "y", "step_length_m", "step_width_m",
                                     "step_time_s", "cadence_steps_min", "speed_m_s"]))
     for name, caption in (("gait_vs_truth.png", "footprints from above (circles: tracked, squares: truth)"),
                           ("gait.png", "footprints from above and gait parameters per step"),
-                          ("speed_stance.png", "walking speed and probability that the left foot is on the ground")):
+                          ("speed_stance.png", "walking speed and probability that the left foot is on the ground "
+                                               "(shaded: the person out of every camera's view)")):
         if (run_dir / name).is_file():
             parts.append(_image(run_dir / name, caption))
     parts.append("<h2>Tracking quality</h2>")
@@ -122,6 +148,7 @@ def build_report(run_dir: Path) -> Path:
             int(np.sum((summary["stance_left_probability"] > 0.2) & (summary["stance_left_probability"] < 0.8))),
     }], ["frames", "N_eff median", "N_eff min", "resampled frames", "re-acquisitions", "fallen walkers re-seeded",
          "frames standing still (walkers held)", "frames with an uncertain stance leg (0.2-0.8)"]))
+    parts += _tracks_section(run_dir / "run.yaml")
     parts += _start_section(run_dir / "run.yaml")
     if (run_dir / "eval.json").is_file():
         result = json.loads((run_dir / "eval.json").read_text())

@@ -85,6 +85,9 @@ class PosteriorSummary:
     reseeded_fallen: int = 0        # particles re-seeded at this frame after their walker fell
     reacquired: int = 0             # particles re-seeded at this frame at the person seen in the images
     person_still: bool = False      # the person stood still at this frame: the walkers were held
+    track_id: int = 1               # which track of the run (a new one each time a person is found anew)
+    person_in_view: bool = True     # in view of some camera (inference.visibility; True without images)
+    cameras_in_view: tuple[str, ...] = ()   # the cameras that see the person
 
     @property
     def heel_strike_foot(self) -> str:

@@ -65,7 +65,7 @@ import numpy as np
 
 from awalker_tracker.vision.camera import Camera
 from awalker_tracker.vision.detection import (
-    GroundTrack, PersonBlob, PersonDetection, ends_on_occlusion, locate_person, person_blobs, wholly_in_view)
+    GroundTrack, PersonBlob, PersonDetection, ends_on_occlusion, locate_person, on_blob, person_blobs, wholly_in_view)
 
 NOT_RESEEDED, RESEEDED_FALLEN, REACQUIRED, HELD = 0, 1, 2, 3
 
@@ -181,14 +181,8 @@ class LostTrackMonitor:
         if 2 * len(gaps) >= span and float(np.median(gaps)) > self.config.lost_distance_one_camera_m:
             return True
         by_name = {c.name: c for c in self.cameras}
-        margin = self.config.box_margin
-        for blob in (b for blobs in seen for b in blobs):
-            uv, depth = by_name[blob.camera].project(pelvis[None])
-            u0, v0, u1, v1 = blob.box
-            du, dv = margin * (u1 - u0), margin * (v1 - v0)
-            if depth[0] > 0 and u0 - du <= uv[0, 0] <= u1 + du and v0 - dv <= uv[0, 1] <= v1 + dv:
-                return False
-        return True
+        return not any(on_blob(by_name[blob.camera], pelvis, blob, self.config.box_margin)
+                       for blobs in seen for blob in blobs)
 
     def _reachable(self, frame: int, position: np.ndarray) -> bool:
         """Whether a feet-row ground position (m) at ``frame`` is within reach of the counted ones (module
@@ -244,7 +238,10 @@ class LostTrackMonitor:
         self._still[frame] = cfg.hold_still and recent_speed is not None and (
             recent_speed < (cfg.moving_m_s if was_still else cfg.still_m_s))
         by_camera = {c.name: f for c, f in zip(self.cameras, features)}
-        off = cfg.reacquire and reliable and self._off_person(frame, detection, pelvis, seen, by_camera)
+        # a body whose pelvis has left every image is a person walking out of view (``inference.visibility``:
+        # the track ends), not a track to move onto whoever else is in view
+        off = (cfg.reacquire and reliable and self._off_person(frame, detection, pelvis, seen, by_camera)
+               and any(bool(camera.in_image(pelvis)) for camera in self.cameras))
         self._run[frame] = self._run.get(frame - 1, 0) + 1 if off else 0
         order = None
         if off and self._run[frame] * self.dt >= cfg.lost_after_s and frame >= self._quiet_until:

@@ -31,6 +31,7 @@ from awalker_tracker.inference.recovery import (
     HELD, REACQUIRED, RESEEDED_FALLEN, LostTrackMonitor, RecoveryConfig, put_rows)
 from awalker_tracker.inference.smc import AncestryHistory, FilterStep, ParticleFilter, SMCConfig
 from awalker_tracker.inference.speed import SPEED_TIME_CONSTANT_S, update_speed
+from awalker_tracker.inference.visibility import TrackEnd, ViewConfig, ViewMonitor, camera_views
 from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription, BodyPoseBatch
 from awalker_tracker.model.walker import LEFT, LEG_NAMES, RIGHT, WalkerParams, WalkerState
 
@@ -176,6 +177,7 @@ class TrackerConfig:
     # and the MAP lineage is the best prior walk by image evidence.
     likelihood_scale: float = 0.1
     recovery: RecoveryConfig = RecoveryConfig()
+    view: ViewConfig = ViewConfig()      # when the person counts as in view, and the track ends (inference.visibility)
     cloud_size: int = 200
     # Leg lengths the filter explores (kinematics module doc, *Leg length*; off by default): with
     # leg_scale_spread > 0 each particle's thigh and shank are x its own factor, log-normal with this spread
@@ -387,6 +389,7 @@ class TrackerModel:
             posture_drift=config.posture_drift if self.posture_spread > 0 else 0.0,
             pelvis_ceiling=ceiling, pelvis_ceiling_drift=ceiling_drift,
             hip_over_ankle=ceiling < 1.0 or len(cameras or ()) >= config.hip_over_ankle_min_cameras)
+        self.cameras = list(cameras or ())
         self._control = control
         self._gaits = gaits
         self._kin = kin_mod
@@ -699,6 +702,7 @@ class MapTrajectory:
     stance_leg: np.ndarray      # (F,)
     heel_strike: np.ndarray     # (F,) bool
     strike_fraction: np.ndarray  # (F,) when in the frame's period the walker struck, 0-1 (NaN where it did not)
+    in_view: np.ndarray | None = None   # (F,) bool: the person in view of some camera (inference.visibility)
     marker_names: tuple[str, ...] = MARKER_NAMES
     joint_names: tuple[str, ...] = JOINT_NAMES
 
@@ -790,10 +794,13 @@ class PublishedPath:
 
 
 class Tracker:
-    """Online tracker: push one observation per frame, get posterior summaries (lag tau frames)."""
+    """Online tracker: push one observation per frame, get posterior summaries (lag tau frames). Once the person
+    has been out of every camera's view for ``ViewConfig.end_after_s`` the track ends (``ended``; module
+    ``inference.visibility``): that frame's summary is the last, and later pushes complete nothing."""
 
-    def __init__(self, model: TrackerModel, config: TrackerConfig | None = None) -> None:
+    def __init__(self, model: TrackerModel, config: TrackerConfig | None = None, track_id: int = 1) -> None:
         self.model = model
+        self.track_id = int(track_id)
         self.config = config or model.config
         self.filter = ParticleFilter(model, self.config.smc)
         self.history = AncestryHistory()
@@ -801,6 +808,10 @@ class Tracker:
         self._last_step: FilterStep | None = None
         self.published = PublishedPath(self.config.dt)
         self._left_probability: list[float] = []    # the posterior's stance-left probability per completed frame
+        self._in_view: list[bool] = []              # the person in view of some camera, per completed frame
+        self._features: dict[int, tuple] = {}       # push index -> the frame's image features, until completed
+        self.views = ViewMonitor(self.config.dt, self.config.view)
+        self.ended: TrackEnd | None = None
 
     def push(self, frame_index: int, stamp_ns: int, obs: Any) -> list[PosteriorSummary]:
         """Add the observation of one frame; returns the summaries completed (in frame order)."""
@@ -810,15 +821,39 @@ class Tracker:
         # walker's motion, so the track does not slip in time; jitter within half a period is not a gap
         self.model.frames_per_step = (max(1, round((stamp_ns - self._frames[-1][1]) * 1e-9 / self.config.dt))
                                       if self._frames else 1)
+        if self.ended is not None:
+            return []
+        if isinstance(obs, ImageObservation):
+            self._features[len(self._frames)] = tuple(obs.features)
         self._frames.append((int(frame_index), int(stamp_ns)))
-        return [self._summarize(s) for s in self.filter.push(obs)]
+        return self._completed(self.filter.push(obs))
 
     def finish(self) -> list[PosteriorSummary]:
         """Flush the frames still waiting for look-ahead observations."""
-        return [self._summarize(s) for s in self.filter.finish()]
+        return [] if self.ended is not None else self._completed(self.filter.finish())
+
+    @property
+    def completed_frames(self) -> int:
+        """Frames whose summaries are out."""
+        return len(self._in_view)
+
+    @property
+    def in_view_frames(self) -> list[bool]:
+        """Per completed frame: the person in view of some camera."""
+        return list(self._in_view)
+
+    def _completed(self, steps: list[FilterStep]) -> list[PosteriorSummary]:
+        """The summaries of ``steps``, up to the one that ends the track."""
+        out = []
+        for step in steps:
+            out.append(self._summarize(step))
+            if self.ended is not None:
+                break
+        return out
 
     def _summarize(self, step: FilterStep) -> PosteriorSummary:
         frame_index, stamp_ns = self._frames[step.frame]
+        features = self._features.pop(step.frame, None)
         out = self.model.outputs(step.states, step.info)
         payload = {"markers": out.markers.astype(np.float32), "joint_angles": out.joint_angles.astype(np.float32),
                    "stance_leg": out.stance_leg.copy(), "heel_strike": out.heel_strike.copy(),
@@ -829,6 +864,13 @@ class Tracker:
         summary = summarize(frame_index, stamp_ns, step.log_weights, out, MARKER_NAMES, JOINT_NAMES,
                             step.resampled, cloud_size=self.config.cloud_size)
         self._left_probability.append(summary.stance_left_probability)
+        views = (camera_views(self.model.cameras, features, summary.mean_markers, self.config.view)
+                 if features is not None and self.model.cameras else ())
+        in_view = not views or any(v.in_view for v in views)
+        self._in_view.append(in_view)
+        self.ended = self.views.update(frame_index, stamp_ns, views)
+        summary = replace(summary, track_id=self.track_id, person_in_view=in_view,
+                          cameras_in_view=tuple(v.camera for v in views if v.in_view))
         offset = self.published.update(out.markers[:, MARKER_NAMES.index("pelvis"), :2], step.ancestors,
                                        step.states.jump, step.best_index)
         if not offset.any():
@@ -851,7 +893,7 @@ class Tracker:
                                                   traj["stance_leg"], traj["flipped"], self._left_probability[:count])
         markers, angles = smooth_jumps(markers, angles, traj["jump"].astype(float), self.model.config.dt)
         return MapTrajectory(frames, stamps, markers, angles, stance, traj["heel_strike"].astype(bool),
-                             traj["strike_fraction"].astype(float))
+                             traj["strike_fraction"].astype(float), np.array(self._in_view[:count], bool))
 
 
 def marker_likelihood(sigma_m: float = 0.03, names: tuple[str, ...] = MARKER_NAMES) -> LikelihoodFn:

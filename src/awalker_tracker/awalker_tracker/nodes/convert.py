@@ -94,6 +94,9 @@ def summary_to_msg(summary: core.PosteriorSummary, world_frame: str = "world") -
     msg.reseeded_fallen = int(summary.reseeded_fallen)
     msg.reacquired = int(summary.reacquired)
     msg.person_still = bool(summary.person_still)
+    msg.track_id = int(summary.track_id)
+    msg.person_in_view = bool(summary.person_in_view)
+    msg.cameras_in_view = list(summary.cameras_in_view)
     msg.contacts = [FootContact(foot=int(c.foot), position=Point(**dict(zip("xyz", map(float, c.position)))),
                                 probability=float(c.probability), heel_strike=bool(c.heel_strike))
                     for c in summary.contacts]
@@ -124,7 +127,8 @@ def summary_from_msg(msg: PosteriorSummary) -> core.PosteriorSummary:
         stance_left_probability=float(msg.stance_left_probability),
         effective_sample_size=float(msg.effective_sample_size), num_particles=int(msg.num_particles),
         resampled=bool(msg.resampled), reseeded_fallen=int(msg.reseeded_fallen), reacquired=int(msg.reacquired),
-        person_still=bool(msg.person_still),
+        person_still=bool(msg.person_still), track_id=int(msg.track_id), person_in_view=bool(msg.person_in_view),
+        cameras_in_view=tuple(msg.cameras_in_view),
         contacts=tuple(core.FootContactEstimate(int(c.foot), np.array([c.position.x, c.position.y, c.position.z]),
                                                 float(c.probability), bool(c.heel_strike)) for c in msg.contacts),
         clouds=tuple(core.MarkerCloud(c.marker_name, cloud_positions(c), np.asarray(c.weights, float))

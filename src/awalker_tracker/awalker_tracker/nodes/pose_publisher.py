@@ -11,7 +11,9 @@ the image stamp of each summary:
   posterior's head/pelvis/knee/ankle clouds, fields x, y, z, weight, marker (``convert.PARTICLE_POINT``);
 - ``/awalker/gait_steps`` awalker_msgs/GaitStep at every heel strike: each change of the posterior's stance
   foot (``inference.gait.PosteriorSteps``): where the heel came down, step length and width, step and
-  stride time, cadence and speed; online, at the filter's look-ahead lag, the steps gait.csv has;
+  stride time, cadence and speed; online, at the filter's look-ahead lag, the steps gait.csv has; only
+  steps whose strike frame had the person in view (``PosteriorSummary.person_in_view``), counted anew for
+  each track (``track_id``);
 - tf ``world -> <body_id>_pelvis`` when ``tf2_ros`` can be imported (not on PyPI; optional).
 """
 from __future__ import annotations
@@ -196,6 +198,8 @@ class PosePublisherNode(AwalkerNode):
         self.gait_pub = self.create_publisher(GaitStep, "/awalker/gait_steps", qos)
         self.steps = PosteriorSteps()          # a step whenever the posterior's stance foot changes
         self._first_stamp_ns: int | None = None
+        self._track_id: int | None = None
+        self._in_view: dict[int, bool] = {}    # frame index -> person in view, over the last frames of the track
         self.tf_broadcaster = _tf_broadcaster(self)
         self.count = 0
         self.create_subscription(PosteriorSummary, values["posterior_topic"], self.on_summary,
@@ -212,12 +216,17 @@ class PosePublisherNode(AwalkerNode):
         if self.publish_clouds:
             self.particles_pub.publish(particles_to_pointcloud2(msg.header, msg.clouds, self.cloud_points))
         stamp = stamp_to_ns(msg.header.stamp)
+        if msg.track_id != self._track_id:     # a new person: their own steps, timed from their first frame
+            self.steps, self._first_stamp_ns, self._track_id, self._in_view = PosteriorSteps(), None, msg.track_id, {}
         if self._first_stamp_ns is None:
             self._first_stamp_ns = stamp
+        self._in_view[int(msg.frame_index)] = bool(msg.person_in_view)
+        for old in [f for f in self._in_view if f < msg.frame_index - 300]:
+            del self._in_view[old]
         step = self.steps.add(msg.frame_index, stamp, (stamp - self._first_stamp_ns) * 1e-9,
                               msg.stance_left_probability,
                               {int(c.foot): np.array([c.position.x, c.position.y]) for c in msg.contacts})
-        if step is not None:
+        if step is not None and self._in_view.get(step.frame, msg.person_in_view):
             self.gait_pub.publish(gait_step_to_msg(step, msg.header, self._first_stamp_ns + round(step.time_s * 1e9)))
         if self.tf_broadcaster is not None:
             from geometry_msgs.msg import TransformStamped

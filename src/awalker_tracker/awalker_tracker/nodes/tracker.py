@@ -38,6 +38,7 @@ from awalker_tracker.inference.autostart import AUTO_SPREAD, AutoStartConfig
 from awalker_tracker.inference.posterior import PosteriorSummary as CoreSummary
 from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES, tracking_profile
 from awalker_tracker.inference.recovery import RecoveryConfig
+from awalker_tracker.inference.visibility import ViewConfig
 from awalker_tracker.inference.smc import SMCConfig
 from awalker_tracker.inference.sync import DEFAULT_TOLERANCE, StampSynchronizer
 from awalker_tracker.inference.tracker import (
@@ -121,6 +122,9 @@ PARAMETERS = (
     NodeParameter("reacquire", _profile("reacquire"), "re-acquire a lost track at the person seen in the images"),
     NodeParameter("hold_still", _profile("hold_still"),
                   "hold the walkers while the person seen in the images stands still"),
+    NodeParameter("end_after_s", ViewConfig().end_after_s,
+                  "end the track after the person is out of every camera's view this long (s), then look for the "
+                  "next person; 0: never (inference/visibility.py)"),
     NodeParameter("frame_rate", 0.0, "frames/s; 0: from the first two frame stamps"),
     NodeParameter("world_frame", "world", "world frame id of the outputs"),
     NodeParameter("ack_topic", "/awalker/ack", "std_msgs/Header acks of processed frames"),
@@ -156,6 +160,10 @@ class TrackerNode(AwalkerNode):
         self.estimate_body = bool(v["estimate_body"])
         self.body_output = str(v["body_output"])
         depth_band = float(v["depth_band_m"])
+        try:
+            self.view = ViewConfig(end_after_s=float(v["end_after_s"]))
+        except ValueError as exc:
+            raise InputError(f"awalker_tracker: parameter 'end_after_s': {exc}") from None
         try:
             self.recovery = RecoveryConfig(reseed_fallen=bool(v["reseed_fallen"]), reacquire=bool(v["reacquire"]),
                                            hold_still=bool(v["hold_still"]), depth_band_m=depth_band)
@@ -195,6 +203,7 @@ class TrackerNode(AwalkerNode):
             raise InputError(f"awalker_tracker: parameters 'sync_queue', 'sync_tolerance': {exc}") from None
         self.stats = TrackerNodeStats()
         self.tracker: Tracker | None = None
+        self.ended_tracks: list[Tracker] = []       # tracks that ended (the person left the view), in order
         self.summaries: list[CoreSummary] = []
         self.keep_summaries = False
         self._person_still = False     # the last summary said the person stands still (logged on change)
@@ -271,7 +280,7 @@ class TrackerNode(AwalkerNode):
         self._process_pending()
 
     def _on_start(self, msg: String) -> None:
-        if self.start is None:
+        if self.start is None and not self.auto_start:
             try:
                 self.start = StartDescription.from_yaml_text(msg.data, START_TOPIC)
             except InputError as exc:
@@ -388,7 +397,10 @@ class TrackerNode(AwalkerNode):
                 self.get_logger().info(f"automatic start: waiting for a walking person ({self._finder.status()})")
         if final and (found := self._finder.finish()) is not None:
             return started(found)
-        if final:
+        if final and self.ended_tracks:
+            self.get_logger().info(f"automatic start: no further walking person after track {len(self.ended_tracks)} "
+                                   f"({self._finder.status()})")
+        elif final:
             self.get_logger().warning(f"automatic start: no walking person found ({self._finder.status()}); "
                                       "nothing tracked")
         return False
@@ -410,7 +422,8 @@ class TrackerNode(AwalkerNode):
         self._write_start()
 
     def _write_start(self) -> None:
-        if self.start_output and self.start is not None:
+        """The first track's start to ``start_output`` (the later tracks' starts are in the log)."""
+        if self.start_output and self.start is not None and not self.ended_tracks:
             from pathlib import Path
 
             Path(self.start_output).write_text(self.start.to_yaml_text())
@@ -429,19 +442,21 @@ class TrackerNode(AwalkerNode):
                     from pathlib import Path
 
                     Path(self.body_output).write_text(self.body.to_yaml_text())
-        self._take_fitted_stance_leg()
+        if not self.ended_tracks:
+            self._take_fitted_stance_leg()
         body = self.body or BodyDescription.default()
         cameras = [self.cameras[c] for c in self.camera_names]
         config = TrackerConfig(smc=self.smc_config, dt=dt, likelihood_scale=self.likelihood_scale,
-                               recovery=self.recovery, leg_scale_spread=self.leg_scale_spread,
+                               recovery=self.recovery, view=self.view, leg_scale_spread=self.leg_scale_spread,
                                pelvis_ceiling=self.pelvis_ceiling,
                                pelvis_ceiling_min_cameras=self.pelvis_ceiling_min_cameras,
                                spread=AUTO_SPREAD if self.start_found_automatically else TrackerConfig.spread)
         model = TrackerModel(body, self.start, image_likelihood(body, cameras),
                              config, cameras=cameras)
-        self.tracker = Tracker(model)
-        self.get_logger().info(f"tracking with {self.smc_config.num_particles} particles, dt {dt * 1e3:.1f} ms, "
-                               f"cameras {', '.join(self.camera_names)}, start frame {self.start.frame}")
+        self.tracker = Tracker(model, track_id=len(self.ended_tracks) + 1)
+        self.get_logger().info(f"track {self.tracker.track_id}: tracking with {self.smc_config.num_particles} "
+                               f"particles, dt {dt * 1e3:.1f} ms, cameras {', '.join(self.camera_names)}, start frame "
+                               f"{self.start.frame}")
         return True
 
     def _process_pending(self, final: bool = False) -> None:
@@ -457,7 +472,7 @@ class TrackerNode(AwalkerNode):
             self.frame_rate = self.frame_rate or 30.0   # a single frame: any dt will do
             self._make_tracker()
         pending, self._pending = self._pending, []
-        for item in pending:
+        for k, item in enumerate(pending):
             if item.frame_index < self.start.frame:
                 continue     # background-only frames before the person appears
             started = time.perf_counter()
@@ -467,6 +482,28 @@ class TrackerNode(AwalkerNode):
             self.stats.frames_tracked += 1
             self._dirty = True
             self._publish(summaries)
+            if self.tracker.ended is not None:
+                self._end_track()
+                # the frames after the end look for the next person
+                self._pending = pending[k + 1:] + self._pending
+                self._process_pending(final)
+                return
+
+    def _end_track(self) -> None:
+        """The person left the view: keep the ended track, and find the next person (the automatic start, also
+        after a hand start: it described the first person only)."""
+        tracker, end = self.tracker, self.tracker.ended
+        self.ended_tracks.append(tracker)
+        self.get_logger().info(
+            f"frame {end.frame_index}: track {tracker.track_id} ended: the person {end.reason} (last in view at "
+            f"frame {end.last_in_view_frame}); no more poses for them; waiting for a person to come into view")
+        self.tracker, self.start, self.start_found_automatically = None, None, False
+        self.auto_start, self._finder, self._dirty = True, None, False
+        self._seen.clear()
+
+    def all_tracks(self) -> list[Tracker]:
+        """Every track of the run in order: the ended ones, then the current one (if any)."""
+        return self.ended_tracks + ([self.tracker] if self.tracker is not None else [])
 
     def _publish(self, summaries: list[CoreSummary]) -> None:
         for s in summaries:

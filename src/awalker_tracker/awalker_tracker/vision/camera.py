@@ -102,6 +102,13 @@ class Camera:
         v = K[1, 1] * y + K[1, 2]
         return np.stack([u, v], axis=-1), depth
 
+    def in_image(self, points: np.ndarray) -> np.ndarray:
+        """Whether world points (..., 3) project in front of the camera and inside the image (...) bool."""
+        uv, depth = self.project(points)
+        with np.errstate(invalid="ignore"):
+            return ((depth > 0) & (uv[..., 0] >= 0) & (uv[..., 0] <= self.width - 1)
+                    & (uv[..., 1] >= 0) & (uv[..., 1] <= self.height - 1))
+
     def pixels_to_normalised(self, uv: np.ndarray, iterations: int = 30) -> np.ndarray:
         """Pixels (..., 2) -> undistorted normalised coordinates (..., 2): the ray through a
         pixel is (x, y, 1) in the camera frame. Inverts the distortion by fixed-point iteration

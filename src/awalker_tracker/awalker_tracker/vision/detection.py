@@ -160,6 +160,15 @@ def blob_near(blobs: list[PersonBlob], camera: Camera, point: np.ndarray) -> Per
     return best if gap(best) <= best.box[3] - best.box[1] else None
 
 
+def on_blob(camera: Camera, point: np.ndarray, blob: PersonBlob, margin: float) -> bool:
+    """Whether the world ``point`` (3,) projects, in front of ``camera``, inside ``blob``'s box widened by
+    ``margin`` x its size on each side."""
+    uv, depth = camera.project(np.asarray(point, float)[None])
+    u0, v0, u1, v1 = blob.box
+    du, dv = margin * (u1 - u0), margin * (v1 - v0)
+    return bool(depth[0] > 0 and u0 - du <= uv[0, 0] <= u1 + du and v0 - dv <= uv[0, 1] <= v1 + dv)
+
+
 def ends_on_occlusion(blob: PersonBlob, features: FrameFeatures, rows: int = 2, fraction: float = 0.5) -> bool:
     """Whether most (``fraction``) of the map pixels just under ``blob`` (``rows`` rows, within its columns)
     lie under the camera's occlusion mask (``FrameFeatures.occlusion``; none: False): the blob's lowest row is
