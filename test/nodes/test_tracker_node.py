@@ -233,3 +233,86 @@ def test_a_bad_camera_info_is_logged_and_not_used(ros_context):
         executor.shutdown()
         probe.destroy_node()
         node.destroy_node()
+
+
+def _stream_features(ros_context, tracker_files, max_lag_s: float, frames: int = 60, rate_hz: float = 60.0):
+    """Publish one camera's features of ``frames`` frames at ``rate_hz`` (as a camera would, whatever the tracker
+    does) to a tracker node too slow for that rate; returns the node's stats, the acks' stamps, the posteriors'
+    stamps and the frames' stamps."""
+    import threading
+
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import Header
+
+    from awalker_msgs.msg import ImageFeatures, PosteriorSummary
+    from awalker_tracker.inference.tracker import StartDescription
+    from awalker_tracker.nodes.convert import stamp_to_ns
+    from awalker_tracker.nodes.tracker import TrackerNode
+
+    (tracker_files / "start0.yaml").write_text(StartDescription(0, (0.0, 0.0), 0.0, 1.3, 0.7, 0).to_yaml_text())
+    node = TrackerNode(context=ros_context, parameter_overrides=[
+        Parameter("cameras", value=["cam0"]), Parameter("calibration", value=str(tracker_files / "calibration.yaml")),
+        Parameter("start_description", value=str(tracker_files / "start0.yaml")),
+        Parameter("body_description", value=str(tracker_files / "body.yaml")),
+        Parameter("num_particles", value=8000), Parameter("lookahead", value=0),
+        Parameter("idle_flush_s", value=60.0), Parameter("max_lag_s", value=max_lag_s)])
+    probe = Node("camera", context=ros_context)
+    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    pub = probe.create_publisher(ImageFeatures, "/cam0/features", qos)
+    acks, posteriors = [], []
+    probe.create_subscription(Header, "/awalker/ack", lambda m: acks.append(stamp_to_ns(m.stamp)), qos)
+    probe.create_subscription(PosteriorSummary, "/awalker/posterior", posteriors.append, qos)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(probe)
+    stamps = [2_000_000_000 + round(k * 1e9 / rate_hz) for k in range(frames)]
+    messages = [_features_msg(s, "cam0") for s in stamps]
+
+    def camera() -> None:
+        start = time.monotonic()
+        for k, msg in enumerate(messages):
+            time.sleep(max(0.0, start + k / rate_hz - time.monotonic()))
+            pub.publish(msg)
+
+    try:
+        deadline = time.monotonic() + 5
+        while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        thread = threading.Thread(target=camera)
+        thread.start()
+        deadline = time.monotonic() + 60
+        while len(acks) < frames and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.02)
+        thread.join()
+        deadline = time.monotonic() + 5
+        while len(posteriors) < node.stats.frames_tracked and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.02)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        probe.destroy_node()
+    return node.stats, acks, [stamp_to_ns(p.header.stamp) for p in posteriors], stamps
+
+
+def test_a_tracker_slower_than_the_camera_skips_frames_by_stamp_and_keeps_up(ros_context, tracker_files):
+    """Features at 60 Hz into a filter that needs longer than a frame period per frame (8000 particles): with
+    max_lag_s 0.1 frames that waited longer are skipped and acknowledged, the filter steps over them by their
+    stamps, and the last frame is done soon after the camera sent it; with max_lag_s 0 (never skip) every frame
+    is filtered and the tracker ends far behind."""
+    stats, acked, published, stamps = _stream_features(ros_context, tracker_files, max_lag_s=0.1)
+    assert sorted(acked) == stamps                               # every frame acknowledged, skipped ones too
+    assert stats.frames_skipped > 0 and stats.frames_tracked + stats.frames_skipped == len(stamps)
+    assert published == sorted(published) and set(published) <= set(stamps)
+    assert len(published) == stats.frames_tracked
+
+    behind, _, all_published, _ = _stream_features(ros_context, tracker_files, max_lag_s=0.0)
+    assert behind.frames_skipped == 0 and len(all_published) == len(stamps)
+    # the time the tracker needs per frame, measured without skipping: more than the camera's period
+    per_frame = behind.seconds_in_filter / behind.frames_tracked
+    assert per_frame > 1.0 / 60.0, per_frame
+    # keeping up: the skipping run's frames took about as long as the camera's 1 s, the other's as long as filtering
+    # all of them
+    assert stats.seconds_in_filter < 0.6 * behind.seconds_in_filter, (stats.seconds_in_filter, behind.seconds_in_filter)

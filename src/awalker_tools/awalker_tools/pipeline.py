@@ -549,7 +549,7 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
             Parameter("hold_still", value=bool(options.recovery)),
             *([Parameter("depth_band_m", value=float(band))] if band is not None else []),
             Parameter("sync_tolerance", value=float(options.sync_tolerance)),
-            Parameter("idle_flush_s", value=1.0e9)]))
+            Parameter("idle_flush_s", value=1.0e9), Parameter("max_lag_s", value=0.0)]))
         tracker.keep_summaries = True
         nodes.append(tracker)
         poser = PosePublisherNode(context=context, **node_options([

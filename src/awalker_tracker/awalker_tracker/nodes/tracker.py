@@ -68,6 +68,7 @@ class TrackerNodeStats:
     summaries: int = 0
     sync_issues: list[str] = field(default_factory=list)
     seconds_in_filter: float = 0.0
+    frames_skipped: int = 0     # frames that waited longer than max_lag_s, skipped to keep up (live)
 
 
 PROFILE_WHERE = "awalker_tracker: parameter 'profile'"
@@ -125,6 +126,9 @@ PARAMETERS = (
     NodeParameter("end_after_s", ViewConfig().end_after_s,
                   "end the track after the person is out of every camera's view this long (s), then look for the "
                   "next person; 0: never (inference/visibility.py)"),
+    NodeParameter("max_lag_s", 0.5, "live: a frame whose features arrived longer ago than this (s) is skipped, "
+                  "counted and logged, and the filter steps over it by the stamps, so the track keeps up with the "
+                  "camera; 0: never skip (offline: awalker track sets 0)"),
     NodeParameter("frame_rate", 0.0, "frames/s; 0: from the first two frame stamps"),
     NodeParameter("world_frame", "world", "world frame id of the outputs"),
     NodeParameter("ack_topic", "/awalker/ack", "std_msgs/Header acks of processed frames"),
@@ -170,6 +174,10 @@ class TrackerNode(AwalkerNode):
         except ValueError as exc:
             raise InputError(f"awalker_tracker: parameter 'depth_band_m': {exc}") from None
         self.frame_rate = float(v["frame_rate"])
+        self.max_lag_s = float(v["max_lag_s"])
+        if not (np.isfinite(self.max_lag_s) and self.max_lag_s >= 0):
+            raise InputError(f"awalker_tracker: parameter 'max_lag_s' must be >= 0 s, got {self.max_lag_s}")
+        self._skip_logged = -np.inf     # monotonic time of the last skip logged
         self.world_frame = v["world_frame"]
         ack_topic = v["ack_topic"]
         self.idle_flush_s = float(v["idle_flush_s"])
@@ -209,7 +217,7 @@ class TrackerNode(AwalkerNode):
         self._person_still = False     # the last summary said the person stands still (logged on change)
         self._pending: list[_Pending] = []
         self._frame_counter = 0                     # frame index = distinct stamps seen, dropped ones included
-        self._arrivals: dict[int, float] = {}       # stamp -> arrival time of the items waiting to be paired
+        self._arrivals: dict[int, int] = {}         # stamp -> when its features arrived (system time, ns)
         self._last_features: dict[str, Any] = {}   # camera -> its latest features (the shape of a frame it misses)
         self._first_stamps: list[int] = []
         self._last_frame_time = time.monotonic()
@@ -254,7 +262,7 @@ class TrackerNode(AwalkerNode):
         self.ack_pub = self.create_publisher(Header, ack_topic, QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
         for cam in self.camera_names:
             self.create_subscription(ImageFeatures, f"/{cam}/features",
-                                     lambda m, c=cam: self._on_features(c, m), QoSProfile(depth=100))
+                                     lambda m, info, c=cam: self._on_features(c, m, info), QoSProfile(depth=100))
         self.create_timer(0.2, self._on_timer)
 
     # -- inputs ----------------------------------------------------------------------------
@@ -297,7 +305,9 @@ class TrackerNode(AwalkerNode):
                 self.body = BodyDescription.default()
             self._process_pending()
 
-    def _on_features(self, cam: str, msg: ImageFeatures) -> None:
+    def _on_features(self, cam: str, msg: ImageFeatures, info: dict | None = None) -> None:
+        """``info``: rclpy's message info; its received_timestamp (system time, ns) is when the message arrived,
+        before it waited in the subscription's queue."""
         stamp = stamp_to_ns(msg.header.stamp)
         try:
             item = features_from_msg(msg)
@@ -309,7 +319,8 @@ class TrackerNode(AwalkerNode):
             self.get_logger().error(f"/{cam}/features at {stamp} ns: {exc}; frame skipped")
             self._ack(stamp)
             return
-        self._arrivals.setdefault(stamp, time.monotonic())
+        received = (info or {}).get("received_timestamp") or time.time_ns()
+        self._arrivals[stamp] = min(self._arrivals.get(stamp, received), received)
         self._last_features[cam] = item
         self._take(*self.sync.add(cam, stamp, item))
         self._last_frame_time = time.monotonic()
@@ -320,9 +331,14 @@ class TrackerNode(AwalkerNode):
         for issue in issues:
             self.stats.sync_issues.append(issue.message)
             self.get_logger().warning(issue.message)
+        now = time.time_ns()
+        lags = [(now - self._arrivals.get(frame.last_stamp_ns, now)) * 1e-9 for frame in frames]
         waiting = set(self.sync.pending_stamps)
         self._arrivals = {s: t for s, t in self._arrivals.items() if s in waiting}
-        for frame in frames:
+        for frame, lag in zip(frames, lags):
+            if self.max_lag_s > 0 and lag > self.max_lag_s and self.tracker is not None:
+                self._skip(frame.last_stamp_ns, lag)
+                continue
             self._pending.append(_Pending(frame.stamp_ns, self._frame_counter, frame.items))
             self._frame_counter += 1
             self.stats.frames_received += 1
@@ -330,6 +346,19 @@ class TrackerNode(AwalkerNode):
                 self._first_stamps.append(frame.stamp_ns)
             self._process_pending()
             self._ack(frame.last_stamp_ns)
+
+    def _skip(self, stamp_ns: int, lag: float) -> None:
+        """Live and behind: leave out a frame that arrived ``lag`` s ago (acknowledged, counted, logged every 2 s);
+        the filter steps over it by the stamps (``Tracker.push``)."""
+        self._frame_counter += 1
+        self.stats.frames_received += 1
+        self.stats.frames_skipped += 1
+        self._ack(stamp_ns)
+        if time.monotonic() - self._skip_logged > 2.0:
+            self._skip_logged = time.monotonic()
+            self.get_logger().warning(
+                f"behind the camera by {lag:.2f} s (max_lag_s {self.max_lag_s:g}): skipping frames to keep up, "
+                f"{self.stats.frames_skipped} skipped so far; the filter steps over them by their stamps")
 
     def _filled(self, items: tuple[Any, ...]) -> tuple[Any, ...]:
         """A frame's features with features carrying no evidence for each camera it has none of
@@ -533,9 +562,9 @@ class TrackerNode(AwalkerNode):
         return len(summaries)
 
     def _on_timer(self) -> None:
-        now = time.monotonic()
+        now = time.time_ns()
         waiting = self.sync.pending_stamps
-        if waiting and now - self._arrivals.get(waiting[0], now) > self.sync_timeout_s:
+        if waiting and (now - self._arrivals.get(waiting[0], now)) * 1e-9 > self.sync_timeout_s:
             self._take(*self.sync.expire(f"waited {self.sync_timeout_s:.1f} s"))
         if self._dirty and time.monotonic() - self._last_frame_time > self.idle_flush_s:
             self.flush()
