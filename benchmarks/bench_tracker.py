@@ -6,7 +6,11 @@ on 1 and 3 cameras (synthetic 640x480 frames, features from vision.features comp
 recording), in this process after the filter tables, and (d) sustained: `awalker track --no-overlay` as a
 user runs it (a fresh process: loading the compiled kernels counts) on a 10 s synthetic 640x480 walk
 (``--long-frames``), where the fixed costs of a 72-frame bag (start-up, kernel loading, writing the
-outputs: ~0.5 s) no longer dominate. Reports where the time goes per frame (dynamics + control, kinematics with pose_body,
+outputs: ~0.5 s) no longer dominate, and (e) with ``--defaults-grid``: `awalker track` at its defaults (no
+``--particles``: what a user gets), a fresh process each, on synthetic 2 s walks with 1 and 2 cameras, 30 and
+60 Hz, 640x480 and 1280x720, each with its end-to-end frames/s beside the median absolute error of that same run
+against the walk's truth (our own renders: a mirror of the speed/accuracy trade, not evidence of accuracy on
+people; that is bench_realwalks.py's, at the same defaults). Reports where the time goes per frame (dynamics + control, kinematics with pose_body,
 likelihood, filter bookkeeping and summaries; drawing the initial particles, once per track, is
 reported apart), and the same filter at 60 Hz input (dt = 1/60 s:
 2 RK4 sub-steps per frame, Table 1's alpha^(1/2); 1 camera). The compiled kernels are loaded (or
@@ -22,6 +26,7 @@ turn: a yardstick for the machine's speed at the time. Prints JSON.
 
     .venv/bin/python benchmarks/bench_tracker.py [--frames 20] [--particles 500 1000 5000] [--cameras 1 3]
         [--rates 30 60] [--skip-end-to-end] [--long-frames 300] [--baseline REV] [--repeats K]
+    .venv/bin/python benchmarks/bench_tracker.py --defaults-grid       # (e) alone
 """
 from __future__ import annotations
 
@@ -189,6 +194,54 @@ def sustained(particles: int, bag: Path, folder: Path) -> dict:
             "filter_frames_per_s": round(frames / max(run["seconds_in_filter"], 1e-9), 2)}
 
 
+def defaults_grid(folder: Path, seconds: float = 2.0) -> list[dict]:
+    """(e): per (cameras, rate, size), `awalker track --no-overlay` at its defaults in a fresh process on a synthetic
+    hand-started walk of ``seconds``, then `awalker eval`: frames/s end to end, while streaming, of the filter, and
+    the median absolute / relative error (mm)."""
+    import json as json_module
+    import subprocess
+
+    import yaml
+
+    from awalker_tools.pipeline import RUN_FILE
+    from awalker_tools.synth import SynthConfig, synthesise
+
+    rows = []
+    for cameras in (1, 2):
+        for rate in (30.0, 60.0):
+            for width, height in ((640, 480), (1280, 720)):
+                name = f"grid_{cameras}cam_{rate:g}hz_{width}x{height}"
+                paths = None
+                for seed in range(1, 20):
+                    try:
+                        paths = synthesise(SynthConfig(out_dir=folder / f"{name}_seed{seed}", cameras=cameras,
+                                                       rate=rate, frames=int(seconds * rate), background_frames=8,
+                                                       width=width, height=height, seed=seed), progress=False)
+                        break
+                    except Exception as exc:  # the walker fell: next seed
+                        print(f"synth seed {seed}: {exc}", file=sys.stderr)
+                if paths is None:
+                    raise RuntimeError(f"bench_tracker: no synthesis seed gave the {name} walk")
+                out = folder / f"{name}_run"
+                subprocess.run([sys.executable, "-m", "awalker_tools.cli", "track", str(paths["bag"]), "--out",
+                                str(out), "--no-overlay"], capture_output=True, text=True, check=True)
+                subprocess.run([sys.executable, "-m", "awalker_tools.cli", "eval", str(out)], capture_output=True,
+                               text=True, check=True)
+                run = yaml.safe_load((out / RUN_FILE).read_text())
+                scores = json_module.loads((out / "eval.json").read_text())
+                frames = run["posteriors"]
+                rows.append({"cameras": cameras, "rate_hz": rate, "size": f"{width}x{height}",
+                             "particles": run["particles"], "frames": frames,
+                             "end_to_end_frames_per_s": round(frames / run["seconds"], 2),
+                             "streaming_frames_per_s": round(frames / run["seconds_streaming"], 2),
+                             "filter_frames_per_s": round(frames / max(run["seconds_in_filter"], 1e-9), 2),
+                             "real_time": frames / run["seconds_streaming"] >= rate,
+                             "absolute_mm_median": round(scores["absolute_mm"]["median"], 1),
+                             "relative_mm_median": round(scores["relative_mm"]["median"], 1)})
+                print(f"defaults grid: {rows[-1]}", file=sys.stderr)
+    return rows
+
+
 def core_speeds() -> list[float]:
     """ns per sine-and-cosine pair of a compiled loop, on each core this process may use in turn (the thread
     pinned to it): a yardstick for the machine's speed, which varies over time and between its two cores (one ran
@@ -290,12 +343,20 @@ def main() -> None:
                         help="input frame rates (Hz); rates other than 30 are run with 1 camera")
     parser.add_argument("--baseline", metavar="REV", help="also run the filter tables on git revision REV and "
                         "report the speed-up against it")
+    parser.add_argument("--defaults-grid", action="store_true",
+                        help="only (e): `awalker track` at its defaults over cameras x rates x image sizes")
     parser.add_argument("--repeats", type=int, default=1,
                         help="run the filter tables this many times (alternately with the baseline's) and report "
                         "the median of each entry: the machine's speed drifts within minutes")
     args = parser.parse_args()
     if args.repeats < 1:
         parser.error("--repeats must be >= 1")
+    if args.defaults_grid:
+        with tempfile.TemporaryDirectory() as tmp:
+            grid = defaults_grid(Path(tmp))
+        print(json.dumps({"machine": "2 cores shared with other jobs",
+                          "load_average_1min": round(os.getloadavg()[0], 2), "defaults_grid": grid}, indent=1))
+        return
     from test_tracker_model import simulate_walk
 
     body, markers, _, _ = simulate_walk(args.frames, 1.3, 0.7, 0.0, seed=3)
