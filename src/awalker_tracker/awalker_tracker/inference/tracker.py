@@ -832,6 +832,13 @@ class Tracker:
         """Flush the frames still waiting for look-ahead observations."""
         return [] if self.ended is not None else self._completed(self.filter.finish())
 
+    def released(self) -> "Tracker":
+        """This ended track without its particles and pending frames (what ``map_trajectory`` and ``in_view_frames``
+        need stays); returns self."""
+        self.filter = None
+        self._features.clear()
+        return self
+
     @property
     def completed_frames(self) -> int:
         """Frames whose summaries are out."""

@@ -211,7 +211,8 @@ class TrackerNode(AwalkerNode):
             raise InputError(f"awalker_tracker: parameters 'sync_queue', 'sync_tolerance': {exc}") from None
         self.stats = TrackerNodeStats()
         self.tracker: Tracker | None = None
-        self.ended_tracks: list[Tracker] = []       # tracks that ended (the person left the view), in order
+        self.tracks_ended = 0                       # tracks that ended (the person left the view)
+        self.ended_tracks: list[Tracker] = []       # ... kept, with keep_summaries, for their MAP trajectories
         self.summaries: list[CoreSummary] = []
         self.keep_summaries = False
         self._person_still = False     # the last summary said the person stands still (logged on change)
@@ -426,8 +427,8 @@ class TrackerNode(AwalkerNode):
                 self.get_logger().info(f"automatic start: waiting for a walking person ({self._finder.status()})")
         if final and (found := self._finder.finish()) is not None:
             return started(found)
-        if final and self.ended_tracks:
-            self.get_logger().info(f"automatic start: no further walking person after track {len(self.ended_tracks)} "
+        if final and self.tracks_ended:
+            self.get_logger().info(f"automatic start: no further walking person after track {self.tracks_ended} "
                                    f"({self._finder.status()})")
         elif final:
             self.get_logger().warning(f"automatic start: no walking person found ({self._finder.status()}); "
@@ -452,7 +453,7 @@ class TrackerNode(AwalkerNode):
 
     def _write_start(self) -> None:
         """The first track's start to ``start_output`` (the later tracks' starts are in the log)."""
-        if self.start_output and self.start is not None and not self.ended_tracks:
+        if self.start_output and self.start is not None and not self.tracks_ended:
             from pathlib import Path
 
             Path(self.start_output).write_text(self.start.to_yaml_text())
@@ -471,7 +472,7 @@ class TrackerNode(AwalkerNode):
                     from pathlib import Path
 
                     Path(self.body_output).write_text(self.body.to_yaml_text())
-        if not self.ended_tracks:
+        if not self.tracks_ended:
             self._take_fitted_stance_leg()
         body = self.body or BodyDescription.default()
         cameras = [self.cameras[c] for c in self.camera_names]
@@ -482,7 +483,7 @@ class TrackerNode(AwalkerNode):
                                spread=AUTO_SPREAD if self.start_found_automatically else TrackerConfig.spread)
         model = TrackerModel(body, self.start, image_likelihood(body, cameras),
                              config, cameras=cameras)
-        self.tracker = Tracker(model, track_id=len(self.ended_tracks) + 1)
+        self.tracker = Tracker(model, track_id=self.tracks_ended + 1)
         self.get_logger().info(f"track {self.tracker.track_id}: tracking with {self.smc_config.num_particles} "
                                f"particles, dt {dt * 1e3:.1f} ms, cameras {', '.join(self.camera_names)}, start frame "
                                f"{self.start.frame}")
@@ -522,7 +523,9 @@ class TrackerNode(AwalkerNode):
         """The person left the view: keep the ended track, and find the next person (the automatic start, also
         after a hand start: it described the first person only)."""
         tracker, end = self.tracker, self.tracker.ended
-        self.ended_tracks.append(tracker)
+        self.tracks_ended += 1
+        if self.keep_summaries:     # (offline: poses.csv needs its MAP trajectory; its particles are not kept)
+            self.ended_tracks.append(tracker.released())
         self.get_logger().info(
             f"frame {end.frame_index}: track {tracker.track_id} ended: the person {end.reason} (last in view at "
             f"frame {end.last_in_view_frame}); no more poses for them; waiting for a person to come into view")
