@@ -82,16 +82,6 @@ def test_fallen_walkers_are_reseeded_standing_where_they_fell(reseed: bool):
     assert np.isfinite(new.pose.markers).all() and np.allclose(new.kin.heading[~down], heading[~down], atol=0.2)
 
 
-@pytest.fixture(scope="module")
-def seen():
-    """The side camera's features of a person (last of 3 rendered frames) and their true ground position."""
-    camera = side_camera()
-    poses = walking_poses(3, x0=0.4)
-    features, _ = features_of(camera, poses, 0)
-    markers = pose_body(BODY, PARAMS, poses[-1].walker, poses[-1].kin).markers[0]
-    return camera, features[-1], markers
-
-
 def test_monitor_orders_reacquisition_after_the_lost_time_then_waits_the_cooldown(seen):
     camera, features, markers = seen
     config = RecoveryConfig(lost_after_s=0.09, cooldown_s=0.5)

@@ -1,29 +1,11 @@
 """Whether the person is in view, and when a track ends (inference/visibility.py)."""
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from awalker_tracker.inference.visibility import (
     LEFT_EVERY_VIEW, NOT_SUPPORTED, CameraView, ViewConfig, ViewMonitor, camera_views)
-from awalker_tracker.model.kinematics import pose_body
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "vision"))
-from test_detection import features_of  # noqa: E402
-from vision_scene import BODY, PARAMS, side_camera, walking_poses  # noqa: E402
-
-
-@pytest.fixture(scope="module")
-def seen():
-    """The side camera, its features of a walking person (last of 3 frames) and the person's markers."""
-    camera = side_camera()
-    poses = walking_poses(3, x0=0.4)
-    features, _ = features_of(camera, poses, 0)
-    markers = pose_body(BODY, PARAMS, poses[-1].walker, poses[-1].kin).markers[0]
-    return camera, features[-1], markers
 
 
 def test_a_body_on_the_person_is_in_view(seen):
