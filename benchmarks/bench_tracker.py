@@ -38,9 +38,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test" / "inference"))
 
-from awalker_tracker.inference.smc import SMCConfig  # noqa: E402
-from awalker_tracker.inference.tracker import (  # noqa: E402
+from awalker_tracker.inference.filter_model import (  # noqa: E402
     StartDescription, Tracker, TrackerConfig, TrackerModel, marker_likelihood)
+from awalker_tracker.inference.smc import SMCConfig  # noqa: E402
 from awalker_tracker.model.walker import LEFT  # noqa: E402
 
 
@@ -134,7 +134,7 @@ def synthesised_walk(folder: Path, name: str, cameras: int, frames: int, backgro
 
 def image_sequence(cameras: int, frames: int, folder: Path):
     """A synthetic 640x480 walk seen by ``cameras`` cameras -> (body, start, cameras, observations)."""
-    from awalker_tracker.inference.tracker import ImageObservation
+    from awalker_tracker.inference.filter_model import ImageObservation
     from awalker_tracker.model.body import BodyDescription
     from awalker_tracker.vision.camera import load_calibration
     from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
@@ -230,7 +230,7 @@ def _timed(fn) -> float:
 def filter_tables(args, body, start, obs, sequences: dict) -> dict:
     """One run of the filter tables: the 3D-marker stand-in and the image likelihood per camera count and
     input rate (``sequences``: camera count -> ``image_sequence``'s (body, start, cameras, observations))."""
-    from awalker_tracker.inference.tracker import image_likelihood
+    from awalker_tracker.inference.filter_model import image_likelihood
 
     tables: dict = {"excluding_image_likelihood": [], "image_likelihood": []}
     for n in args.particles:
@@ -296,7 +296,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.repeats < 1:
         parser.error("--repeats must be >= 1")
-    from test_tracker_model import simulate_walk
+    from test_filter_model import simulate_walk
 
     body, markers, _, _ = simulate_walk(args.frames, 1.3, 0.7, 0.0, seed=3)
     start = StartDescription(0, tuple(markers[0, 0, :2]), 0.0, 1.3, 0.7, LEFT)

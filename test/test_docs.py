@@ -29,8 +29,8 @@ CONFIGURATION = REPO_ROOT / "docs" / "configuration.md"
 
 #: The dataclasses whose fields a person may tune: (module, class).
 CONFIG_DATACLASSES = (
-    ("awalker_tracker.inference.tracker", "TrackerConfig"),
-    ("awalker_tracker.inference.tracker", "InitialSpread"),
+    ("awalker_tracker.inference.filter_model", "TrackerConfig"),
+    ("awalker_tracker.inference.filter_model", "InitialSpread"),
     ("awalker_tracker.inference.smc", "SMCConfig"),
     ("awalker_tracker.inference.profiles", "TrackingProfile"),
     ("awalker_tracker.inference.recovery", "RecoveryConfig"),
@@ -53,13 +53,13 @@ CONFIG_DATACLASSES = (
 #: Module constants a person may tune, as docs/configuration.md names them (module path after the package).
 MODULE_CONSTANTS = (
     "model.dynamics.MAX_STANCE_LEAN", "model.dynamics.MAX_STRIKE_INTERVAL", "model.dynamics.DEFAULT_MAX_SUBSTEP",
-    "model.gaits.SOLVER_STEP", "model.gaits.RESIDUAL_TOLERANCE", "model.gaits.PREFERRED_STEP_AT_5KMH",
-    "model.gaits.PREFERRED_STEP_EXPONENT", "model.control.MIN_IMPULSE_MEAN", "model.kinematics.CHORD_LEAN",
+    "model.cyclic_gaits.SOLVER_STEP", "model.cyclic_gaits.RESIDUAL_TOLERANCE", "model.cyclic_gaits.PREFERRED_STEP_AT_5KMH",
+    "model.cyclic_gaits.PREFERRED_STEP_EXPONENT", "model.control.MIN_IMPULSE_MEAN", "model.kinematics.CHORD_LEAN",
     "model.kinematics.POSTURE_LIMIT", "model.kinematics.PELVIS_CEILING_RANGE",
     "inference.speed.SPEED_TIME_CONSTANT_S", "inference.autostart.AUTO_SPREAD",
-    "inference.gait.HUMAN_DOUBLE_SUPPORT", "inference.gait.WALKER_STRIKE_DELAY", "inference.gait.TYPICAL_STEP_TIME_S",
-    "inference.tracker.JUMP_SPREAD_M_S", "inference.tracker.JUMP_SPREAD_MIN_S",
-    "inference.tracker.MAX_PUBLISHED_SPEED_M_S",
+    "inference.gait_events.HUMAN_DOUBLE_SUPPORT", "inference.gait_events.WALKER_STRIKE_DELAY", "inference.gait_events.TYPICAL_STEP_TIME_S",
+    "inference.filter_model.JUMP_SPREAD_M_S", "inference.filter_model.JUMP_SPREAD_MIN_S",
+    "inference.filter_model.MAX_PUBLISHED_SPEED_M_S",
     "vision.features.MULTI_CAMERA_MAP_WIDTH", "vision.features.MAX_PENDING_FLOWS", "vision.features.SCHEDULE_RATE_HZ",
     "vision.foreground.NUM_COMPONENTS", "vision.foreground.OUTLIER_LOG_DENSITY", "vision.flow.STUDENT_T_DOF",
     "vision.densities.SHADOW_DARKEST", "vision.densities.SHADOW_PRIOR", "vision.densities.SHADOW_EDGE_STD",
@@ -67,10 +67,10 @@ MODULE_CONSTANTS = (
     "awalker_tools.pipeline.FRAMES_AHEAD", "awalker_tools.pipeline.GIL_SWITCH_INTERVAL_S",
     "awalker_tools.pipeline.ACK_TIMEOUT_S", "awalker_tools.pipeline.RECORD_WAIT_S", "awalker_tools.pipeline.UNDECODABLE_STOP",
     "awalker_tools.pipeline.FIRST_PASS_PARTICLES", "awalker_tools.pipeline.FIT_FRAMES",
-    "nodes.pose_publisher.DEFAULT_CLOUD_POINTS", "nodes.pose_publisher.CONTACT_MIN_PROBABILITY",
-    "inference.smc.MAX_PARTICLES", "inference.tracker.START_MAX_SPEED", "model.body.BODY_LEG_RANGE",
+    "nodes.pose_publisher_node.DEFAULT_CLOUD_POINTS", "nodes.pose_publisher_node.CONTACT_MIN_PROBABILITY",
+    "inference.smc.MAX_PARTICLES", "inference.filter_model.START_MAX_SPEED", "model.body.BODY_LEG_RANGE",
     "awalker_tools.synth.MAX_IMAGE_SIDE", "awalker_tools.commands.gaits.MAX_GRID_POINTS",
-    "awalker_tools.convert.FPS_RANGE", "awalker_tools.convert.UNREADABLE_RUN_STOP",
+    "awalker_tools.video_to_bag.FPS_RANGE", "awalker_tools.video_to_bag.UNREADABLE_RUN_STOP",
 )
 
 

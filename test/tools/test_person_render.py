@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from conftest import MOCAP_07
 
-from awalker_tools.mocap_motion import level_floor
 from awalker_tools.person_render import (BUILD_RANGE, HEAD_RADIUS_RANGE, LOWER_GARMENTS, LOWER_PATTERNS, POINT_NAMES,
                                          TOP_PATTERNS, Outfit, PersonRenderer, _capsule_hits, frustum_normals,
                                          intersect_frustum, shapes)
-from awalker_tracker.model.mocap import load_mocap
+from awalker_tools.walk_variants import level_floor
+from awalker_tracker.model.acclaim import load_mocap
 from awalker_tracker.vision.camera import Camera
 
 P = {n: i for i, n in enumerate(POINT_NAMES)}

@@ -41,9 +41,9 @@ import numpy as np
 import yaml
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.inference.filter_model import StartDescription, TrackerConfig
 from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES
 from awalker_tracker.inference.sync import DEFAULT_TOLERANCE
-from awalker_tracker.inference.tracker import StartDescription, TrackerConfig
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEG_NAMES
 
@@ -466,9 +466,9 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
     from rclpy.signals import SignalHandlerOptions
 
     from awalker_tracker.nodes.base import AwalkerNode, private_node_options
-    from awalker_tracker.nodes.features import FeatureNode
-    from awalker_tracker.nodes.pose_publisher import PosePublisherNode
-    from awalker_tracker.nodes.tracker import TrackerNode
+    from awalker_tracker.nodes.features_node import FeatureNode
+    from awalker_tracker.nodes.pose_publisher_node import PosePublisherNode
+    from awalker_tracker.nodes.tracker_node import TrackerNode
     from awalker_tracker.vision.camera import save_calibration
     from awalker_tracker.vision.features import map_downsample
 
