@@ -177,7 +177,7 @@ class TrackerConfig:
     likelihood_scale: float = 0.1
     recovery: RecoveryConfig = RecoveryConfig()
     cloud_size: int = 200
-    # Leg lengths the filter explores (kinematics module doc, *Leg length*; off by default): with
+    # Leg lengths the filter explores (docs/design.md, *Leg length per particle*; off by default): with
     # leg_scale_spread > 0 each particle's thigh and shank are x its own factor, log-normal with this spread
     # when drawn (start, re-seeds), wandering by leg_scale_drift per frame (log, std). Real walks, hand-started,
     # tracker seeds 0-4, 0.04 and 0.001 (bench_realwalks --leg-scale-spread 0.04): medians of the
@@ -189,7 +189,7 @@ class TrackerConfig:
     # docs/design.md, "Leg length per particle".
     leg_scale_spread: float = 0.0
     leg_scale_drift: float = 0.001
-    # Postures the filter explores (kinematics module doc, *Posture*), with at least posture_min_cameras
+    # Postures the filter explores (docs/design.md, *Posture*), with at least posture_min_cameras
     # cameras: each particle's torso pitch rests at its own angle, Table 1's rest (upright) plus
     # N(0, posture_spread^2) rad when drawn (start, re-seeds), wandering by posture_drift rad per frame (std);
     # otherwise, and with posture_spread 0, upright for every particle. Real walks, hand-started, tracker seeds
@@ -199,7 +199,7 @@ class TrackerConfig:
     posture_spread: float = 0.08
     posture_drift: float = 0.002
     posture_min_cameras: int = 2
-    # Pelvis ceilings the filter explores (kinematics module doc, *Pelvis ceiling*), with at least
+    # Pelvis ceilings the filter explores (docs/design.md, *Pelvis ceiling*), with at least
     # pelvis_ceiling_min_cameras cameras: each particle's pelvis stays at most its own fraction of the walker's
     # hip height, pelvis_ceiling plus N(0, pelvis_ceiling_spread^2) when drawn (start, re-seeds) within 0.85-1,
     # wandering by pelvis_ceiling_drift per frame (std); with fewer cameras, or pelvis_ceiling 1, off (the
