@@ -6,7 +6,7 @@ on 1 and 3 cameras (synthetic 640x480 frames, features from vision.features comp
 recording), in this process after the filter tables, and (d) sustained: `awalker track --no-overlay` as a
 user runs it (a fresh process: loading the compiled kernels counts) on a 10 s synthetic 640x480 walk
 (``--long-frames``), where the fixed costs of a 72-frame bag (start-up, kernel loading, writing the
-outputs: ~0.5 s) no longer dominate. Reports where the time goes per frame (dynamics + control, kinematics with pose_body,
+outputs: ~0.5 s) do not dominate. Reports where the time goes per frame (dynamics + control, kinematics with pose_body,
 likelihood, filter bookkeeping and summaries; drawing the initial particles, once per track, is
 reported apart), and the same filter at 60 Hz input (dt = 1/60 s:
 2 RK4 sub-steps per frame, Table 1's alpha^(1/2); 1 camera). The compiled kernels are loaded (or

@@ -56,7 +56,7 @@ def test_help_lists_the_parameters_without_starting_ros(module: str, program: st
 
 
 def test_pose_publisher_console_script_answers_help_at_once() -> None:
-    """It used to ignore --help and run until killed."""
+    """It answers --help and exits, rather than spinning until killed."""
     done = subprocess.run([sys.executable, "-c", "import sys; from awalker_tracker.nodes.pose_publisher_node import main; "
                            "sys.exit(main())", "--help"], capture_output=True, text=True, timeout=60, check=False)
     assert done.returncode == 0 and "cloud_points" in done.stdout and not done.stderr, done.stderr

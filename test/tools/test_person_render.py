@@ -122,7 +122,7 @@ def test_random_draws_what_it_drew_before():
     assert o.radii["hips"] == pytest.approx(0.10551371380490389, abs=1e-12) and o.carry == "backpack"
     rng = np.random.default_rng(3)
     Outfit.random(rng)
-    assert rng.random() == pytest.approx(0.8917110704451572, abs=1e-15)      # as many numbers drawn as before
+    assert rng.random() == pytest.approx(0.8917110704451572, abs=1e-15)      # a fixed count of numbers drawn
 
 
 def _first_solid_entry(origin, direction, top, axis, length, r_top, r_bottom, far, step=2e-4):

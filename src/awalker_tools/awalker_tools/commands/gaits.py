@@ -19,7 +19,7 @@ PACKAGE_DIR = PACKAGED_TABLE.parents[1]
 #: `gaits solve` writes here unless --out says otherwise (a new file in the current folder).
 DEFAULT_OUT = "cyclic_gaits.json"
 #: The most grid points `gaits solve` takes (the default grid has 11 x 19 = 209; each point takes up to a few
-#: seconds, so 2:7:100000 would run for days).
+#: seconds, so 2:7:100000, with millions of points, would not finish).
 MAX_GRID_POINTS = 2000
 
 
