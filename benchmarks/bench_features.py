@@ -24,8 +24,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test" / "vision"))
 from vision_scene import BODY, background_image, noisy, render_frames, side_camera, walking_poses  # noqa: E402
 
-from awalker_tracker.nodes.convert import header  # noqa: E402
-from awalker_tracker.nodes.features import features_to_msg  # noqa: E402
+from awalker_tracker.nodes.features_node import features_to_msg  # noqa: E402
+from awalker_tracker.nodes.messages import header  # noqa: E402
 from awalker_tracker.vision.background import measurements  # noqa: E402
 from awalker_tracker.vision.decode import decode_image  # noqa: E402
 from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor  # noqa: E402
@@ -78,7 +78,7 @@ def _node_and_camera(domain_id: int, depth: int):
     from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import Image
 
-    from awalker_tracker.nodes.features import FeatureNode
+    from awalker_tracker.nodes.features_node import FeatureNode
 
     context = Context()
     rclpy.init(context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)

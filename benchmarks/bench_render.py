@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from awalker_tracker.model import dynamics, gaits
+from awalker_tracker.model import dynamics, cyclic_gaits
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.kinematics import (
     DOF_NAMES,
@@ -38,9 +38,9 @@ PARAMS = BODY.walker_params()
 
 def walk(n: int, frames: int, dt: float):
     """Walker states on the 1.3 m/s, 0.7 m cyclic gait (with the heel strikes' events)."""
-    table = gaits.GaitTable.load()
+    table = cyclic_gaits.GaitTable.load()
     _, _, stiffness, impulse = table.lookup(1.3, 0.7)
-    walker = gaits.gait_initial_state(PARAMS, 1.3, 0.7, stance_leg=LEFT, table=table).take(np.zeros(n, np.intp))
+    walker = cyclic_gaits.gait_initial_state(PARAMS, 1.3, 0.7, stance_leg=LEFT, table=table).take(np.zeros(n, np.intp))
     states, events, since = [walker], [None], None
     for _ in range(frames - 1):
         walker, ev = dynamics.advance(PARAMS, walker, stiffness, impulse, dt, time_since_strike=since)

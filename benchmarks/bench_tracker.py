@@ -6,7 +6,7 @@ on 1 and 3 cameras (synthetic 640x480 frames, features from vision.features comp
 recording), in this process after the filter tables, and (d) sustained: `awalker track --no-overlay` as a
 user runs it (a fresh process: loading the compiled kernels counts) on a 10 s synthetic 640x480 walk
 (``--long-frames``), where the fixed costs of a 72-frame bag (start-up, kernel loading, writing the
-outputs: ~0.5 s) no longer dominate, and (e) with ``--defaults-grid``: `awalker track` at its defaults (no
+outputs: ~0.5 s) do not dominate, and (e) with ``--defaults-grid``: `awalker track` at its defaults (no
 ``--particles``: what a user gets), a fresh process each, on synthetic 2 s walks with 1 and 2 cameras, 30 and
 60 Hz, 640x480 and 1280x720, each with its end-to-end frames/s beside the median absolute error of that same run
 against the walk's truth (our own renders: a mirror of the speed/accuracy trade, not evidence of accuracy on
@@ -43,9 +43,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test" / "inference"))
 
-from awalker_tracker.inference.smc import SMCConfig  # noqa: E402
-from awalker_tracker.inference.tracker import (  # noqa: E402
+from awalker_tracker.inference.filter_model import (  # noqa: E402
     StartDescription, Tracker, TrackerConfig, TrackerModel, marker_likelihood)
+from awalker_tracker.inference.smc import SMCConfig  # noqa: E402
 from awalker_tracker.model.walker import LEFT  # noqa: E402
 
 
@@ -139,7 +139,7 @@ def synthesised_walk(folder: Path, name: str, cameras: int, frames: int, backgro
 
 def image_sequence(cameras: int, frames: int, folder: Path):
     """A synthetic 640x480 walk seen by ``cameras`` cameras -> (body, start, cameras, observations)."""
-    from awalker_tracker.inference.tracker import ImageObservation
+    from awalker_tracker.inference.filter_model import ImageObservation
     from awalker_tracker.model.body import BodyDescription
     from awalker_tracker.vision.camera import load_calibration
     from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
@@ -283,7 +283,7 @@ def _timed(fn) -> float:
 def filter_tables(args, body, start, obs, sequences: dict) -> dict:
     """One run of the filter tables: the 3D-marker stand-in and the image likelihood per camera count and
     input rate (``sequences``: camera count -> ``image_sequence``'s (body, start, cameras, observations))."""
-    from awalker_tracker.inference.tracker import image_likelihood
+    from awalker_tracker.inference.filter_model import image_likelihood
 
     tables: dict = {"excluding_image_likelihood": [], "image_likelihood": []}
     for n in args.particles:
@@ -357,7 +357,7 @@ def main() -> None:
         print(json.dumps({"machine": "2 cores shared with other jobs",
                           "load_average_1min": round(os.getloadavg()[0], 2), "defaults_grid": grid}, indent=1))
         return
-    from test_tracker_model import simulate_walk
+    from test_filter_model import simulate_walk
 
     body, markers, _, _ = simulate_walk(args.frames, 1.3, 0.7, 0.0, seed=3)
     start = StartDescription(0, tuple(markers[0, 0, :2]), 0.0, 1.3, 0.7, LEFT)

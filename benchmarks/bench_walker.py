@@ -13,14 +13,14 @@ import time
 
 import numpy as np
 
-from awalker_tracker.model import dynamics, gaits
+from awalker_tracker.model import dynamics, cyclic_gaits
 from awalker_tracker.model.walker import WalkerParams, WalkerState
 
 
-def spread_walkers(params: WalkerParams, table: gaits.GaitTable, n: int, rng: np.random.Generator
+def spread_walkers(params: WalkerParams, table: cyclic_gaits.GaitTable, n: int, rng: np.random.Generator
                    ) -> tuple[WalkerState, np.ndarray, np.ndarray]:
     w1, w2, kappa, iota = (float(np.ravel(x)[0]) for x in table.lookup(5 / 3.6, 0.7))
-    a = float(gaits.double_support_angle(params, 0.7))
+    a = float(cyclic_gaits.double_support_angle(params, 0.7))
     state = WalkerState.from_arrays(a, -a, w1, w2)
     # advance one walker through a stride and pick states at random phases
     states = []
@@ -41,7 +41,7 @@ def main() -> None:
     parser.add_argument("--substeps", type=int, default=None, help="RK4 sub-steps per frame (default: dynamics'")
     args = parser.parse_args()
     params = WalkerParams()
-    table = gaits.GaitTable.load()
+    table = cyclic_gaits.GaitTable.load()
     rng = np.random.default_rng(0)
     results = []
     for n in args.sizes:

@@ -4,7 +4,7 @@ viewing direction (and across it), at the true pose of a synthetic sequence and 
 For each camera of SEQ (an `awalker synth` output directory: calibration.yaml, body.yaml,
 ground_truth.csv) and the features RUN recorded (an `awalker track` output directory: result.bag,
 poses.csv, body.yaml):
-- truth: the true markers posed as our body (``mocap.segments_from_markers`` with SEQ's body), moved by
+- truth: the true markers posed as our body (``acclaim.segments_from_markers`` with SEQ's body), moved by
   -0.4..+0.4 m along the view (+ = away from the camera) and across it, log-likelihood summed over every
   other frame: where it peaks (the mean offset within 2 nats of the top) and what 0.1 and 0.2 m cost;
 - map: each MAP pose of RUN (RUN's body) moved along the view: the best shift per frame, what it gains,
@@ -32,8 +32,8 @@ def recorded_features(run: Path) -> dict[str, dict[int, object]]:
     from rosbags.rosbag2 import Reader
 
     from awalker_tracker.errors import InputError
-    from awalker_tracker.nodes.convert import stamp_to_ns
-    from awalker_tracker.nodes.features import features_from_msg
+    from awalker_tracker.nodes.features_node import features_from_msg
+    from awalker_tracker.nodes.messages import stamp_to_ns
 
     bag = run / "result.bag"
     if not bag.exists():
@@ -59,8 +59,8 @@ def moved(segments, direction: np.ndarray):
 
 def main(argv: list[str] | None = None) -> int:
     from awalker_tracker.errors import InputError
+    from awalker_tracker.model.acclaim import segments_from_markers
     from awalker_tracker.model.body import BodyDescription
-    from awalker_tracker.model.mocap import segments_from_markers
     from awalker_tracker.vision.camera import load_calibration
     from awalker_tracker.vision.likelihood import log_likelihood
 

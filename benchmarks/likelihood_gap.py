@@ -4,7 +4,7 @@ For a synthetic sequence SEQ (an `awalker synth` output directory: calibration.y
 runs of `awalker track` on its bag (RUN: result.bag with the features, poses.csv, body.yaml), at every other
 frame of each run:
 - gap: log p(images | truth) - log p(images | MAP), both posed as the run's body from their markers
-  (``mocap.segments_from_markers``; the previous frame's pose for the flow), summed over the cameras. Positive:
+  (``acclaim.segments_from_markers``; the previous frame's pose for the flow), summed over the cameras. Positive:
   the likelihood prefers the truth, so what keeps the tracker from it is the prior or the search (a pose the
   prior cannot reach, or particles that do not get there), not the likelihood;
 - by group: the gain of putting the truth's markers of one group (the upper body, the knees, each foot, each
@@ -47,8 +47,8 @@ def summary(gaps: list[float], gains: dict[str, list[float]]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     from awalker_tracker.errors import InputError
+    from awalker_tracker.model.acclaim import MARKER_NAMES, segments_from_markers
     from awalker_tracker.model.body import BodyDescription
-    from awalker_tracker.model.mocap import MARKER_NAMES, segments_from_markers
     from awalker_tracker.vision.camera import load_calibration
     from awalker_tracker.vision.likelihood import log_likelihood
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from awalker_tracker import blocks
-from awalker_tracker.inference.tracker import StartDescription, TrackerConfig, TrackerModel, marker_likelihood
+from awalker_tracker.inference.filter_model import StartDescription, TrackerConfig, TrackerModel, marker_likelihood
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEFT
 

@@ -1,4 +1,5 @@
-"""The documentation against the code: every setting is in docs/configuration.md, every README command parses.
+"""The documentation against the code: every setting is in docs/configuration.md, every README command parses
+and the quick ones run.
 
 - Each field of the config dataclasses listed below must appear, in backticks, in its own section of
   docs/configuration.md (the ``###`` section whose heading names the class); each module constant listed must
@@ -7,6 +8,9 @@
   and in its inline code spans is checked: an ``awalker ...`` line is parsed by the command's own argparse
   parser (a synopsis with ``[optional]`` parts or ``a|b`` alternatives: its subcommand and every ``--option``
   must exist); a ``python benchmarks/X.py`` line needs the script; a ``make X`` line needs the target.
+- Each command of the code blocks is run or listed as parse-only, with the reason, in
+  ``scripts/check_readme.py``; the quick ones run here end to end in a temporary folder (the script runs the
+  slower ones too).
 """
 from __future__ import annotations
 
@@ -15,8 +19,10 @@ import contextlib
 import dataclasses
 import importlib
 import io
+import os
 import re
 import shlex
+import sys
 from pathlib import Path
 
 import pytest
@@ -24,13 +30,15 @@ import pytest
 from awalker_tools.cli import build_parser
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO_ROOT / "scripts"))
+from check_readme import classification_errors, commands_of, readme_commands, run_checks, shell_blocks  # noqa: E402
 README = REPO_ROOT / "README.md"
 CONFIGURATION = REPO_ROOT / "docs" / "configuration.md"
 
 #: The dataclasses whose fields a person may tune: (module, class).
 CONFIG_DATACLASSES = (
-    ("awalker_tracker.inference.tracker", "TrackerConfig"),
-    ("awalker_tracker.inference.tracker", "InitialSpread"),
+    ("awalker_tracker.inference.filter_model", "TrackerConfig"),
+    ("awalker_tracker.inference.filter_model", "InitialSpread"),
     ("awalker_tracker.inference.smc", "SMCConfig"),
     ("awalker_tracker.inference.profiles", "TrackingProfile"),
     ("awalker_tracker.inference.recovery", "RecoveryConfig"),
@@ -53,13 +61,13 @@ CONFIG_DATACLASSES = (
 #: Module constants a person may tune, as docs/configuration.md names them (module path after the package).
 MODULE_CONSTANTS = (
     "model.dynamics.MAX_STANCE_LEAN", "model.dynamics.MAX_STRIKE_INTERVAL", "model.dynamics.DEFAULT_MAX_SUBSTEP",
-    "model.gaits.SOLVER_STEP", "model.gaits.RESIDUAL_TOLERANCE", "model.gaits.PREFERRED_STEP_AT_5KMH",
-    "model.gaits.PREFERRED_STEP_EXPONENT", "model.control.MIN_IMPULSE_MEAN", "model.kinematics.CHORD_LEAN",
+    "model.cyclic_gaits.SOLVER_STEP", "model.cyclic_gaits.RESIDUAL_TOLERANCE", "model.cyclic_gaits.PREFERRED_STEP_AT_5KMH",
+    "model.cyclic_gaits.PREFERRED_STEP_EXPONENT", "model.control.MIN_IMPULSE_MEAN", "model.kinematics.CHORD_LEAN",
     "model.kinematics.POSTURE_LIMIT", "model.kinematics.PELVIS_CEILING_RANGE",
     "inference.speed.SPEED_TIME_CONSTANT_S", "inference.autostart.AUTO_SPREAD",
-    "inference.gait.HUMAN_DOUBLE_SUPPORT", "inference.gait.WALKER_STRIKE_DELAY", "inference.gait.TYPICAL_STEP_TIME_S",
-    "inference.tracker.JUMP_SPREAD_M_S", "inference.tracker.JUMP_SPREAD_MIN_S",
-    "inference.tracker.MAX_PUBLISHED_SPEED_M_S",
+    "inference.gait_events.HUMAN_DOUBLE_SUPPORT", "inference.gait_events.WALKER_STRIKE_DELAY", "inference.gait_events.TYPICAL_STEP_TIME_S",
+    "inference.filter_model.JUMP_SPREAD_M_S", "inference.filter_model.JUMP_SPREAD_MIN_S",
+    "inference.filter_model.MAX_PUBLISHED_SPEED_M_S",
     "vision.features.MULTI_CAMERA_MAP_WIDTH", "vision.features.MAX_PENDING_FLOWS", "vision.features.SCHEDULE_RATE_HZ",
     "vision.foreground.NUM_COMPONENTS", "vision.foreground.OUTLIER_LOG_DENSITY", "vision.flow.STUDENT_T_DOF",
     "vision.densities.SHADOW_DARKEST", "vision.densities.SHADOW_PRIOR", "vision.densities.SHADOW_EDGE_STD",
@@ -67,10 +75,10 @@ MODULE_CONSTANTS = (
     "awalker_tools.pipeline.FRAMES_AHEAD", "awalker_tools.pipeline.GIL_SWITCH_INTERVAL_S",
     "awalker_tools.pipeline.ACK_TIMEOUT_S", "awalker_tools.pipeline.RECORD_WAIT_S", "awalker_tools.pipeline.UNDECODABLE_STOP",
     "awalker_tools.pipeline.FIRST_PASS_PARTICLES", "awalker_tools.pipeline.FIT_FRAMES",
-    "nodes.pose_publisher.DEFAULT_CLOUD_POINTS", "nodes.pose_publisher.CONTACT_MIN_PROBABILITY",
-    "inference.smc.MAX_PARTICLES", "inference.tracker.START_MAX_SPEED", "model.body.BODY_LEG_RANGE",
+    "nodes.pose_publisher_node.DEFAULT_CLOUD_POINTS", "nodes.pose_publisher_node.CONTACT_MIN_PROBABILITY",
+    "inference.smc.MAX_PARTICLES", "inference.filter_model.START_MAX_SPEED", "model.body.BODY_LEG_RANGE",
     "awalker_tools.synth.MAX_IMAGE_SIDE", "awalker_tools.commands.gaits.MAX_GRID_POINTS",
-    "awalker_tools.convert.FPS_RANGE", "awalker_tools.convert.UNREADABLE_RUN_STOP",
+    "awalker_tools.video_to_bag.FPS_RANGE", "awalker_tools.video_to_bag.UNREADABLE_RUN_STOP",
 )
 
 
@@ -124,59 +132,6 @@ def test_the_section_check_finds_an_undocumented_field() -> None:
 
 
 # ----------------------------------------------------------------------------- README commands
-
-_FENCE = re.compile(r"^(\s*)(`{3,}|~{3,})\s*([\w+-]*)")
-_SHELL_LANGUAGES = {"", "bash", "sh", "shell", "console"}
-_LIST_ITEM = re.compile(r"^\s*([-*+]|\d+[.)])\s")
-
-
-def shell_blocks(text: str) -> list[list[str]]:
-    """Lines of the fenced shell blocks (bash, sh, shell, console or unlabelled) and of the indented code
-    blocks of a Markdown text (an indented block follows a blank line after a paragraph or heading that is
-    not indented and not a list item)."""
-    blocks: list[list[str]] = []
-    lines = text.splitlines()
-    i = 0
-    while i < len(lines):
-        m = _FENCE.match(lines[i])
-        if m:
-            fence, language = m.group(2), m.group(3).lower()
-            body = []
-            i += 1
-            while i < len(lines) and not lines[i].strip().startswith(fence):
-                body.append(lines[i])
-                i += 1
-            if language in _SHELL_LANGUAGES:
-                blocks.append(body)
-            i += 1
-            continue
-        if (lines[i].startswith("    ") and lines[i].strip() and i >= 2 and not lines[i - 1].strip()
-                and lines[i - 2].strip() and not lines[i - 2].startswith(" ") and not _LIST_ITEM.match(lines[i - 2])):
-            body = []
-            while i < len(lines) and (lines[i].startswith("    ") or not lines[i].strip()):
-                body.append(lines[i][4:])
-                i += 1
-            blocks.append(body)
-            continue
-        i += 1
-    return blocks
-
-
-def commands_of(lines: list[str]) -> list[str]:
-    """The commands of a block's lines: backslash continuations joined, comments and blank lines dropped."""
-    out: list[str] = []
-    pending = ""
-    for line in lines:
-        stripped = line.strip()
-        if stripped.endswith("\\"):
-            pending += stripped[:-1] + " "
-            continue
-        command = (pending + stripped).strip()
-        pending = ""
-        if command and not command.startswith("#"):
-            out.append(command)
-    return out
-
 
 def inline_commands(text: str) -> list[str]:
     """Inline code spans outside code blocks that start like a command (awalker, python, make)."""
@@ -292,3 +247,22 @@ def test_code_blocks_are_found() -> None:
             "```yaml\nawalker: no\n```\n\nText:\n\n    make demo\n\n- item\n\n    not code\n")
     commands = [c for block in shell_blocks(text) for c in commands_of(block)]
     assert commands == ["awalker info a.bag   # comment", "awalker track a.bag  --out r/", "make demo"]
+
+
+def test_every_readme_command_is_run_or_parse_only() -> None:
+    """scripts/check_readme.py classifies every command of the README's code blocks, and only those."""
+    errors = classification_errors(readme_commands())
+    assert not errors, "\n".join(errors)
+
+
+@pytest.mark.slow
+def test_readme_quick_commands_run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The README's quick commands (info, report, eval, simulate, gaits plot, --help, --version; report and eval
+    on a run of the sample bag at 500 particles) run end to end and write what they say: under a minute."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(90 + int(worker.removeprefix("gw") or 0)))
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+    results = run_checks(quick_only=True, root=tmp_path, jobs=2, report=lambda line: None)
+    assert len(results) >= 10, [r.line for r in results]
+    failures = [f"{r.line or r.command}: {r.why}" for r in results if not r.ok]
+    assert not failures, "\n\n".join(failures)

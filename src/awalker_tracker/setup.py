@@ -20,9 +20,9 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'awalker_tracker_node = awalker_tracker.nodes.tracker:main',
-            'awalker_pose_publisher = awalker_tracker.nodes.pose_publisher:main',
-            'awalker_features = awalker_tracker.nodes.features:main',
+            'awalker_tracker_node = awalker_tracker.nodes.tracker_node:main',
+            'awalker_pose_publisher = awalker_tracker.nodes.pose_publisher_node:main',
+            'awalker_features = awalker_tracker.nodes.features_node:main',
         ],
     },
 )

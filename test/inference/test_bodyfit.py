@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from awalker_tracker.inference.bodyfit import BodyFitConfig, fit_leg_length, fit_stance_leg, legs_scaled
-from awalker_tracker.inference.tracker import StartDescription, TrackerConfig, marker_likelihood
+from awalker_tracker.inference.filter_model import StartDescription, TrackerConfig, marker_likelihood
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEFT, RIGHT
-from test_tracker_model import simulate_walk
+from test_filter_model import simulate_walk
 
 
 def test_legs_scaled_changes_thigh_and_shank_only():

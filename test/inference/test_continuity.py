@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from awalker_tracker.inference.tracker import (
+from awalker_tracker.inference.filter_model import (
     JUMP_SPREAD_M_S, JUMP_SPREAD_MIN_S, MAX_PUBLISHED_SPEED_M_S, PublishedPath, smooth_jumps)
 from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES
 
@@ -79,7 +79,7 @@ def test_the_live_pose_follows_a_map_that_swaps_between_particles_without_jumpin
 
 def _walking_particles(n: int, frames: int, seed: int = 0):
     """Tracker particles walked ``frames`` frames by the prior (no images)."""
-    from awalker_tracker.inference.tracker import StartDescription, TrackerConfig, TrackerModel, marker_likelihood
+    from awalker_tracker.inference.filter_model import StartDescription, TrackerConfig, TrackerModel, marker_likelihood
     from awalker_tracker.model.body import BodyDescription
 
     model = TrackerModel(BodyDescription.default(), StartDescription(0, (0.0, 0.0), 0.7, 1.3, None, None),
@@ -140,7 +140,7 @@ def _renamed_walk(at: int, frames: int = 12):
 def test_a_lineage_that_renamed_its_legs_is_named_throughout_as_it_ends():
     """A walk whose particle renamed its legs at frame 6: the lineage's earlier frames are mirrored and renamed
     too, so its feet do not swap sides at the flip, and the frames after it are left as they are."""
-    from awalker_tracker.inference.tracker import relabel_lineage
+    from awalker_tracker.inference.filter_model import relabel_lineage
 
     (markers, angles, stance), (lineage, lineage_angles, lineage_stance), flipped = _renamed_walk(6)
     left_ankle = MARKER_NAMES.index("left_ankle")
@@ -179,7 +179,7 @@ def test_the_lineage_takes_the_naming_the_posterior_favoured():
     """Where the last particle's naming is a coin toss, the posterior's frames decide: a lineage that renamed its
     legs at frame 9 of 12, while the posterior kept favouring its first naming, keeps that naming throughout (the
     frames after the flip are mirrored back); a posterior that agrees with the last naming keeps it."""
-    from awalker_tracker.inference.tracker import relabel_lineage
+    from awalker_tracker.inference.filter_model import relabel_lineage
 
     (markers, _, stance), (lineage, lineage_angles, lineage_stance), flipped = _renamed_walk(9)
     first_naming = np.where(stance == 0, 0.9, 0.1)                 # the posterior's P(left) per frame

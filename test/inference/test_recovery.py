@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from awalker_tracker.inference.filter_model import StartDescription, TrackerConfig, TrackerModel, marker_likelihood
 from awalker_tracker.inference.recovery import (
     HELD, NOT_RESEEDED, RESEEDED_FALLEN, LostTrackMonitor, RecoveryConfig, put_rows)
-from awalker_tracker.inference.tracker import StartDescription, TrackerConfig, TrackerModel, marker_likelihood
 from awalker_tracker.model.body import MARKER_NAMES, BodyDescription
 from awalker_tracker.model.walker import LEFT
 
@@ -219,7 +219,7 @@ def test_monitor_says_when_the_person_stands_still_and_when_they_walk_on(walk_st
 
 
 def test_the_walkers_are_held_while_the_person_stands_still(walk_stop_walk):
-    from awalker_tracker.inference.tracker import ImageObservation, image_likelihood
+    from awalker_tracker.inference.filter_model import ImageObservation, image_likelihood
 
     camera, features, pelvis = walk_stop_walk
     body = BodyDescription.default()
@@ -338,7 +338,7 @@ def test_walkers_straying_in_depth_beyond_the_band_lose_weight(seen, band: float
     keep the image's log-likelihood; beyond it they lose 0.5 (excess / sigma)^2 nats, levelling off at
     ~-log(depth_band_outlier) (a feet row metres from every walker changes no weights). Not over the first
     ``depth_band_delay_s`` (0.5 s: 15 frames) of the track. Band 0 (off): no term."""
-    from awalker_tracker.inference.tracker import ImageObservation
+    from awalker_tracker.inference.filter_model import ImageObservation
 
     camera, features, markers = seen
     pelvis = markers[PELVIS]

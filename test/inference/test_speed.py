@@ -51,8 +51,8 @@ def test_the_tracker_and_the_evaluation_use_it():
     from pathlib import Path
 
     from awalker_tools import evaluation
+    from awalker_tracker.inference.filter_model import StartDescription, TrackerConfig, TrackerModel, marker_likelihood
     from awalker_tracker.inference.smc import SMCConfig
-    from awalker_tracker.inference.tracker import StartDescription, TrackerConfig, TrackerModel, marker_likelihood
     from awalker_tracker.model.body import BodyDescription
     from awalker_tracker.model.walker import LEFT
 

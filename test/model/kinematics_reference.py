@@ -1,6 +1,6 @@
-"""Test oracle: the vectorised numpy implementation of the conditional kinematics' pose
-computation as it was before the compiled kernels (``awalker_tracker.model.kinematics``),
-kept only to check the kernels against it. Same maths, same rng stream; not used by the package.
+"""Test oracle: a vectorised numpy implementation of the conditional kinematics' pose computation,
+which ``awalker_tracker.model.kinematics`` runs in compiled kernels; used only to check the kernels
+against it. Same maths, same rng stream; not used by the package.
 """
 from __future__ import annotations
 

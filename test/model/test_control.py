@@ -6,27 +6,27 @@ import dataclasses
 import numpy as np
 import pytest
 
-from awalker_tracker.model import control, dynamics, gaits
+from awalker_tracker.model import control, dynamics, cyclic_gaits
 from awalker_tracker.model.walker import WalkerParams, WalkerState
 
 PARAMS = WalkerParams()
 
 
 @pytest.fixture(scope="module")
-def table() -> gaits.GaitTable:
-    return gaits.GaitTable.load()
+def table() -> cyclic_gaits.GaitTable:
+    return cyclic_gaits.GaitTable.load()
 
 
 @pytest.fixture(scope="module")
-def prior(table: gaits.GaitTable) -> control.ControlPrior:
+def prior(table: cyclic_gaits.GaitTable) -> control.ControlPrior:
     return control.ControlPrior.from_gait_table(table)
 
 
-def test_defaults_and_the_papers_values(prior: control.ControlPrior, table: gaits.GaitTable) -> None:
+def test_defaults_and_the_papers_values(prior: control.ControlPrior, table: cyclic_gaits.GaitTable) -> None:
     paper = control.ControlPrior.paper(table)
     assert (paper.beta, paper.mu_kappa, paper.kappa_bar_variance, paper.kappa_noise_variance) == (0.85, 0.7, 0.5, 1.0)
     assert paper.toe_off_rule == "bilinear" and paper.impulse_variance == pytest.approx(0.05**2)
-    coef, _ = gaits.fit_impulse_mean(table)
+    coef, _ = cyclic_gaits.fit_impulse_mean(table)
     np.testing.assert_allclose(paper.impulse_mean_coefficients, coef)
     # the default keeps beta, mu_kappa and sigma_iota^2, with the cyclic-gait toe-off and smaller kappa noise
     assert (prior.beta, prior.mu_kappa, prior.toe_off_rule) == (0.85, 0.7, "cyclic_gait")
@@ -50,16 +50,16 @@ def test_gamma_impulse_has_the_given_mean_and_paper_variance(prior: control.Cont
     assert draws.var() == pytest.approx(0.05**2, rel=2e-2)
 
 
-def _pre_strike(table: gaits.GaitTable, speed: float, step: float) -> tuple[WalkerState, float, float]:
+def _pre_strike(table: cyclic_gaits.GaitTable, speed: float, step: float) -> tuple[WalkerState, float, float]:
     """Pre-impact state of the cyclic gait (speed, step) and its (kappa, iota)."""
     _, _, kappa, iota = table.lookup(speed, step)
-    start = gaits.gait_initial_state(PARAMS, speed, step, table=table)
+    start = cyclic_gaits.gait_initial_state(PARAMS, speed, step, table=table)
     pre_states = []
     dynamics.simulate_to_strike(PARAMS, start, kappa, lambda idx, pre: pre_states.append(pre) or np.full(idx.size, iota))
     return pre_states[0], float(kappa), float(iota)
 
 
-def test_bilinear_toe_off_mean_is_the_fit(table: gaits.GaitTable) -> None:
+def test_bilinear_toe_off_mean_is_the_fit(table: cyclic_gaits.GaitTable) -> None:
     paper = control.ControlPrior.paper(table)
     pre, kappa, _ = _pre_strike(table, 5 / 3.6, 0.7)
     c0, c1, c2, c3 = paper.impulse_mean_coefficients
@@ -68,7 +68,7 @@ def test_bilinear_toe_off_mean_is_the_fit(table: gaits.GaitTable) -> None:
 
 
 @pytest.mark.parametrize("speed_kmh, step", [(3.0, 0.55), (5.0, 0.7), (6.5, 0.9)])
-def test_cyclic_gait_toe_off_is_the_gaits_impulse(prior: control.ControlPrior, table: gaits.GaitTable,
+def test_cyclic_gait_toe_off_is_the_gaits_impulse(prior: control.ControlPrior, table: cyclic_gaits.GaitTable,
                                                   speed_kmh: float, step: float) -> None:
     """On a solved cyclic gait, the toe-off that restores the gait's stance rate is the table's own iota."""
     speed = speed_kmh / 3.6
@@ -82,7 +82,7 @@ def test_cyclic_gait_toe_off_is_the_gaits_impulse(prior: control.ControlPrior, t
     np.testing.assert_allclose(post.stance_rate, stance_rate, atol=1e-10)
 
 
-def test_gait_for_stiffness_inverts_the_table(table: gaits.GaitTable) -> None:
+def test_gait_for_stiffness_inverts_the_table(table: cyclic_gaits.GaitTable) -> None:
     assert np.all(np.diff(table.stiffness, axis=0) > 0)  # kappa rises with speed at every step length
     speeds = np.array([2.5, 3.7, 5.2, 6.6]) / 3.6
     steps = np.array([0.52, 0.66, 0.81, 1.13])
@@ -93,12 +93,12 @@ def test_gait_for_stiffness_inverts_the_table(table: gaits.GaitTable) -> None:
 
 
 def _start(prior, table, n, rng, speed=5 / 3.6, step=0.7):
-    walkers = gaits.gait_initial_state(PARAMS, np.full(n, speed), np.full(n, step), table=table)
+    walkers = cyclic_gaits.gait_initial_state(PARAMS, np.full(n, speed), np.full(n, step), table=table)
     _, _, kappa, iota = table.lookup(speed, step)
     return walkers, control.initial_control(prior, n, rng, stiffness=kappa, toe_off_impulse=iota)
 
 
-def test_kappa_draws_and_rao_blackwell_update(prior: control.ControlPrior, table: gaits.GaitTable) -> None:
+def test_kappa_draws_and_rao_blackwell_update(prior: control.ControlPrior, table: cyclic_gaits.GaitTable) -> None:
     rng = np.random.default_rng(1)
     n = 20_000
     walkers, ctrl = _start(prior, table, n, rng)
@@ -116,7 +116,7 @@ def test_kappa_draws_and_rao_blackwell_update(prior: control.ControlPrior, table
 
 
 @pytest.mark.parametrize("rule", control.TOE_OFF_RULES)
-def test_stride_update_at_heel_strike(table: gaits.GaitTable, rule: str) -> None:
+def test_stride_update_at_heel_strike(table: cyclic_gaits.GaitTable, rule: str) -> None:
     """With tiny noise, walkers strike; at the strike the belief goes through eq. (5), is conditioned on the
     new stride's first kappa_t, and iota is the rule's mean."""
     quiet = control.ControlPrior.from_gait_table(table, kappa_noise_variance=1e-10, kappa_bar_variance=1e-6,
@@ -156,7 +156,7 @@ def test_stride_update_at_heel_strike(table: gaits.GaitTable, rule: str) -> None
     np.testing.assert_allclose(ctrl.time_since_strike, (1 - ev.strike_fraction) / 30)
 
 
-def test_take_and_copy(prior: control.ControlPrior, table: gaits.GaitTable) -> None:
+def test_take_and_copy(prior: control.ControlPrior, table: cyclic_gaits.GaitTable) -> None:
     rng = np.random.default_rng(3)
     _, ctrl = _start(prior, table, 4, rng)
     ctrl.stiffness[:] = [1.0, 2.0, 3.0, 4.0]
@@ -167,7 +167,7 @@ def test_take_and_copy(prior: control.ControlPrior, table: gaits.GaitTable) -> N
     assert ctrl.stiffness[0] == 1.0
 
 
-def _steps_before_falling(prior: control.ControlPrior, table: gaits.GaitTable, speed: float, step: float,
+def _steps_before_falling(prior: control.ControlPrior, table: cyclic_gaits.GaitTable, speed: float, step: float,
                           n: int, frames: int, seed: int, push: float = 0.0) -> np.ndarray:
     """Heel strikes each walker took before falling (-1: still walking); ``push`` (rad/s) added to phi1'."""
     rng = np.random.default_rng(seed)
@@ -182,7 +182,7 @@ def _steps_before_falling(prior: control.ControlPrior, table: gaits.GaitTable, s
     return np.where(fallen, steps, -1)  # -1: still walking
 
 
-def _noise_free_prior(table: gaits.GaitTable, speed: float, step: float, fixed_toe_off: bool) -> control.ControlPrior:
+def _noise_free_prior(table: cyclic_gaits.GaitTable, speed: float, step: float, fixed_toe_off: bool) -> control.ControlPrior:
     """A prior without noise holding the stiffness of the gait (speed, step); its toe-off is the gait's own iota
     (``fixed_toe_off``, a constant "bilinear" mean) or the default cyclic-gait rule."""
     _, _, kappa, iota = table.lookup(speed, step)
@@ -192,13 +192,13 @@ def _noise_free_prior(table: gaits.GaitTable, speed: float, step: float, fixed_t
     return control.ControlPrior.from_gait_table(table, **quiet)
 
 
-def test_noise_free_prior_keeps_walking_at_the_gait(table: gaits.GaitTable) -> None:
+def test_noise_free_prior_keeps_walking_at_the_gait(table: cyclic_gaits.GaitTable) -> None:
     """Without noise, walkers from the 4 km/h, 0.6 m gait (open-loop stable) take 20 regular steps."""
     still = _noise_free_prior(table, 4 / 3.6, 0.6, fixed_toe_off=True)
     assert np.all(_steps_before_falling(still, table, 4 / 3.6, 0.6, 20, 330, 4) == -1)
 
 
-def test_cyclic_gait_toe_off_stabilises_an_unstable_gait(table: gaits.GaitTable) -> None:
+def test_cyclic_gait_toe_off_stabilises_an_unstable_gait(table: cyclic_gaits.GaitTable) -> None:
     """5 km/h, 0.7 m has Floquet multiplier 1.08: pushed by 0.02 rad/s it falls with its fixed iota, and
     keeps walking with the cyclic-gait toe-off."""
     fixed = _noise_free_prior(table, 5 / 3.6, 0.7, fixed_toe_off=True)
@@ -208,7 +208,7 @@ def test_cyclic_gait_toe_off_stabilises_an_unstable_gait(table: gaits.GaitTable)
     assert all(_steps_before_falling(steered, table, 5 / 3.6, 0.7, 1, 600, 4, push)[0] == -1 for push in pushes)
 
 
-def test_paper_prior_falls_and_ours_walks(prior: control.ControlPrior, table: gaits.GaitTable) -> None:
+def test_paper_prior_falls_and_ours_walks(prior: control.ControlPrior, table: cyclic_gaits.GaitTable) -> None:
     """The issue's check (reported in README): walkers started on the 5 km/h, 0.7 m gait, 20 steps.
 
     The paper's values make nearly every walker fall within a few steps; the default prior keeps > 95 %
@@ -225,7 +225,7 @@ def test_paper_prior_falls_and_ours_walks(prior: control.ControlPrior, table: ga
     assert 0.25 < ours["log_step_length_vs_log_speed_slope"] < 0.6
 
 
-def test_prior_walk_statistics_on_a_still_prior(table: gaits.GaitTable) -> None:
+def test_prior_walk_statistics_on_a_still_prior(table: cyclic_gaits.GaitTable) -> None:
     still = _noise_free_prior(table, 4 / 3.6, 0.6, fixed_toe_off=True)
     quiet = control.prior_walk_statistics(PARAMS, still, table, 4 / 3.6, 0.6, n=20, steps=8)
     assert quiet["fraction_fallen"] == 0.0 and quiet["median_strikes_before_fall"] is None

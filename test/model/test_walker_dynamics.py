@@ -300,7 +300,7 @@ def test_strike_located_inside_the_frame() -> None:
 
 def test_fallen_walkers_flagged_and_frozen() -> None:
     # 0: falls backwards (rate pushes the stance leg forward past horizontal); 1: walks; 2: no strike too long
-    a = 0.39608  # the 5 km/h, 0.7 m cyclic gait for walker 1 (see test_gaits.py)
+    a = 0.39608  # the 5 km/h, 0.7 m cyclic gait for walker 1 (see test_cyclic_gaits.py)
     state = WalkerState.from_arrays([0.3, a, 0.1], [-0.3, -a, -0.1], [12.0, -1.9093, -0.001], [0.0, -1.3005, 0.0])
     tss = np.array([0.0, 0.0, 1.99])
     fallen_ever = np.zeros(3, bool)
@@ -368,7 +368,7 @@ def test_compiled_impact_matches_the_jacobian_form(params: WalkerParams) -> None
 def test_a_stance_leg_leaning_beyond_any_step_counts_as_fallen() -> None:
     """fallen_mask: a stance leg leaning past MAX_STANCE_LEAN (0.9 rad) is a fall, forwards or backwards,
     while every step the gait table solves (up to 1.2 m, for this leg length) strikes well within it."""
-    from awalker_tracker.model.gaits import double_support_angle
+    from awalker_tracker.model.cyclic_gaits import double_support_angle
 
     lean = dynamics.MAX_STANCE_LEAN
     state = WalkerState.from_arrays([lean + 0.02, -lean - 0.02, lean - 0.02, 0.3], [-0.3, 0.3, -0.3, -0.3],

@@ -37,7 +37,7 @@ def test_private_options_leave_out_event_handlers_and_services_but_not_messages(
         private.create_subscription(String, "/private/other", lambda m: None, 10,
                                     event_callbacks=SubscriptionEventCallbacks(deadline=deadlines.append))
         assert _entities(private)[0] >= 1       # the deadline handler (and those its callbacks object asks for)
-        # messages flow as before (publisher: the private node's)
+        # messages still flow (publisher: the private node's)
         executor = SingleThreadedExecutor(context=ros_context)
         executor.add_node(private)
         deadline = time.monotonic() + 10

@@ -47,7 +47,7 @@ def scene_frames():
 def image_msg(rgb: np.ndarray, stamp_ns: int, encoding: str = "rgb8"):
     from sensor_msgs.msg import Image
 
-    from awalker_tracker.nodes.convert import header
+    from awalker_tracker.nodes.messages import header
 
     data = rgb if encoding == "rgb8" else rgb[..., ::-1]
     msg = Image(header=header(stamp_ns, "cam_optical_frame"), height=rgb.shape[0], width=rgb.shape[1],
@@ -57,8 +57,8 @@ def image_msg(rgb: np.ndarray, stamp_ns: int, encoding: str = "rgb8"):
 
 
 def test_features_message_roundtrip():
-    from awalker_tracker.nodes.convert import header
-    from awalker_tracker.nodes.features import features_from_msg, features_to_msg
+    from awalker_tracker.nodes.features_node import features_from_msg, features_to_msg
+    from awalker_tracker.nodes.messages import header
 
     frames = scene_frames()
     extractor = FeatureExtractor(FeatureConfig(background_frames=3, downsample=2, flow=FlowConfig(cell_size=8)))
@@ -100,8 +100,8 @@ def test_node_publishes_features_for_every_image(ros_context):
     from std_msgs.msg import String
 
     from awalker_msgs.msg import ImageFeatures
-    from awalker_tracker.nodes.convert import header, stamp_to_ns
-    from awalker_tracker.nodes.features import FeatureNode, features_from_msg
+    from awalker_tracker.nodes.features_node import FeatureNode, features_from_msg
+    from awalker_tracker.nodes.messages import header, stamp_to_ns
 
     frames = scene_frames()
     cam = scene_camera()
@@ -190,8 +190,8 @@ def _features_with_a_broken_flow(ros_context, monkeypatch, error: Exception, fra
     from sensor_msgs.msg import Image
 
     from awalker_msgs.msg import ImageFeatures
-    from awalker_tracker.nodes.convert import stamp_to_ns
-    from awalker_tracker.nodes.features import FeatureNode
+    from awalker_tracker.nodes.features_node import FeatureNode
+    from awalker_tracker.nodes.messages import stamp_to_ns
     from awalker_tracker.vision import flow as flow_module
 
     monkeypatch.setenv("AWALKER_THREADS", "2")
@@ -252,7 +252,7 @@ def test_a_frame_refused_on_the_flow_thread_is_skipped_and_counted(ros_context, 
 
 
 def test_node_requires_a_camera_name(ros_context):
-    from awalker_tracker.nodes.features import FeatureNode
+    from awalker_tracker.nodes.features_node import FeatureNode
 
     with pytest.raises(InputError, match="camera_name"):
         FeatureNode(context=ros_context)
@@ -262,7 +262,7 @@ def test_start_and_body_file_parameters(ros_context, tmp_path):
     """The start file sets the background-only frames at once; bad files are named in the error."""
     from rclpy.parameter import Parameter
 
-    from awalker_tracker.nodes.features import FeatureNode
+    from awalker_tracker.nodes.features_node import FeatureNode
 
     start = tmp_path / "start.yaml"
     start.write_text("start: {frame: 7, position: [0, 0], heading: 0, speed: 1.3, stance_leg: left}\n")
@@ -293,8 +293,8 @@ def test_features_for_every_frame_of_a_replayed_bag(ros_context, tmp_path):
     from awalker_msgs.msg import ImageFeatures
     from awalker_tools.bagio import START_DESCRIPTION_TOPIC, SequenceWriter
     from awalker_tools.replay import ReplayConfig, Replayer
-    from awalker_tracker.nodes.convert import stamp_to_ns
-    from awalker_tracker.nodes.features import FeatureNode, features_from_msg
+    from awalker_tracker.nodes.features_node import FeatureNode, features_from_msg
+    from awalker_tracker.nodes.messages import stamp_to_ns
 
     frames = scene_frames()
     cam = scene_camera()
@@ -350,7 +350,7 @@ class MaskRig:
         from sensor_msgs.msg import Image
 
         from awalker_msgs.msg import ImageFeatures
-        from awalker_tracker.nodes.features import FeatureNode
+        from awalker_tracker.nodes.features_node import FeatureNode
 
         self.frames = scene_frames()
         self.stamps = [3_000_000_000 + k * 33_333_333 for k in range(len(self.frames))]
@@ -380,7 +380,7 @@ class MaskRig:
     def publish_mask(self, k: int) -> None:
         from sensor_msgs.msg import Image
 
-        from awalker_tracker.nodes.convert import header
+        from awalker_tracker.nodes.messages import header
 
         h, w = self.frames[k].shape[:2]
         occluded = np.zeros((h, w), np.uint8)
@@ -398,8 +398,8 @@ class MaskRig:
 def test_occlusion_mask_published_after_its_image_is_applied(ros_context):
     """Replay publishes a frame's mask just after its image: the node holds the image for it. A frame
     whose mask never comes is processed after mask_wait_s, counted, and still published."""
-    from awalker_tracker.nodes.convert import stamp_to_ns
-    from awalker_tracker.nodes.features import features_from_msg
+    from awalker_tracker.nodes.features_node import features_from_msg
+    from awalker_tracker.nodes.messages import stamp_to_ns
 
     rig = MaskRig(ros_context, mask_wait_s=0.3)
     received, count = rig.received, len(rig.frames)
@@ -426,8 +426,8 @@ def test_masks_that_came_in_time_are_applied_when_the_node_was_kept_waiting(ros_
     than mask_wait_s: the hold timers and the masks are ready together, and rclpy runs timers first. Both
     frames must still get their masks, in order (before: the first image went out unmasked whenever the
     machine was busy, so runs of one bag differed)."""
-    from awalker_tracker.nodes.convert import stamp_to_ns
-    from awalker_tracker.nodes.features import features_from_msg
+    from awalker_tracker.nodes.features_node import features_from_msg
+    from awalker_tracker.nodes.messages import stamp_to_ns
 
     rig = MaskRig(ros_context, mask_wait_s=0.1)
     received = rig.received

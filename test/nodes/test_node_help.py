@@ -14,9 +14,9 @@ from rclpy.parameter import Parameter
 from awalker_tools import cli
 from awalker_tracker.nodes.base import Default, _shown
 
-NODES = [("awalker_tracker.nodes.tracker", "awalker_tracker_node"),
-         ("awalker_tracker.nodes.features", "awalker_features"),
-         ("awalker_tracker.nodes.pose_publisher", "awalker_pose_publisher"),
+NODES = [("awalker_tracker.nodes.tracker_node", "awalker_tracker_node"),
+         ("awalker_tracker.nodes.features_node", "awalker_features"),
+         ("awalker_tracker.nodes.pose_publisher_node", "awalker_pose_publisher"),
          ("awalker_tools.replay", "awalker_replay")]
 
 
@@ -56,19 +56,19 @@ def test_help_lists_the_parameters_without_starting_ros(module: str, program: st
 
 
 def test_pose_publisher_console_script_answers_help_at_once() -> None:
-    """It used to ignore --help and run until killed."""
-    done = subprocess.run([sys.executable, "-c", "import sys; from awalker_tracker.nodes.pose_publisher import main; "
+    """It answers --help and exits, rather than spinning until killed."""
+    done = subprocess.run([sys.executable, "-c", "import sys; from awalker_tracker.nodes.pose_publisher_node import main; "
                            "sys.exit(main())", "--help"], capture_output=True, text=True, timeout=60, check=False)
     assert done.returncode == 0 and "cloud_points" in done.stdout and not done.stderr, done.stderr
 
 
 def test_defaults_shown_are_the_declared_ones(ros_context) -> None:
     """Each node declares exactly its table's parameters, with the table's defaults and descriptions."""
-    from awalker_tracker.nodes import features, pose_publisher, tracker
+    from awalker_tracker.nodes import features_node, pose_publisher_node, tracker_node
 
-    cases = [(pose_publisher.PosePublisherNode, pose_publisher.PARAMETERS, []),
-             (features.FeatureNode, features.PARAMETERS, [Parameter("camera_name", value="cam0")]),
-             (tracker.TrackerNode, tracker.PARAMETERS, [Parameter("cameras", value=["cam0"])])]
+    cases = [(pose_publisher_node.PosePublisherNode, pose_publisher_node.PARAMETERS, []),
+             (features_node.FeatureNode, features_node.PARAMETERS, [Parameter("camera_name", value="cam0")]),
+             (tracker_node.TrackerNode, tracker_node.PARAMETERS, [Parameter("cameras", value=["cam0"])])]
     for cls, table, overrides in cases:
         node = cls(context=ros_context, parameter_overrides=overrides)
         try:
@@ -85,7 +85,7 @@ def test_defaults_shown_are_the_declared_ones(ros_context) -> None:
                 assert node.describe_parameter(p.name).description == p.description
         finally:
             node.destroy_node()
-    node = tracker.TrackerNode(context=ros_context, parameter_overrides=[
+    node = tracker_node.TrackerNode(context=ros_context, parameter_overrides=[
         Parameter("cameras", value=["cam0"]), Parameter("profile", value="realtime")])
     try:
         assert node.get_parameter("num_particles").value == 5000       # the profile's default, as --help says

@@ -9,7 +9,7 @@ import pytest
 
 
 @pytest.mark.parametrize("module, program, expected", [
-    ("awalker_tracker.nodes.tracker", "awalker_tracker_node", "parameter 'cameras' is required"),
+    ("awalker_tracker.nodes.tracker_node", "awalker_tracker_node", "parameter 'cameras' is required"),
     ("awalker_tools.replay", "awalker_replay", "parameter 'bag' is required"),
 ])
 def test_node_console_script_rejects_missing_parameters(module: str, program: str, expected: str,

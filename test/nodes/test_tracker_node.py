@@ -10,8 +10,8 @@ import pytest
 
 def _features_msg(stamp_ns: int, cam: str):
     from awalker_tracker.model.body import PART_CLASSES
-    from awalker_tracker.nodes.convert import header
-    from awalker_tracker.nodes.features import features_to_msg
+    from awalker_tracker.nodes.features_node import features_to_msg
+    from awalker_tracker.nodes.messages import header
     from awalker_tracker.vision.features import FrameFeatures
     from awalker_tracker.vision.flow import FlowGrid
 
@@ -25,7 +25,7 @@ def _features_msg(stamp_ns: int, cam: str):
 
 @pytest.fixture
 def tracker_files(tmp_path):
-    from awalker_tracker.inference.tracker import StartDescription
+    from awalker_tracker.inference.filter_model import StartDescription
     from awalker_tracker.model.body import BodyDescription
     from awalker_tracker.vision.camera import Camera, save_calibration
 
@@ -45,8 +45,8 @@ def test_tracker_node_pairs_cameras_acks_and_publishes(ros_context, tracker_file
     from std_msgs.msg import Header
 
     from awalker_msgs.msg import ImageFeatures, PosteriorSummary
-    from awalker_tracker.nodes.convert import stamp_to_ns
-    from awalker_tracker.nodes.tracker import TrackerNode
+    from awalker_tracker.nodes.messages import stamp_to_ns
+    from awalker_tracker.nodes.tracker_node import TrackerNode
 
     node = TrackerNode(context=ros_context, parameter_overrides=[
         Parameter("cameras", value=["cam0", "cam1"]),
@@ -93,7 +93,7 @@ def test_tracker_node_pairs_cameras_acks_and_publishes(ros_context, tracker_file
 
 def test_tracker_node_needs_cameras(ros_context):
     from awalker_tracker.errors import InputError
-    from awalker_tracker.nodes.tracker import TrackerNode
+    from awalker_tracker.nodes.tracker_node import TrackerNode
 
     with pytest.raises(InputError, match="'cameras' is required"):
         TrackerNode(context=ros_context)
@@ -103,7 +103,7 @@ def test_tracker_node_checks_follow_near(ros_context):
     from rclpy.parameter import Parameter
 
     from awalker_tracker.errors import InputError
-    from awalker_tracker.nodes.tracker import TrackerNode
+    from awalker_tracker.nodes.tracker_node import TrackerNode
 
     for bad in ([1.0], [float("nan"), 0.0]):
         with pytest.raises(InputError, match="parameter 'follow_near'"):
@@ -121,7 +121,7 @@ def test_tracker_node_checks_leg_scale_spread(ros_context):
     from rclpy.parameter import Parameter
 
     from awalker_tracker.errors import InputError
-    from awalker_tracker.nodes.tracker import TrackerNode
+    from awalker_tracker.nodes.tracker_node import TrackerNode
 
     with pytest.raises(InputError, match="parameter 'leg_scale_spread'"):
         TrackerNode(context=ros_context, parameter_overrides=[
@@ -138,7 +138,7 @@ def test_tracker_node_checks_the_pelvis_ceiling(ros_context):
     from rclpy.parameter import Parameter
 
     from awalker_tracker.errors import InputError
-    from awalker_tracker.nodes.tracker import TrackerNode
+    from awalker_tracker.nodes.tracker_node import TrackerNode
 
     for name, bad in (("pelvis_ceiling", 1.2), ("pelvis_ceiling_min_cameras", 0)):
         with pytest.raises(InputError, match="parameters 'pelvis_ceiling', 'pelvis_ceiling_min_cameras'"):
@@ -154,9 +154,9 @@ def test_a_start_without_stance_leg_takes_the_fitted_one_at_its_frame(ros_contex
 
     from rclpy.parameter import Parameter
 
-    from awalker_tracker.inference.tracker import StartDescription
+    from awalker_tracker.inference.filter_model import StartDescription
     from awalker_tracker.model.walker import RIGHT
-    from awalker_tracker.nodes.tracker import TrackerNode
+    from awalker_tracker.nodes.tracker_node import TrackerNode
 
     given = StartDescription(1, (0.0, 0.0), 0.0, 1.3, 0.7, None)
     (tracker_files / "start.yaml").write_text(given.to_yaml_text())
@@ -190,7 +190,7 @@ def test_a_bad_camera_info_is_logged_and_not_used(ros_context):
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import CameraInfo
 
-    from awalker_tracker.nodes.tracker import TrackerNode
+    from awalker_tracker.nodes.tracker_node import TrackerNode
 
     node = TrackerNode(context=ros_context, parameter_overrides=[Parameter("cameras", value=["cam0"]),
                                                                  Parameter("num_particles", value=50)])
@@ -248,9 +248,9 @@ def _stream_features(ros_context, tracker_files, max_lag_s: float, frames: int =
     from std_msgs.msg import Header
 
     from awalker_msgs.msg import ImageFeatures, PosteriorSummary
-    from awalker_tracker.inference.tracker import StartDescription
-    from awalker_tracker.nodes.convert import stamp_to_ns
-    from awalker_tracker.nodes.tracker import TrackerNode
+    from awalker_tracker.inference.filter_model import StartDescription
+    from awalker_tracker.nodes.messages import stamp_to_ns
+    from awalker_tracker.nodes.tracker_node import TrackerNode
 
     (tracker_files / "start0.yaml").write_text(StartDescription(0, (0.0, 0.0), 0.0, 1.3, 0.7, 0).to_yaml_text())
     node = TrackerNode(context=ros_context, parameter_overrides=[

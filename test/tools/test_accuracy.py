@@ -170,7 +170,7 @@ def test_the_speed_is_found_from_a_wrong_start_speed(tracked):
 def live_steps(result: dict, first_stamp_ns: int) -> list:
     """The steps the run published on /awalker/gait_steps, timed at their strikes from ``first_stamp_ns``."""
     from awalker_tools.bagio import SequenceReader, stamp_ns_of
-    from awalker_tracker.inference.gait import Step
+    from awalker_tracker.inference.gait_events import Step
 
     with SequenceReader(Path(result["run_dir"]) / "result.bag") as reader:
         live = [m for _, _, _, m in reader.messages(["/awalker/gait_steps"])]
@@ -185,7 +185,7 @@ def test_heel_strikes_match_the_true_ones_in_time(tracked):
     """Each true heel strike (the heel down and slow, GAIT.md) is matched by a strike of the same foot in
     gait.csv, and on the live /awalker/gait_steps topic, within 0.25 s one to one: timing, where the foot came
     down, and no foot named the other way."""
-    from awalker_tracker.inference import gait
+    from awalker_tracker.inference import gait_events
     from awalker_tracker.model.body import MARKER_NAMES
 
     name = "mono_straight"
@@ -201,11 +201,11 @@ def test_heel_strikes_match_the_true_ones_in_time(tracked):
     names = list(truth.marker_names)
     markers = truth.markers[:, [names.index(n) for n in MARKER_NAMES]]
     first = int(truth.stamps_ns[0])
-    stance, fraction = gait.stance_from_heels(markers, (truth.stamps_ns - first) * 1e-9)
-    true_steps = gait.steps(truth.frames, truth.stamps_ns, markers, stance, fraction, at_rest=True)
+    stance, fraction = gait_events.stance_from_heels(markers, (truth.stamps_ns - first) * 1e-9)
+    true_steps = gait_events.steps(truth.frames, truth.stamps_ns, markers, stance, fraction, at_rest=True)
     tracked_from = evaluation.read_summary_csv(Path(result["run_dir"]) / "summary.csv")["stamp_ns"][0]
     covered = [s for s in true_steps if s.stamp_ns >= tracked_from]
-    live = gait.compare(live_steps(result, first), covered)
+    live = gait_events.compare(live_steps(result, first), covered)
     within(f"{name}.live_strikes_matched_fraction", live["matched_strikes"] / max(len(covered), 1), live)
     within(f"{name}.live_strike_timing_s", live["timing_error_s_median"] or np.inf, live)
     all_within()

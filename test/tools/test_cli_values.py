@@ -6,11 +6,11 @@ from pathlib import Path
 
 import pytest
 
-from awalker_tools import cli, convert, pipeline
+from awalker_tools import cli, pipeline, video_to_bag
 from awalker_tools.commands import gaits as gaits_command
 from awalker_tools.commands import synth as synth_command
 from awalker_tracker.errors import InputError
-from awalker_tracker.inference.tracker import StartDescription
+from awalker_tracker.inference.filter_model import StartDescription
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.vision.camera import load_calibration
 
@@ -54,7 +54,7 @@ def test_bad_value_is_one_line_exit_2(argv: list[str], needle: str, tmp_path: Pa
         (tmp_path / name).write_text(text)
     # the work itself: reaching any of it means the value was not checked first
     for target, name in ((pipeline, "run_tracking"), (synth_command, "synthesise"),
-                         (gaits_command.gaits, "solve_grid"), (convert, "load_calibration")):
+                         (gaits_command.cyclic_gaits, "solve_grid"), (video_to_bag, "load_calibration")):
         monkeypatch.setattr(target, name, lambda *a, **k: pytest.fail(f"{name} reached"))
     rc = cli.main(argv)
     err = capsys.readouterr().err

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from awalker_tracker.errors import InputError
-from awalker_tracker.inference import gait
+from awalker_tracker.inference import gait_events
 from awalker_tools import evaluation
 from awalker_tools.cli import main
 from awalker_tools.evaluation import PoseTrack
@@ -229,13 +229,13 @@ def test_walk_quality_heading_swaps_falls_and_the_last_frame():
 
 def test_gait_is_compared_over_the_frames_the_estimate_covers():
     """An estimate that starts later than the truth (an automatic start): step times count from its first
-    frame in both, so an exact estimate is off only by the walker's double-support shift (``gait``) and
+    frame in both, so an exact estimate is off only by the walker's double-support shift (``gait_events.WALKER_STRIKE_DELAY``) and
     only the covered strikes count."""
     import sys
     from pathlib import Path
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "inference"))
-    from test_gait import stylised_walk
+    from test_gait_events import stylised_walk
 
     markers, stance, strikes = stylised_walk()
     frames = np.arange(len(markers))
@@ -249,7 +249,7 @@ def test_gait_is_compared_over_the_frames_the_estimate_covers():
     assert result["true_strikes"] == sum(late < f for f in strikes)
     assert result["matched_strikes"] == result["true_strikes"]
     # the walker's strikes are dated late in a double support: WALKER_STRIKE_DELAY x the 0.5 s steps earlier
-    shift = gait.WALKER_STRIKE_DELAY * 0.5
+    shift = gait_events.WALKER_STRIKE_DELAY * 0.5
     assert result["timing_error_s_median"] == pytest.approx(shift, abs=1e-9)
     assert result["timing_bias_s_median"] == pytest.approx(-shift, abs=1e-9)      # reported early
 

@@ -8,7 +8,7 @@ import pytest
 
 from awalker_tools import cli
 from awalker_tools.commands import gaits as gaits_command
-from awalker_tracker.model import gaits
+from awalker_tracker.model import cyclic_gaits
 
 TINY = ["--speeds", "4.5:5:2", "--step-lengths", "0.65:0.7:2"]
 
@@ -17,7 +17,7 @@ TINY = ["--speeds", "4.5:5:2", "--step-lengths", "0.65:0.7:2"]
 def no_solving(monkeypatch) -> list:
     """solve_grid replaced: a refused command must not reach it."""
     calls: list = []
-    monkeypatch.setattr(gaits, "solve_grid", lambda *a, **k: calls.append(a) or pytest.fail("solved"))
+    monkeypatch.setattr(cyclic_gaits, "solve_grid", lambda *a, **k: calls.append(a) or pytest.fail("solved"))
     return calls
 
 
@@ -49,7 +49,7 @@ def test_default_out_is_a_new_file_in_the_current_folder(tmp_path: Path, monkeyp
     assert cli.main(["gaits", "solve", *TINY]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["out"] == gaits_command.DEFAULT_OUT and summary["points"] == 4
-    table = gaits.GaitTable.load(tmp_path / gaits_command.DEFAULT_OUT)
+    table = cyclic_gaits.GaitTable.load(tmp_path / gaits_command.DEFAULT_OUT)
     assert table.converged.shape == (2, 2)
     assert gaits_command.PACKAGED_TABLE.read_bytes() == before
     # a second run does not overwrite it unless told to

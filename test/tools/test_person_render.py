@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from conftest import MOCAP_07
 
-from awalker_tools.mocap_motion import level_floor
 from awalker_tools.person_render import (BUILD_RANGE, HEAD_RADIUS_RANGE, LOWER_GARMENTS, LOWER_PATTERNS, POINT_NAMES,
                                          TOP_PATTERNS, Outfit, PersonRenderer, _capsule_hits, frustum_normals,
                                          intersect_frustum, shapes)
-from awalker_tracker.model.mocap import load_mocap
+from awalker_tools.walk_variants import level_floor
+from awalker_tracker.model.acclaim import load_mocap
 from awalker_tracker.vision.camera import Camera
 
 P = {n: i for i, n in enumerate(POINT_NAMES)}
@@ -122,7 +122,7 @@ def test_random_draws_what_it_drew_before():
     assert o.radii["hips"] == pytest.approx(0.10551371380490389, abs=1e-12) and o.carry == "backpack"
     rng = np.random.default_rng(3)
     Outfit.random(rng)
-    assert rng.random() == pytest.approx(0.8917110704451572, abs=1e-15)      # as many numbers drawn as before
+    assert rng.random() == pytest.approx(0.8917110704451572, abs=1e-15)      # a fixed count of numbers drawn
 
 
 def _first_solid_entry(origin, direction, top, axis, length, r_top, r_bottom, far, step=2e-4):

@@ -91,7 +91,7 @@ def test_synth_is_complete_deterministic_and_lines_up(tmp_path):
     assert save_overlay_png(tmp_path / "overlay.png", frames[10][1]["cam0"], markers[7], cameras[0]).stat().st_size > 0
     assert (a / "overlay_cam0.png").stat().st_size > 0 and (a / "overlay_cam1.png").is_file()
     # Filled parts: the rendered body is blended in (more pixels change than for the skeleton alone).
-    from awalker_tracker.model.mocap import segments_from_markers
+    from awalker_tracker.model.acclaim import segments_from_markers
     body = BodyDescription.default()
     filled = draw_body(frames[10][1]["cam0"], markers[7], cameras[0], segments_from_markers(body, markers[7:8]), body)
     assert np.count_nonzero(np.any(filled != frames[10][1]["cam0"], axis=2)) > \
@@ -180,7 +180,7 @@ MOCAP = ["--from-mocap", str(MOCAP_07 / "07.asf"), str(MOCAP_07 / "07_01.amc")]
 def test_dressed_person_is_not_the_model_body(tmp_path):
     """`--person dressed` draws arms, clothes and a head the tracker's body lacks: more of the image
     differs from the empty room than the model body covers, and both legs wear the same colour."""
-    from awalker_tracker.model.mocap import segments_from_markers
+    from awalker_tracker.model.acclaim import segments_from_markers
     from awalker_tracker.vision.render import render
 
     assert synth(tmp_path / "model", *MOCAP, "--seed", "2") == 0
@@ -209,12 +209,12 @@ def test_dressed_shoes_stand_on_the_floor_while_the_foot_lies_flat(tmp_path):
     3D through their depth, reach down to the floor within 8 mm in flat-foot frames (3-4 cm before; a pixel is 6 mm
     there) and never below it, though the shoes' capsules reach 2-3 cm under it while a foot rolls."""
     from awalker_tools.person_render import Outfit, PersonRenderer, capsules
-    from awalker_tools.synth import SynthConfig, make_cameras, mocap_motion
-    from awalker_tracker.model.mocap import flat_foot_frames
+    from awalker_tools.synth import SynthConfig, make_cameras, walk_variants
+    from awalker_tracker.model.acclaim import flat_foot_frames
 
     config = SynthConfig(tmp_path, frames=40, mocap=(MOCAP_07 / "07.asf", MOCAP_07 / "07_01.amc"),
                          person="dressed", width=960, height=720)
-    motion = mocap_motion(config, np.zeros(2), 0.0)
+    motion = walk_variants(config, np.zeros(2), 0.0)
     camera = make_cameras(1, 960, 720, motion.markers[20, M["pelvis"], :2])[0]
     green_shoes = replace(Outfit.random(np.random.default_rng(0)), shoes=(0.0, 220.0, 0.0))   # nothing else is green
     renderer = PersonRenderer(camera, green_shoes, blur_sigma_px=0.0)
@@ -274,8 +274,8 @@ def test_a_carried_bag_is_drawn_where_it_is_carried(tmp_path, carry):
                          [("u-turn", 180.0, 1.0), ("veer-left", 35.0, 1.0), ("veer-right", -35.0, 1.0),
                           ("fast", 0.0, 1.2), ("slow", 0.0, 0.8)])
 def test_walk_variants_turn_and_change_speed_without_foot_skate(tmp_path, variant, turn_deg, speed_factor):
-    from awalker_tools import mocap_motion
-    from awalker_tracker.inference.gait import stance_from_heels
+    from awalker_tools import walk_variants
+    from awalker_tracker.inference.gait_events import stance_from_heels
 
     frames = 130 if turn_deg else 60
     assert cli.main(["synth", "--out", str(tmp_path / variant), "--size", "80", "60", "--frames", str(frames),
@@ -284,8 +284,8 @@ def test_walk_variants_turn_and_change_speed_without_foot_skate(tmp_path, varian
                      "--background-frames", "0", *MOCAP]) == 0
     _, _, _, walk, _, _ = read(tmp_path / variant)
     _, _, _, straight, _, _ = read(tmp_path / "straight")
-    facing = np.unwrap(mocap_motion.facing(walk))
-    facing_straight = np.unwrap(mocap_motion.facing(straight))
+    facing = np.unwrap(walk_variants.facing(walk))
+    facing_straight = np.unwrap(walk_variants.facing(straight))
     turned = np.degrees((facing[-10:].mean() - facing[:10].mean()) - (facing_straight[-10:].mean() - facing_straight[:10].mean()))
     assert turned == pytest.approx(turn_deg, abs=12)
     if turn_deg:     # within the variant's 2 (u-turn) or 2.5 (veer) s, then straight again

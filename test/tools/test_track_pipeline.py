@@ -254,7 +254,7 @@ def test_a_failure_in_the_feature_thread_stops_track_with_its_error(synth_bag: P
     """The features nodes spin in their own thread: an exception there ends `awalker track` at once with
     that exception, not after the replay's ack timeout."""
     from awalker_tools.pipeline import TrackOptions, run_tracking
-    from awalker_tracker.nodes.features import FeatureNode
+    from awalker_tracker.nodes.features_node import FeatureNode
 
     def broken(self, *args, **kwargs):
         raise RuntimeError("feature extraction broke")
@@ -272,7 +272,7 @@ def test_outputs_missing_from_the_result_bag_are_reported(synth_bag: Path, tmp_p
     """A pose publisher that answers only some posteriors: the run completes (poses.csv comes from the tracker)
     but says which topics result.bag lacks and how many it got, instead of waiting on in silence."""
     from awalker_tools import pipeline
-    from awalker_tracker.nodes.pose_publisher import PosePublisherNode
+    from awalker_tracker.nodes.pose_publisher_node import PosePublisherNode
 
     original = PosePublisherNode.on_summary
 
@@ -322,9 +322,9 @@ def test_track_with_nodes_in_two_processes(synth_bag: Path, localhost_context, t
     from sensor_msgs.msg import JointState
 
     from awalker_msgs.msg import PosteriorSummary
-    from awalker_tracker.nodes.features import FeatureNode
-    from awalker_tracker.nodes.pose_publisher import PosePublisherNode
-    from awalker_tracker.nodes.tracker import TrackerNode
+    from awalker_tracker.nodes.features_node import FeatureNode
+    from awalker_tracker.nodes.pose_publisher_node import PosePublisherNode
+    from awalker_tracker.nodes.tracker_node import TrackerNode
 
     ctx = localhost_context
     nodes = []
@@ -436,7 +436,7 @@ def test_node_and_command_line_read_one_set_of_defaults(tmp_path: Path, monkeypa
     from awalker_tools import pipeline
     from awalker_tracker.errors import InputError
     from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES
-    from awalker_tracker.nodes.tracker import TrackerNode
+    from awalker_tracker.nodes.tracker_node import TrackerNode
 
     def of_options(options: pipeline.TrackOptions) -> dict:
         return {"num_particles": options.particles, "lookahead": options.lookahead, "trust": options.trust,
@@ -566,8 +566,8 @@ def test_a_start_without_stance_leg_has_it_fitted_in_a_first_pass(synth_bag: Pat
     from dataclasses import replace
 
     from awalker_tools.commands.report import build_report
-    from awalker_tracker.inference.gait import SIDES_NOTE
-    from awalker_tracker.inference.tracker import StartDescription
+    from awalker_tracker.inference.filter_model import StartDescription
+    from awalker_tracker.inference.gait_events import SIDES_NOTE
     from awalker_tracker.model.walker import LEG_NAMES
 
     named = StartDescription.from_yaml(synth_bag.parent / "start.yaml")

@@ -1,8 +1,8 @@
 """Numpy reference of the image likelihood (test oracle only, not part of the package).
 
-The vectorised numpy implementation of ``awalker_tracker.vision.likelihood`` as it was before
-the per-state loops were compiled with numba (same model: see that module's docstring),
-float32, all N states at once. ``test_likelihood_kernel.py`` checks the compiled likelihood
+A vectorised numpy implementation of ``awalker_tracker.vision.likelihood``, whose per-state
+loops are compiled with numba (same model: see that module's docstring), float32, all N states
+at once. ``test_likelihood_kernel.py`` checks the compiled likelihood
 against it.
 """
 from __future__ import annotations

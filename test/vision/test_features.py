@@ -130,7 +130,7 @@ def test_a_forked_child_starts_its_own_flow_thread(monkeypatch):
 
 def test_map_downsample_keeps_one_camera_coarse_and_makes_several_about_160_pixels_wide():
     """One camera keeps FeatureConfig's 4 at any size; two cameras or more get maps ~160 map pixels wide:
-    2 at 320x240, 4 at 640x480 (as before), 8 at 1280x960, and at least 1 on tiny images."""
+    2 at 320x240, 4 at 640x480, 8 at 1280x960, and at least 1 on tiny images."""
     assert FeatureConfig().downsample == 4
     assert [map_downsample(w, 1) for w in (160, 320, 640, 1280)] == [4, 4, 4, 4]
     assert [map_downsample(w, 2) for w in (100, 320, 640, 1280)] == [1, 2, 4, 8]

@@ -2,7 +2,7 @@
 
 A *trial* is a stretch of one CMU motion-capture file (``test/data/mocap``, its README): straight walks,
 slow walks, starts from standing, a curved U-turn, a turn on the spot, slow turns with pauses, a small
-subject; two of subject 7's walks also turned round or veering by ``mocap_motion.bend`` (``BENT``). The
+subject; two of subject 7's walks also turned round or veering by ``walk_variants.bend`` (``BENT``). The
 subjects are split once, before any measurement, into a tuning set (what the tracker may be tuned on)
 and a reporting set (what accuracy figures are reported on; never tuned on): ``TUNING_SUBJECTS``,
 ``REPORTING_SUBJECTS``. ``QUICK`` is a small tuning subset for frequent runs.
@@ -43,11 +43,11 @@ import numpy as np
 import yaml
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.model.acclaim import EXTRA_POINTS
 from awalker_tracker.model.body import MARKER_NAMES, BodyDescription
-from awalker_tracker.model.mocap import EXTRA_POINTS
 from awalker_tracker.vision.camera import Camera, save_calibration
 
-from awalker_tools import bagio, mocap_motion
+from awalker_tools import bagio, walk_variants
 from awalker_tools.person_render import Outfit, PersonRenderer
 from awalker_tools.synth import (
     FIRST_STAMP_NS,
@@ -83,7 +83,7 @@ def off_the_walking_line(direction: float, heading: float) -> float:
 @dataclass(frozen=True)
 class Trial:
     """A stretch of a CMU trial: ``seconds`` (start, end) from the file's start (None: all of it), and a bend
-    (``mocap_motion.bend``: angle deg, start s, duration s after the stretch's start) for our own turned
+    (``walk_variants.bend``: angle deg, start s, duration s after the stretch's start) for our own turned
     variants of straight walks."""
 
     name: str
@@ -224,7 +224,7 @@ TAPE_LENGTHS = ("upper_leg_length", "lower_leg_length", "hip_width", "torso_leng
 # ---- motion -------------------------------------------------------------------------------------
 def trial_points(trial: Trial, rate: float) -> np.ndarray:
     """The trial's points (F, len(POINT_NAMES), 3) at ``rate`` Hz, the floor levelled at z = 0."""
-    from awalker_tracker.model.mocap import load_mocap
+    from awalker_tracker.model.acclaim import load_mocap
 
     if not trial.amc_path.is_file() or not trial.asf_path.is_file():
         raise InputError(f"development set: {trial.amc_path} or {trial.asf_path} missing (test/data/mocap/README.md)")
@@ -234,7 +234,7 @@ def trial_points(trial: Trial, rate: float) -> np.ndarray:
         first, last = (int(round(s * mocap.rate)) for s in trial.seconds)
         points = points[first: last + 1]
     resampled = replace(mocap, markers=points[:, : len(MARKER_NAMES)], extra=points[:, len(MARKER_NAMES):]).resample(rate)
-    return mocap_motion.level_floor(np.concatenate([resampled.markers, resampled.extra], axis=1), rate)
+    return walk_variants.level_floor(np.concatenate([resampled.markers, resampled.extra], axis=1), rate)
 
 
 def walking_onset(pelvis: np.ndarray, rate: float, moving_m_s: float = 0.3) -> int:
@@ -261,7 +261,7 @@ def walk_direction_and_speed(pelvis: np.ndarray, rate: float) -> tuple[float, fl
 def recording_motion(recording: Recording) -> Motion:
     """The recording's motion: the trial scaled, bent, and placed in the room (the middle of the walk at the
     origin, its first direction along ``recording.heading``); body sizes from the markers; the true start."""
-    from awalker_tracker.model.mocap import body_from_markers, segments_from_markers
+    from awalker_tracker.model.acclaim import body_from_markers, segments_from_markers
 
     trial, rate = TRIALS[recording.trial], recording.rate
     points = trial_points(trial, rate)
@@ -278,7 +278,7 @@ def recording_motion(recording: Recording) -> Motion:
     points = points @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T
     if trial.bend is not None:
         angle, start, duration = trial.bend
-        points = mocap_motion.bend(points, rate, np.radians(angle), start, duration)
+        points = walk_variants.bend(points, rate, np.radians(angle), start, duration)
     path = points[:, _M["pelvis"], :2]
     points -= np.append(0.5 * (path.min(axis=0) + path.max(axis=0)), 0.0)
     markers = np.ascontiguousarray(points[:, : len(MARKER_NAMES)])
@@ -310,7 +310,7 @@ def second_person(recording: Recording, first: Motion) -> Motion:
                                       span=None, second=None))
     points = motion.points
     if len(points) < len(first.points):
-        points = mocap_motion.loop_to_duration(points, recording.rate, (len(first.points) - 1) / recording.rate)
+        points = walk_variants.loop_to_duration(points, recording.rate, (len(first.points) - 1) / recording.rate)
     points = points[: len(first.points)].copy()
     toward_camera = np.array([np.cos(recording.cameras[0].direction), np.sin(recording.cameras[0].direction)])
     path = first.points[:, _M["pelvis"], :2]

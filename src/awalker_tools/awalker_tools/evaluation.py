@@ -392,20 +392,20 @@ GAIT_COLUMNS = ("index", "frame", "stamp_ns", "time_s", "foot", "x", "y", "step_
 
 def track_steps(track: PoseTrack, stance_leg: np.ndarray | None = None,
                 strike_fraction: np.ndarray | None = None) -> list:
-    """The steps of a pose track (``inference.gait``): from its stance legs (0 left / 1 right per frame)
+    """The steps of a pose track (``inference.gait_events``): from its stance legs (0 left / 1 right per frame)
     when given (the tracker's own strikes, timed within the frame by ``strike_fraction``, the heel strike
-    ``gait.WALKER_STRIKE_DELAY`` x the step time before), else from its heel markers (``gait.heel_strikes``;
-    each step where its heel comes to rest: ``gait.heel_at_rest``)."""
-    from awalker_tracker.inference import gait
+    ``gait_events.WALKER_STRIKE_DELAY`` x the step time before), else from its heel markers (``gait_events.heel_strikes``;
+    each step where its heel comes to rest: ``gait_events.heel_at_rest``)."""
+    from awalker_tracker.inference import gait_events
 
     from awalker_tracker.model.body import MARKER_NAMES
 
-    markers = _select(track, list(MARKER_NAMES), np.arange(len(track.frames)), "pose track")   # inference.gait's order
+    markers = _select(track, list(MARKER_NAMES), np.arange(len(track.frames)), "pose track")   # inference.gait_events's order
     if stance_leg is None:
-        stance, fraction = gait.stance_from_heels(markers, (track.stamps_ns - track.stamps_ns[0]) * 1e-9)
-        return gait.steps(track.frames, track.stamps_ns, markers, stance, fraction, at_rest=True)
-    return gait.steps(track.frames, track.stamps_ns, markers, np.asarray(stance_leg), strike_fraction,
-                      gait.WALKER_STRIKE_DELAY)
+        stance, fraction = gait_events.stance_from_heels(markers, (track.stamps_ns - track.stamps_ns[0]) * 1e-9)
+        return gait_events.steps(track.frames, track.stamps_ns, markers, stance, fraction, at_rest=True)
+    return gait_events.steps(track.frames, track.stamps_ns, markers, np.asarray(stance_leg), strike_fraction,
+                             gait_events.WALKER_STRIKE_DELAY)
 
 
 @dataclass(frozen=True)
@@ -421,14 +421,14 @@ class TrackedWalk:
 
 
 def write_gait(out: Path, walks: Sequence[TrackedWalk], sides_known: bool = True) -> list:
-    """gait.csv (one row per step seen, ``GAIT_COLUMNS`` and its track) and gait.json (``inference.gait.summary``
+    """gait.csv (one row per step seen, ``GAIT_COLUMNS`` and its track) and gait.json (``inference.gait_events.summary``
     of the track with the most steps seen, and with several tracks each one's under ``tracks``; ``sides_known``
     False: with its note that left and right may be swapped). A step whose heel strike fell on a frame with the
     person out of every camera's view was predicted, not seen: it is left out of both, and counted
     (``steps_out_of_view``). Returns the steps seen (``plot_gait_file`` draws them)."""
     import json
 
-    from awalker_tracker.inference import gait
+    from awalker_tracker.inference import gait_events
 
     seen_by_track: list[tuple[int, list]] = []
     left_out = 0
@@ -444,13 +444,13 @@ def write_gait(out: Path, walks: Sequence[TrackedWalk], sides_known: bool = True
         writer = csv.DictWriter(fh, fieldnames=("track",) + GAIT_COLUMNS)
         writer.writeheader()
         for track_id, steps in seen_by_track:
-            for row in gait.as_rows(steps):
+            for row in gait_events.as_rows(steps):
                 writer.writerow({"track": track_id,
                                  **{k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in row.items()}})
     main_id, main = max(seen_by_track, key=lambda t: len(t[1]), default=(1, []))
-    summary: dict[str, object] = {"track": main_id, **gait.summary(main, sides_known), "steps_out_of_view": left_out}
+    summary: dict[str, object] = {"track": main_id, **gait_events.summary(main, sides_known), "steps_out_of_view": left_out}
     if len(seen_by_track) > 1:
-        summary["tracks"] = [{"track": track_id, **gait.summary(steps, sides_known)}
+        summary["tracks"] = [{"track": track_id, **gait_events.summary(steps, sides_known)}
                              for track_id, steps in seen_by_track]
     (out / "gait.json").write_text(json.dumps(summary, indent=1))
     return [st for _, steps in seen_by_track for st in steps]
@@ -466,8 +466,8 @@ def plot_gait_file(out: Path, track: PoseTrack, walk: list) -> Path:
 def gait_comparison(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarray] | None) -> dict:
     """Gait summaries of the estimate (its stance legs from summary.csv when there, else its heels) and of
     the truth (its heels) over the frames the estimate covers, and their comparison
-    (``inference.gait.compare``; step times count from the first tracked frame in both)."""
-    from awalker_tracker.inference import gait
+    (``inference.gait_events.compare``; step times count from the first tracked frame in both)."""
+    from awalker_tracker.inference import gait_events
 
     covered = (truth.stamps_ns >= estimate.stamps_ns[0]) & (truth.stamps_ns <= estimate.stamps_ns[-1])
     truth = PoseTrack(truth.frames[covered], truth.stamps_ns[covered], truth.marker_names, truth.markers[covered])
@@ -480,7 +480,7 @@ def gait_comparison(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np
             when = dict(zip(summary["stamp_ns"].tolist(), summary["strike_fraction"].tolist()))
             fraction = np.array([when[int(s)] for s in estimate.stamps_ns], float)
     est, true = track_steps(estimate, stance, fraction), track_steps(truth)
-    return {"estimate": gait.summary(est), "truth": gait.summary(true), "comparison": gait.compare(est, true)}
+    return {"estimate": gait_events.summary(est), "truth": gait_events.summary(true), "comparison": gait_events.compare(est, true)}
 
 
 def facing(track: PoseTrack, rows: np.ndarray) -> np.ndarray:

@@ -44,7 +44,7 @@ def _features(run_dir: Path, cameras: list[Any], tolerance: float) -> tuple[list
     from awalker_tools.bagio import iter_messages, open_reader, stamp_ns_of
     from awalker_tools.typestore import typestore
     from awalker_tracker.inference.sync import StampSynchronizer
-    from awalker_tracker.nodes.features import features_from_msg
+    from awalker_tracker.nodes.features_node import features_from_msg
     from awalker_tracker.vision.features import blank_features
 
     bag = run_dir / "result.bag"
@@ -101,9 +101,9 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
     (frames, particles, seed, stance_repeats, stance_max_repeats). Progress goes to stderr."""
     from awalker_tracker.inference.autostart import AUTO_SPREAD
     from awalker_tracker.inference.bodyfit import BodyFitConfig, fit_leg_length, fit_stance_leg
+    from awalker_tracker.inference.filter_model import ImageObservation, StartDescription, TrackerConfig, image_likelihood
     from awalker_tracker.inference.recovery import RecoveryConfig
     from awalker_tracker.inference.smc import SMCConfig
-    from awalker_tracker.inference.tracker import ImageObservation, StartDescription, TrackerConfig, image_likelihood
     from awalker_tracker.model.body import BodyDescription
     from awalker_tracker.model.walker import LEG_NAMES
     from awalker_tracker.vision.camera import load_calibration

@@ -32,9 +32,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from awalker_tools.mocap_motion import FOOT_LINE_HEIGHT
+from awalker_tools.walk_variants import FOOT_LINE_HEIGHT
+from awalker_tracker.model.acclaim import EXTRA_POINTS
 from awalker_tracker.model.body import MARKER_NAMES
-from awalker_tracker.model.mocap import EXTRA_POINTS
 from awalker_tracker.vision.camera import Camera
 from awalker_tracker.vision.render import pixel_rays
 

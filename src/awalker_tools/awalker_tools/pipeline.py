@@ -41,9 +41,9 @@ import numpy as np
 import yaml
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.inference.filter_model import StartDescription, TrackerConfig
 from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES
 from awalker_tracker.inference.sync import DEFAULT_TOLERANCE
-from awalker_tracker.inference.tracker import StartDescription, TrackerConfig
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEG_NAMES
 
@@ -467,9 +467,9 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
     from rclpy.signals import SignalHandlerOptions
 
     from awalker_tracker.nodes.base import AwalkerNode, private_node_options
-    from awalker_tracker.nodes.features import FeatureNode
-    from awalker_tracker.nodes.pose_publisher import PosePublisherNode
-    from awalker_tracker.nodes.tracker import TrackerNode
+    from awalker_tracker.nodes.features_node import FeatureNode
+    from awalker_tracker.nodes.pose_publisher_node import PosePublisherNode
+    from awalker_tracker.nodes.tracker_node import TrackerNode
     from awalker_tracker.vision.camera import save_calibration
     from awalker_tracker.vision.features import map_downsample
 
@@ -714,7 +714,7 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
 
 
 def track_record(tracker: Any) -> dict[str, object]:
-    """run.yaml's entry for one track (an ``inference.tracker.Tracker``): its first and last frame, the frames the
+    """run.yaml's entry for one track (an ``inference.filter_model.Tracker``): its first and last frame, the frames the
     person was in view, and how it ended: where the person left (frame, reason, last frame in view), or
     ``ended: null``, tracked to the end of the input."""
     frames = tracker.map_trajectory().frames

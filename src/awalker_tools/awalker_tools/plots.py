@@ -77,7 +77,7 @@ def plot_speed_and_stance(path: Path, frames: np.ndarray, speed: np.ndarray, spe
 def plot_gait(path: Path, steps: list, pelvis_xy: np.ndarray, true_steps: list | None = None,
               true_pelvis_xy: np.ndarray | None = None, title: str = "") -> Path:
     """Footprints seen from above over the ground plane with the pelvis path (left), and step length,
-    step time and speed per step (right). ``steps``: inference.gait.Step lists."""
+    step time and speed per step (right). ``steps``: inference.gait_events.Step lists."""
     plt = _pyplot()
     fig = plt.figure(figsize=(11, 4.5))
     top_view = fig.add_subplot(1, 2, 1)

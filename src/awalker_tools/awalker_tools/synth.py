@@ -375,14 +375,14 @@ def tape_measured(body: BodyDescription, rng: np.random.Generator) -> BodyDescri
                             for n in names})
 
 
-def mocap_motion(config: SynthConfig, start_xy: np.ndarray, heading: float) -> Motion:
+def walk_variants(config: SynthConfig, start_xy: np.ndarray, heading: float) -> Motion:
     """Motion from a CMU walk (with arms, ``Motion.points``): floor levelled, resampled, played faster or
     slower and turned as ``config.variant`` asks, repeated as long as ``config.frames`` needs, then turned
     and moved so that it starts at ``start_xy`` walking along ``heading``; body sizes measured from the
     markers."""
-    from awalker_tracker.model.mocap import body_from_markers, load_mocap, segments_from_markers
+    from awalker_tracker.model.acclaim import body_from_markers, load_mocap, segments_from_markers
 
-    from awalker_tools import mocap_motion as variants
+    from awalker_tools import walk_variants as variants
 
     asf, amc = config.mocap  # type: ignore[misc]
     trial = load_mocap(asf, amc).resample(config.rate)
@@ -435,17 +435,17 @@ def walker_motion(config: SynthConfig, start_xy: np.ndarray, heading: float, rng
     The hips rest as Table 1 has them (unabducted: the feet tread the hip joints' distance apart), not
     at the tracker's narrower step width (``KinematicConfig.step_width``).
     """
-    from awalker_tracker.model import dynamics, gaits
+    from awalker_tracker.model import dynamics, cyclic_gaits
     from awalker_tracker.model.kinematics import KinematicConfig, initial_kinematics, pose_body, sample_kinematics
     from awalker_tracker.model.walker import LEFT
 
     body = BodyDescription.default()
     params = body.walker_params()
     dt = 1.0 / config.rate
-    table = gaits.GaitTable.load().scaled_to(params)
+    table = cyclic_gaits.GaitTable.load().scaled_to(params)
     speeds = _speed_schedule(config)
     steps = config.step_length * (speeds / config.speed) ** 0.42  # preferred step length ~ speed^0.42
-    walker = gaits.gait_initial_state(params, config.speed, config.step_length, contact_origin=0.0,
+    walker = cyclic_gaits.gait_initial_state(params, config.speed, config.step_length, contact_origin=0.0,
                                       stance_leg=LEFT, table=table)
     kin_config = KinematicConfig(dt=dt, step_width=None)
     headings = _turn_schedule(config, heading)
@@ -611,7 +611,7 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
     start_xy = np.array([-2.0, 0.0])
     heading = 0.0
     if config.mocap is not None:
-        motion = mocap_motion(config, start_xy, heading)
+        motion = walk_variants(config, start_xy, heading)
     else:
         motion = walker_motion(config, start_xy, heading, rng)
     path_centre = 0.5 * (motion.markers[0, 0, :2] + motion.markers[-1, 0, :2])
@@ -624,7 +624,7 @@ def synthesise(config: SynthConfig, progress: bool = True) -> dict[str, Path]:
         from dataclasses import replace
 
         far_end = np.array([motion.markers[-1, 0, 0], start_xy[1] + SECOND_PERSON_BEHIND_M])
-        other = mocap_motion(replace(config, variant="straight"), far_end, heading + np.pi)
+        other = walk_variants(replace(config, variant="straight"), far_end, heading + np.pi)
     textures = make_textures(rng)
     scene = Scene(cameras, [render_room(cam, textures) for cam in cameras], other=other)
     if config.occluder:

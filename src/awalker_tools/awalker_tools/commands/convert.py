@@ -5,8 +5,8 @@ import argparse
 from pathlib import Path
 
 from awalker_tools.bagio import IMAGE_FORMATS, STORAGES
-from awalker_tools.convert import convert, parse_source
 from awalker_tools.outdir import check_new_path
+from awalker_tools.video_to_bag import convert, parse_source
 
 EPILOG = """\
 Calibration YAML (one file, one entry per camera; world frame z up, ground z = 0):

@@ -8,18 +8,18 @@ from pathlib import Path
 import numpy as np
 
 from awalker_tracker.errors import InputError
-from awalker_tracker.model import gaits
+from awalker_tracker.model import cyclic_gaits
 from awalker_tracker.model.walker import WalkerParams
 
 from awalker_tools.outdir import check_new_path
 
-PACKAGED_TABLE = Path(gaits.__file__).resolve().parents[1] / "data" / "cyclic_gaits.json"
+PACKAGED_TABLE = Path(cyclic_gaits.__file__).resolve().parents[1] / "data" / "cyclic_gaits.json"
 #: The installed awalker_tracker package: its files (the packaged gait table among them) are never written.
 PACKAGE_DIR = PACKAGED_TABLE.parents[1]
 #: `gaits solve` writes here unless --out says otherwise (a new file in the current folder).
 DEFAULT_OUT = "cyclic_gaits.json"
 #: The most grid points `gaits solve` takes (the default grid has 11 x 19 = 209; each point takes up to a few
-#: seconds, so 2:7:100000 would run for days).
+#: seconds, so 2:7:100000, with millions of points, would not finish).
 MAX_GRID_POINTS = 2000
 
 
@@ -55,16 +55,16 @@ def run_solve(args: argparse.Namespace) -> int:
                          f"{speeds_range[2] * steps_range[2]} grid points, at most {MAX_GRID_POINTS}")
     out = solve_output(args.out, args.force)
     params = WalkerParams(leg_length=args.leg_length, gravity=args.gravity)
-    speeds, step_lengths = gaits.grid_axes(speeds_range, steps_range)
-    table = gaits.solve_grid(params, speeds, step_lengths, progress=gaits.stderr_progress, family=args.family)
+    speeds, step_lengths = cyclic_gaits.grid_axes(speeds_range, steps_range)
+    table = cyclic_gaits.solve_grid(params, speeds, step_lengths, progress=cyclic_gaits.stderr_progress, family=args.family)
     table.save(out)
-    coef, rms = gaits.fit_impulse_mean(table) if table.converged.sum() >= 4 else (np.full(4, np.nan), np.nan)
+    coef, rms = cyclic_gaits.fit_impulse_mean(table) if table.converged.sum() >= 4 else (np.full(4, np.nan), np.nan)
     radius = table.step_map_radius[table.converged]
     summary = {"out": str(out), "converged": int(table.converged.sum()), "points": int(table.converged.size),
                "max_residual_converged": float(np.max(table.residual[table.converged], initial=0.0)),
                "locally_stable_points": int(np.sum(radius < 1.0)),
                "impulse_fit": {"coefficients": np.asarray(coef).tolist(), "rms_m_per_s": rms},
-               "not_converged": [{"speed_kmh": round(float(table.speeds[i]) / gaits.KMH, 3),
+               "not_converged": [{"speed_kmh": round(float(table.speeds[i]) / cyclic_gaits.KMH, 3),
                                   "step_length": float(table.step_lengths[j]), "reason": table.reason[i][j]}
                                  for i, j in zip(*np.nonzero(~table.converged))]}
     print(json.dumps(summary, indent=1))
@@ -77,10 +77,10 @@ def run_plot(args: argparse.Namespace) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    table = gaits.GaitTable.load(args.table)
+    table = cyclic_gaits.GaitTable.load(args.table)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    speeds_kmh = table.speeds / gaits.KMH
+    speeds_kmh = table.speeds / cyclic_gaits.KMH
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
     for ax, name, label in zip(axes, ("stiffness", "toe_off_impulse"),
                                ("stiffness kappa (N m/rad per kg)", "toe-off impulse iota (m/s)")):
@@ -101,7 +101,7 @@ def run_plot(args: argparse.Namespace) -> int:
     plt.close(fig)
 
     pts = table.converged_points()
-    coef, rms = gaits.fit_impulse_mean(table)
+    coef, rms = cyclic_gaits.fit_impulse_mean(table)
     fig = plt.figure(figsize=(6.5, 5))
     ax = fig.add_subplot(projection="3d")
     w1, w2 = pts["pre_stance_rate"], pts["pre_swing_rate"]

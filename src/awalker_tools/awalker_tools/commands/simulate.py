@@ -22,14 +22,14 @@ from pathlib import Path
 import numpy as np
 
 from awalker_tracker.errors import InputError
-from awalker_tracker.model import control, dynamics, gaits
+from awalker_tracker.model import control, dynamics, cyclic_gaits
 from awalker_tracker.model.walker import LEFT, RIGHT, WalkerParams, WalkerState, hip_position, stance_contact_x
 
 COLUMNS = ("time", "stance_leg", "stance_angle", "swing_angle", "stance_rate", "swing_rate", "stiffness",
            "toe_off_impulse", "contact_x", "hip_x", "hip_y", "total_energy", "heel_strike", "fallen")
 
 
-def _start(args: argparse.Namespace, params: WalkerParams, table: gaits.GaitTable | None
+def _start(args: argparse.Namespace, params: WalkerParams, table: cyclic_gaits.GaitTable | None
            ) -> tuple[WalkerState, float, float]:
     """Initial state, stiffness and toe-off impulse from the gait or the explicit options."""
     leg = LEFT if args.stance_leg == "left" else RIGHT
@@ -48,7 +48,7 @@ def _start(args: argparse.Namespace, params: WalkerParams, table: gaits.GaitTabl
                          f"({table.speeds[0]:.2f}-{table.speeds[-1]:.2f} m/s, "
                          f"{table.step_lengths[0]:.2f}-{table.step_lengths[-1]:.2f} m)")
     w1, w2, kappa, iota = (float(np.ravel(x)[0]) for x in table.lookup(v, s))
-    a = float(gaits.double_support_angle(params, s))
+    a = float(cyclic_gaits.double_support_angle(params, s))
     return WalkerState.from_arrays(a, -a, w1, w2, 0.0, leg), kappa, iota
 
 
@@ -102,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
     table = None
     if needs_table:
         try:
-            table = gaits.GaitTable.load(args.table).scaled_to(params)  # solved for L = 0.9 m: rescaled exactly
+            table = cyclic_gaits.GaitTable.load(args.table).scaled_to(params)  # solved for L = 0.9 m: rescaled exactly
         except ValueError as exc:
             raise InputError(f"{args.table or 'packaged gait table'}: {exc}") from None
     state, kappa, iota = _start(args, params, table)

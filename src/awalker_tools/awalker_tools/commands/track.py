@@ -18,7 +18,7 @@ DEFAULTS = PROFILES[DEFAULT_PROFILE]
 def run(args: argparse.Namespace) -> int:
     from awalker_tools.pipeline import TrackOptions, run_tracking
     from awalker_tracker.inference.autostart import AutoStartConfig
-    from awalker_tracker.inference.tracker import TrackerConfig
+    from awalker_tracker.inference.filter_model import TrackerConfig
 
     profile = tracking_profile(args.profile, "--profile")       # the defaults of what is not given
 

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from awalker_tracker.inference.tracker import InitialSpread, StartDescription
+from awalker_tracker.inference.filter_model import InitialSpread, StartDescription
 from awalker_tracker.vision.camera import Camera
 from awalker_tracker.vision.detection import GroundTrack, PersonDetection, detect_person, wholly_in_view
 

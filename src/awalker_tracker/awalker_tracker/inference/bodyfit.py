@@ -53,8 +53,8 @@ import numpy as np
 from scipy.special import logsumexp
 
 from awalker_tracker.blocks import thread_count
+from awalker_tracker.inference.filter_model import StartDescription, TrackerConfig, TrackerModel
 from awalker_tracker.inference.smc import ParticleFilter
-from awalker_tracker.inference.tracker import StartDescription, TrackerConfig, TrackerModel
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEFT, LEG_NAMES, RIGHT
 

@@ -16,9 +16,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.inference.filter_model import TrackerConfig
 from awalker_tracker.inference.recovery import RecoveryConfig
 from awalker_tracker.inference.smc import SMCConfig
-from awalker_tracker.inference.tracker import TrackerConfig
 
 
 @dataclass(frozen=True)

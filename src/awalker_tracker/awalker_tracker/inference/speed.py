@@ -3,7 +3,7 @@
 The one definition, for the tracker and its evaluation alike: each frame the speed moves towards the
 frame's horizontal pelvis displacement over its duration (m/s) by dt / ``SPEED_TIME_CONSTANT_S`` (an
 exponential moving average, causal, so it lags a change of pace by about a time constant). The tracker
-keeps one per particle (``inference.tracker``: ``TrackerModel.transition``) and reports their weighted
+keeps one per particle (``inference.filter_model``: ``TrackerModel.transition``) and reports their weighted
 mean per frame; the evaluation (``awalker eval``, the accuracy tests) computes the truth's the same way
 with ``walking_speed``, so that the two are compared like with like.
 """

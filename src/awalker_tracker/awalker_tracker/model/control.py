@@ -45,8 +45,8 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from .cyclic_gaits import GaitTable, fit_impulse_mean, gait_initial_state
 from .dynamics import StepEvents, advance, impulse_for_stance_rate
-from .gaits import GaitTable, fit_impulse_mean, gait_initial_state
 from .walker import WalkerParams, WalkerState
 
 #: Smallest Gamma mean (m/s) used for iota where a rule would give <= 0.

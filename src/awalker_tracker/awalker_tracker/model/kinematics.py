@@ -1,157 +1,15 @@
-"""Conditional 3D kinematics (paper Sec. 4.3): a 3D body driven by the planar walker.
+"""Conditional 3D kinematics (paper Sec. 4.3): the 3D body driven by the planar walker, for N particles.
 
-State of N particles (``KinematicState``): torso orientation (heading = torso yaw, pitch,
-roll), hip abduction and rotation, knees, ankle flexion and inversion (13 DOFs, ``DOF_NAMES``);
-the two sagittal hip angles ("Hip X") follow the walker's leg angles (the hip-ankle chords lie
-along them; *Knees* below), so with them the body has
-3 torso-orientation DOFs and 12 joint angles as in the paper. The torso position is not free:
-it follows from the stance-foot ground contact.
+Each particle's ``KinematicState`` holds 13 DOFs (``DOF_NAMES``: torso heading, pitch and roll, hip
+abduction and rotation, knees, ankle flexion and inversion); the sagittal hip angles follow the
+walker's leg angles and the body is placed by the stance foot's rolling contact on the ground.
+``initial_kinematics`` draws the start, ``sample_kinematics``/``sample_posed_kinematics`` advance one
+frame by eq. (6) with Table 1's parameters (``TABLE1``, ``KinematicConfig``, ``TurnPrior``) and
+``pose_body`` poses the body. Units: angles rad, lengths m, time s; Table 1's k in 1/s^2 and sigma in
+deg/s^2 (``KinematicConfig.sigma_unit``); world frame z up, ground at z = 0.
 
-Each DOF psi follows eq. (6):
-    psi_t = psi_{t-1} + alpha (psi_{t-1} - psi_{t-2}) + dt^2 (k (psi_bar - psi_{t-1}) + eta),
-    eta ~ N(0, sigma^2) truncated so that psi_t stays within its joint limits,
-with Table 1's parameters (``TABLE1``; the joint column reconstructed as in docs/design.md, *Table 1's joints*).
-alpha is given for dt = 1/30 s; at another dt we use alpha^(30 dt) (square root at 1/60 s,
-as the paper does), and sigma scaled so that the joint velocity eq. (6) drives keeps Table 1's
-stationary variance dt^2 sigma^2 / (1 - alpha^2) at any dt (``KinematicConfig.noise_scale``: 1.45-1.63
-at 1/60 s for Table 1's alphas 0.9-0.5; the paper says only that its 60 Hz parameters were "adjusted to
-account for a difference in frame rate"). With sigma unchanged, 60 Hz had half that variance or less:
-less freedom to follow a veer (real walks at 60 Hz, docs/design.md, "Conditional kinematics"). k is in 1/s^2. The swing knee's rest angle is gain x psi_hip with
-psi_hip = phi1 - phi2, the sagittal angle of the swing leg behind the stance leg (bent knee
-early in the stride, straight towards its end). The paper's gain is 5; ours is 2.5
-(``KinematicConfig.swing_knee_rest_gain``), measured on real walks (CMU subject 7, rendered by
-``person_render``, ``benchmarks/bench_realwalks.py``): with 5 the knee bends through its rest
-angle and, with Table 1's slow knee (k = 15, alpha = 0.9), is still bent at heel strike, so the
-ankles trail the person's by ~6 cm on average and the swing foot rides ~6 cm high; with 2.5 the
-knee bends little more than the swing-foot clearance below needs.
-
-Units of sigma (the paper does not state them): **deg/s^2**. Decided by sampling the prior
-on the walker's 1.3 m/s cyclic gait (``benchmarks/bench_render.py``, 2000 particles, 60
-frames at 30 Hz). Read as deg/s^2: median per-frame change 0.04 deg (torso, hips), 0.08 deg
-(ankles), 0.33 deg (heading); the heading wanders 10 deg (std) in 2 s; the swing knee peaks
-at ~90 deg through its rest-angle spring (people: ~65 deg): plausible. Read as rad/s^2: 2-3 deg per frame
-for torso, hips and ankles (95th percentile ~7-10 deg), 19 deg per frame for the heading
-(560 deg std after 2 s: the body spins), the swing knee slams into its 180 deg limit.
-``KinematicConfig.sigma_unit`` holds the conversion factor to rad (pi/180).
-
-Stance-foot contact: the foot's sole is a rocker, a circular arc of radius
-``body.sole_radius`` through the heel and toe ends of the sole line (bulging ``sole_sag`` below
-it). The contact is the arc's lowest point (angle ``contact_roll`` beta on the arc, clipped
-at the heel/toe ends where the foot then pivots about the end). As the foot pitches with the
-walker's stance leg (its pitch follows phi1 plus knee and ankle), the contact rolls from
-heel to toe, and the ground contact point moves by the rolled arc length sole_radius *
-d(beta): rolling without slip, and the foot never goes below the ground. The whole body is
-placed by putting this contact point at ``contact_point`` on the ground (z = 0); heading
-changes turn the body about it. At heel strike the contact passes to the other foot at
-the ground position under that foot's lowest point (its height is snapped to the ground: the
-paper's small "jump").
-
-Swing-foot clearance (our addition): the knee-less walker's
-trailing leg sweeps through the floor just after toe-off; where the sampled swing knee would
-put the swing foot's sole lower than ``swing_clearance`` (2 cm, about the minimum toe
-clearance of human gait) above the ground while the swing leg trails the stance leg, or
-below the ground later in the swing, the knee is bent just enough to clear it (a
-pose-dependent lower joint limit, applied as a position projection that adds no knee velocity).
-
-Knees (our reading of "the sagittal hip angle equals the walker's leg angle", and our change to
-Table 1's stance-knee rest): the walker's leg is the straight line from the hip to the rolling foot, so
-the hip-ankle *chord* follows the walker's leg angle phi, and a bent knee shortens the chord, to
-L(knee) = sqrt(l_thigh^2 + l_shank^2 + 2 l_thigh l_shank cos knee), instead of swinging the shank back: the
-thigh leans ahead of the chord by delta = atan2(l_shank sin knee, l_thigh + l_shank cos knee), the shank trails
-it by knee - delta, and the foot hangs from the walker's leg (the ankle DOF counts from its direction, so a bent
-knee does not tip the foot; the reported ankle flexion is the angle from the shank, the reported hip flexion the
-thigh's angle). By default the chord keeps its angle (phi less ``CHORD_LEAN``) and shortens along it. With
-``KinematicConfig.hip_over_ankle`` (the tracker's with two cameras or more, and with the pelvis ceilings) the bent knee
-lowers the hip straight down over the ankle instead, which stays as far ahead of the hip as the straight leg's,
-L0 sin(phi - CHORD_LEAN) with L0 = l_thigh + l_shank (``_chord_angle``: sin theta = L0 sin(phi - CHORD_LEAN) /
-L(knee)): late in the stance, the chord leaning forward from the ankle, shortening along it slid the hip back as
-the ceilings bend the knee, and the tracked pelvis rode 30 mm behind the person's on the real walks with two
-cameras against 19 without the ceilings (docs/design.md, "The hip comes down over the ankle"). The straight leg's
-chord leans ``CHORD_LEAN`` (0.08 rad) back from the walker's leg: the walker's leg ends at the rolling
-contact, where a person's centre of pressure lies ahead of the ankle over the stance (heel, flat foot,
-forefoot), so their hip rides ahead of the stance ankle (CMU subject 7: a median 65 mm over single
-support) where a chord along phi kept ours over it (-14 mm in the prior; with the lean +46) and the tracked
-pelvis 7 cm behind the person's on the real walks. The stance knee rests at ``stance_knee_rest`` 0.4 rad
-(Table 1: 0): people walk with the stance knee bent (CMU subject 7: a median 20-27 degrees over stance),
-which holds the hips lower and the knees ahead of the hip-ankle line
-(7-9 cm on those walks), where a straight stance leg carried the pelvis 2 cm high and the knees 6-7 cm
-behind. With Table 1's slow knee (k = 20, alpha 0.75) it reaches ~9 degrees on average over the stance
-in the prior. Measured on the real walks (docs/design.md, "Knees"). Since the feet land where the walker's do,
-the body walks at the walker's speed (with the thigh at phi, a swing knee still bent at heel strike
-landed the foot short and the body walked at 0.7x). Two position projections keep the body with the
-walker at heel strike, when the walker's rigid legs meet the ground together: *heel rise*
-(``_stance_knee``): late in a long stance the stance foot stands on its toe, which would carry the
-pelvis above the walker's hip (``walker.hip_position``), so the stance knee bends just enough to keep it
-there (people flex it ~35 degrees at toe-off; a pelvis ceiling < 1, ``KinematicState.pelvis_ceiling``, keeps the
-pelvis below that fraction of the walker's hip height, so the stance knee bends over the whole stance as a person's
-does: *Pelvis ceiling* below); *landing* (``_landing_knee``): a landing knee still bent holds the foot
-above the ground, so it is straightened until the foot touches (on the hand-made walk of ``test_kinematics`` from 0.34 to 0.24 rad, median, and the pelvis drops a median 3 mm in that frame;
-19 mm without the lean).
-
-Turning (our addition to Table 1; ``TurnPrior``): Table 1's torso "up" row alone (alpha 0.75,
-k 0, sigma 300 deg/s^2) makes the heading a quickly damped random walk: about 10 degrees of drift in
-2 s, so a person who turns 180 degrees in 2 s (90 deg/s) or veers 35 degrees is lost. People steer
-step by step, at foot placement; so each particle also carries a turn rate omega that is redrawn at
-every heel strike (omega' = 0.9 omega + e; e ~ N(0, (4 deg/s)^2), or with probability 0.15 a turn,
-N(0, (45 deg/s)^2); at most 150 deg/s) and kept through the step. The heading integrates omega,
-and eq. (6) with Table 1's row runs on the heading's deviation from that integral (its velocity term
-would otherwise amplify the turn). Straight walks stay straight for most particles (85 % of steps
-change omega by a few deg/s), while some particles of every step try a turn for the likelihood
-to confirm. Measured on a 180-degree turn in 1.7 s (walker render, 320x240, 2000 particles): heading
-error at most 16 degrees (Table 1 alone: lost, 160 degrees); straight walks unchanged (33-53 mm mean
-absolute against 46-64 over seeds 0-2).
-
-Step width (our change to Table 1's rest; ``KinematicConfig.step_width``): Table 1's hips rest
-unabducted, so the feet tread the hip joints' distance apart (0.18 m for the default body), where people
-tread about 0.1 m apart (centre to centre; the real walks' person 0.07 m). Both hips rest adducted by
-asin((hip_width - step_width) / (2 c)), c the hip-ankle chord at the stance knee's rest (-0.050 rad for
-the default body at 0.10 m), from the start pose
-on (Table 1's hip spring, k = 5 1/s^2, would take seconds to get there). ``step_width=None`` keeps
-Table 1's rest (``synth`` draws its walker renders so).
-
-Leg length (our addition; ``KinematicState.leg_scale``): each particle carries a factor on the thigh and
-shank lengths of the body description (the walker's L, the feet, torso and head keep theirs), drawn
-log-normal around 1 (``initial_kinematics(leg_scale_spread=...)``) and wandering by ``leg_scale_drift``
-(log, per frame) within ``leg_scale_range``, so that the filter weighs leg lengths as it weighs poses. Both
-are 0 by default (the body's own legs, as ``synth`` draws them, bit for bit as before); the tracker sets
-them when asked (``TrackerConfig.leg_scale_spread``, off by default; measured there). Why: a tape measure's
-leg is a few per cent off, and a person walks with the hips lower than the standing leg length (the stance
-knee flexed ~20 degrees on the real walks, ours straight), so a leg too long carries pelvis, hips and
-thorax too high however well the rest is tracked (real walks: 7 cm). The image likelihood draws the parts
-at the body description's lengths from the scaled joints (the thigh from the hip, the shank from the
-knee): drawing them at the scaled lengths was measured worse (real walks, seeds 0-2: two cameras 98 mm
-against 88, one camera 110 against 103).
-
-Posture (our addition; ``KinematicState.torso_rest``): Table 1's torso rests upright (psi_bar 0) on a
-spring (k = 5 1/s^2, alpha 0.9) whose noise lets the pitch wander only ~1 degree, so a person who walks
-leaning a few degrees (or whose torso's outline does: a backpack, a coat, the spine behind the body's
-centre) is tracked upright, and the likelihood, fitting that torso to the image, pulls the pelvis and with
-it the whole body behind the person's. Each particle therefore carries its own rest pitch, drawn around
-Table 1's (``initial_kinematics(posture_spread=...)``) and wandering by ``posture_drift`` (rad per frame)
-within +- ``POSTURE_LIMIT``; eq. (6) pulls the torso towards it, and the filter weighs postures as it
-weighs poses. Both are 0 by default (``synth`` draws its walkers upright, bit for bit as before); the
-tracker sets them (``TrackerConfig.posture_spread``, ``posture_drift``; measured there).
-
-Pelvis ceiling (our addition; ``KinematicState.pelvis_ceiling``): the heel-rise projection keeps each
-particle's pelvis at most its own fraction of the walker's hip height, drawn around
-``KinematicConfig.pelvis_ceiling`` (``initial_kinematics(pelvis_ceiling_spread=...)``, within
-``PELVIS_CEILING_RANGE``) and wandering by ``pelvis_ceiling_drift`` per frame, so that the filter weighs how
-far the stance knee bends as it weighs postures: people walk with the pelvis ~0.96 of the standing leg,
-the walker's rigid leg at 1. All 1 and 0 by default (``synth`` draws its walkers so, bit for bit as
-before); the tracker sets them with two or more cameras (``TrackerConfig.pelvis_ceiling``; measured there), and
-with them lowers the hip over the ankle as the knee bends (``hip_over_ankle``, *Knees* above).
-
-``plane_origin`` maps the walker's sagittal x to the world: the walker's stance contact
-x (``walker.stance_contact_x``) lands on ``contact_point``, x grows along the heading.
-
-Computation: the random numbers (new turn rates at heel strikes, eq. 6's noise: standard normals,
-and for joints near a limit inverse-CDF draws from uniforms) are drawn with the numpy Generator,
-vectorised, so a seed gives a fixed result; everything else is per particle and deterministic and
-runs in serial numba kernels that loop over the particles (``_eq6_mean_kernel``/``_eq6_draw_kernel``:
-eq. 6's means and truncation, around ``_standard_truncated_normal``; ``_sample_kernel``: forward
-kinematics, rolling contact, heel strike, swing-foot clearance and the posed body in one pass;
-``_pose_kernel`` for ``pose_body``). They are compiled on first use and cached next to this file (``__pycache__``);
-``test/model/kinematics_reference.py`` keeps the former vectorised numpy code as a test oracle.
+What is built and why (the knees, the rolling foot, swing-foot clearance, turning, step width, posture,
+pelvis ceiling, leg length, the numba kernels): docs/design.md, "Conditional kinematics".
 """
 from __future__ import annotations
 
@@ -206,7 +64,7 @@ TABLE1: dict[str, JointPrior] = {
     "hip_front": JointPrior(0.5, 5.0, 0.0, 50.0, -_EIGHTH, _EIGHTH),
     "hip_up": JointPrior(0.5, 5.0, 0.0, 50.0, -_EIGHTH, _EIGHTH),
     "stance_knee": JointPrior(0.75, 20.0, 0.0, 50.0, 0.0, np.pi),
-    "swing_knee": JointPrior(0.9, 15.0, 0.0, 300.0, 0.0, np.pi),  # rest = gain x psi_hip (see module doc)
+    "swing_knee": JointPrior(0.9, 15.0, 0.0, 300.0, 0.0, np.pi),  # rest = gain x psi_hip (docs/design.md, *Knees*)
     "ankle_side": JointPrior(0.9, 50.0, 0.0, 50.0, -_EIGHTH, _EIGHTH),
     "ankle_front": JointPrior(0.9, 50.0, 0.0, 50.0, -_EIGHTH, _EIGHTH),
 }
@@ -217,7 +75,7 @@ _DOF_ROWS = ("torso_side", "torso_front", "torso_up", "hip_front", "hip_front", 
 
 @dataclass(frozen=True)
 class TurnPrior:
-    """Turning, per step (our addition to Table 1; see the module docstring): the heading turns at a
+    """Turning, per step (our addition to Table 1; docs/design.md, *Turning*): the heading turns at a
     rate omega (rad/s) that is redrawn at each heel strike, omega' = persistence * omega + e, with e
     from N(0, small_sigma^2) or, with probability ``turn_probability``, N(0, large_sigma^2) (a turn
     decided at this step), |omega'| <= max_rate. Table 1's torso "up" row adds its within-step noise."""
@@ -241,7 +99,7 @@ class TurnPrior:
                        self.max_rate)
 
 
-# fractions of the walker's hip height a particle's pelvis ceiling may take (module doc, *Pelvis ceiling*)
+# fractions of the walker's hip height a particle's pelvis ceiling may take (docs/design.md, *Pelvis ceiling*)
 PELVIS_CEILING_RANGE = (0.85, 1.0)
 
 
@@ -251,26 +109,26 @@ class KinematicConfig:
 
     dt: float = 1.0 / 30.0
     table: dict[str, JointPrior] = field(default_factory=lambda: dict(TABLE1))
-    sigma_unit: float = np.pi / 180.0       # Table 1 sigma is in deg/s^2 (see module docstring)
-    swing_knee_rest_gain: float = 2.5       # psi_bar_swing_knee = gain * psi_hip (the paper: 5; module doc)
-    stance_knee_rest: float = 0.4           # rad, psi_bar of the stance knee (Table 1: 0; module doc, *Knees*)
+    sigma_unit: float = np.pi / 180.0       # Table 1 sigma is in deg/s^2 (docs/design.md, *Units of sigma*)
+    swing_knee_rest_gain: float = 2.5       # psi_bar_swing_knee = gain * psi_hip (the paper: 5; docs/design.md, *Knees*)
+    stance_knee_rest: float = 0.4           # rad, psi_bar of the stance knee (Table 1: 0; docs/design.md, *Knees*)
     swing_clearance: float = 0.02           # m: the swing foot's sole stays this far above the ground
     turning: TurnPrior = TurnPrior()
-    # m: how far apart (centre to centre) the feet tread with the hips at rest (module doc, *Step width*);
+    # m: how far apart (centre to centre) the feet tread with the hips at rest (docs/design.md, *Step width*);
     # None: Table 1's rest, hips unabducted, so that the feet tread the hip joints' distance apart
     step_width: float | None = 0.10
     # per frame: each particle's leg scale wanders by this (log, standard deviation) within leg_scale_range
     leg_scale_drift: float = 0.0
     leg_scale_range: tuple[float, float] = (0.85, 1.10)
     # per frame (rad, standard deviation): each particle's posture (torso_rest) wanders by this within
-    # +- POSTURE_LIMIT of Table 1's rest (module doc, *Posture*)
+    # +- POSTURE_LIMIT of Table 1's rest (docs/design.md, *Posture*)
     posture_drift: float = 0.0
-    # the particles' pelvis ceilings (module doc, *Pelvis ceiling*) are drawn around this fraction of the
+    # the particles' pelvis ceilings (docs/design.md, *Pelvis ceiling*) are drawn around this fraction of the
     # walker's hip height and wander by pelvis_ceiling_drift per frame (standard deviation) within
     # PELVIS_CEILING_RANGE; 1 = the walker's hip height itself
     pelvis_ceiling: float = 1.0
     pelvis_ceiling_drift: float = 0.0
-    # the knee rule (module doc, *Knees*): False, a bent knee shortens the hip-ankle chord along its angle; True,
+    # the knee rule (docs/design.md, *Knees*): False, a bent knee shortens the hip-ankle chord along its angle; True,
     # it lowers the hip straight down over the ankle, which keeps the straight leg's reach (the tracker's with two
     # cameras or more and with the pelvis ceilings: ``TrackerConfig.hip_over_ankle_min_cameras``)
     hip_over_ankle: bool = False
@@ -356,7 +214,7 @@ class KinematicState:
     contact_leg: np.ndarray     # (N,) int8 LEFT/RIGHT: the foot holding the contact
     plane_origin: np.ndarray    # (N, 2) world xy of the walker's sagittal x = 0
     turn_rate: np.ndarray       # (N,) omega: the heading's turn rate during this step (rad/s, left +)
-    leg_scale: np.ndarray       # (N,) thigh and shank lengths x this (the body's: 1; *Leg length* in the module doc)
+    leg_scale: np.ndarray       # (N,) thigh and shank lengths x this (the body's: 1; docs/design.md, *Leg length per particle*)
     torso_rest: np.ndarray      # (N,) rad: eq. 6's psi_bar of the torso pitch, this particle's posture (*Posture*)
     pelvis_ceiling: np.ndarray  # (N,) the pelvis at most this fraction of the walker's hip height (*Pelvis ceiling*)
 
@@ -896,7 +754,7 @@ def _copy_frame(frames: np.ndarray, source: int, target: int) -> None:
             frames[target, row, col] = frames[source, row, col]
 
 
-# rad: how far each leg's hip-ankle chord leans back from the walker's leg (module doc, *Knees*)
+# rad: how far each leg's hip-ankle chord leans back from the walker's leg (docs/design.md, *Knees*)
 CHORD_LEAN = 0.08
 
 

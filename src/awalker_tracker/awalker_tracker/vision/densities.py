@@ -31,7 +31,7 @@ LOG_SHADOW_PRIOR = float(np.log(SHADOW_PRIOR))
 # of the darkening), which the background's gradients scaled by the darkening cannot explain: the shadow
 # component's gradient channels get this much more standard deviation (grey levels per pixel). Without it
 # the contact shadow around a person's feet (colour matched to 1-2 grey levels, gradients 7-18 standard
-# deviations off on dressed CMU renders) was neither background nor foreground, so a model foot could sit
+# deviations off on dressed CMU renders) is neither background nor foreground, so a model foot can sit
 # on it, below the real foot: nearer a single camera. Wider lets dark clothes with the floor's hue pass for
 # shadow, their own texture no longer telling them apart. One camera, dressed CMU walks 07_01/07_02
 # straight and veer-left, 5000 particles, tracker seeds 0-2, absolute median (mm): no allowance (and

@@ -230,7 +230,7 @@ def start_pose_labels(body: BodyDescription, camera, position_xy: tuple[float, f
     pelvis above ``position_xy`` (m), walking along ``heading`` (rad), legs in double support
     for ``step_length`` (m), with self-occlusion (``render_labels``). The leg phase of a real
     start is unknown, so callers fill foreground pixels the projection misses with bands."""
-    from awalker_tracker.model.gaits import double_support_angle
+    from awalker_tracker.model.cyclic_gaits import double_support_angle
     from awalker_tracker.model.kinematics import KinematicConfig, initial_kinematics, pose_body
     from awalker_tracker.model.walker import WalkerState
     from awalker_tracker.vision.render import render_labels

@@ -48,8 +48,8 @@ whose occludee lies wholly in front, are skipped. Cameras are conditionally inde
 
 Cost: O(N x parts x points) scalar operations in one serial numba-compiled loop over the N
 states (``_score_states``): a state's projections, occlusion flags and sums stay in registers
-and cache, instead of the ~100 numpy calls over (rows, parts, N) arrays of the former vectorised
-version (kept as the test oracle ``test/vision/likelihood_reference.py``). About 1.5 ms per 1000
+and cache, instead of the ~100 numpy calls over (rows, parts, N) arrays a vectorised version
+makes (the test oracle ``test/vision/likelihood_reference.py``). About 1.5 ms per 1000
 states and camera (``benchmarks/bench_likelihood.py``, 5000 states: 7.5-7.8 ms against 19-21 ms
 for the numpy version, back to back on a shared 2-core machine). Compiled on first use (~7-9 s)
 and cached on disk next to this file (``cache=True``): later processes load it in ~0.3-0.4 s.

@@ -63,7 +63,7 @@ from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import PART_CLASSES, BodyDescription
 from awalker_tracker.model.walker import LEFT
 from awalker_tracker.nodes.base import AwalkerNode, NodeParameter, declare_parameters
-from awalker_tracker.nodes.convert import camera_from_msgs, stamp_to_ns
+from awalker_tracker.nodes.messages import camera_from_msgs, stamp_to_ns
 from awalker_tracker.nodes.spin import run_node
 from awalker_tracker.vision.decode import decode_image, decode_mono8
 from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor, FrameFeatures
@@ -211,7 +211,7 @@ class FeatureNode(AwalkerNode):
             raise InputError(f"awalker_features ({self.camera_name}): {exc}") from None
         if threads > 0:
             cv2.setNumThreads(threads)
-        from awalker_tracker.inference.tracker import StartDescription
+        from awalker_tracker.inference.filter_model import StartDescription
 
         self.extractor = FeatureExtractor(self.config, body=BodyDescription.from_yaml(body_path) if body_path else None,
                                           verbose=self.verbose)
@@ -252,7 +252,7 @@ class FeatureNode(AwalkerNode):
 
     # -- side inputs ------------------------------------------------------------------------
     def _on_start(self, msg: String) -> None:
-        from awalker_tracker.inference.tracker import StartDescription
+        from awalker_tracker.inference.filter_model import StartDescription
 
         try:
             start = StartDescription.from_yaml_text(msg.data, START_TOPIC)

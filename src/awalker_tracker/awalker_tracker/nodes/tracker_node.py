@@ -35,19 +35,19 @@ from std_msgs.msg import Header, String
 
 from awalker_tracker.errors import InputError
 from awalker_tracker.inference.autostart import AUTO_SPREAD, AutoStartConfig
+from awalker_tracker.inference.filter_model import (
+    ImageObservation, StartDescription, Tracker, TrackerConfig, TrackerModel, image_likelihood)
 from awalker_tracker.inference.posterior import PosteriorSummary as CoreSummary
 from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES, tracking_profile
 from awalker_tracker.inference.recovery import RecoveryConfig
 from awalker_tracker.inference.visibility import ViewConfig
 from awalker_tracker.inference.smc import SMCConfig
 from awalker_tracker.inference.sync import DEFAULT_TOLERANCE, StampSynchronizer
-from awalker_tracker.inference.tracker import (
-    ImageObservation, StartDescription, Tracker, TrackerConfig, TrackerModel, image_likelihood)
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEG_NAMES
 from awalker_tracker.nodes.base import AwalkerNode, Default, NodeParameter, declare_parameters
-from awalker_tracker.nodes.convert import POSTERIOR_DEPTH, camera_from_msgs, header, stamp_to_ns, summary_to_msg
-from awalker_tracker.nodes.features import features_from_msg
+from awalker_tracker.nodes.features_node import features_from_msg
+from awalker_tracker.nodes.messages import POSTERIOR_DEPTH, camera_from_msgs, header, stamp_to_ns, summary_to_msg
 from awalker_tracker.nodes.spin import run_node
 
 START_TOPIC = "/awalker/start_description"

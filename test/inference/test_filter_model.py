@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.inference.filter_model import (
+    InitialSpread, StartDescription, Tracker, TrackerConfig, TrackerModel, marker_likelihood, where_arrays)
 from awalker_tracker.inference.smc import SMCConfig
 from awalker_tracker.inference.speed import walking_speed
-from awalker_tracker.inference.tracker import (
-    InitialSpread, StartDescription, Tracker, TrackerConfig, TrackerModel, marker_likelihood, where_arrays)
 from awalker_tracker.model.body import MARKER_NAMES, BodyDescription
 from awalker_tracker.model.walker import LEFT, WalkerParams, WalkerState
 
@@ -26,14 +26,14 @@ def simulate_walk(frames: int, speed: float, step_length: float, heading: float,
     left heel strike and the first ``lead_in`` frames are dropped: the walk starts in the left leg's single
     support (a third into its step), which a start description names "left" (the named leg's phase is
     drawn from the last 3/4 of its step: ``InitialSpread.named_leg_phase_share``)."""
-    from awalker_tracker.model import control, gaits, kinematics
+    from awalker_tracker.model import control, cyclic_gaits, kinematics
 
     body = BodyDescription.default()
     params = body.walker_params()
-    table = gaits.GaitTable.load()
+    table = cyclic_gaits.GaitTable.load()
     prior = control.ControlPrior.from_gait_table(table, kappa_noise_variance=0.02, kappa_bar_variance=0.02)
     rng = np.random.default_rng(seed)
-    walker = gaits.gait_initial_state(params, np.array([speed]), np.array([step_length]), stance_leg=LEFT, table=table)
+    walker = cyclic_gaits.gait_initial_state(params, np.array([speed]), np.array([step_length]), stance_leg=LEFT, table=table)
     _, _, stiffness, impulse = table.lookup(np.array([speed]), np.array([step_length]))
     ctrl = control.initial_control(prior, 1, rng, stiffness=np.asarray(stiffness, float),
                                    toe_off_impulse=np.asarray(impulse, float))
@@ -203,9 +203,9 @@ def test_initial_particles_spread_around_the_start():
 def test_start_outside_the_solved_gaits_is_refused_and_the_spread_redrawn():
     import dataclasses
 
-    from awalker_tracker.model import gaits
+    from awalker_tracker.model import cyclic_gaits
 
-    table = gaits.GaitTable.load()
+    table = cyclic_gaits.GaitTable.load()
     holed = dataclasses.replace(table, converged=table.converged.copy())
     holed.converged[:3, :4] = False                       # no gaits below ~3 km/h with steps below ~0.45 m
     body = BodyDescription.default()

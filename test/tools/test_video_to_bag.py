@@ -9,7 +9,7 @@ import pytest
 
 from awalker_tools import cli
 from awalker_tools.bagio import BODY_DESCRIPTION_TOPIC, START_DESCRIPTION_TOPIC, SequenceReader
-from awalker_tools.convert import image_files, read_timestamps
+from awalker_tools.video_to_bag import image_files, read_timestamps
 from awalker_tracker.errors import InputError
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.vision.camera import Camera, save_calibration

@@ -1,4 +1,4 @@
-"""Gait analytics (inference/gait.py) on walks with known heel strikes and step geometry."""
+"""Gait analytics (inference/gait_events.py) on walks with known heel strikes and step geometry."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from awalker_tracker.inference import gait
+from awalker_tracker.inference import gait_events
 from awalker_tracker.model.body import MARKER_NAMES
 
 M = {n: i for i, n in enumerate(MARKER_NAMES)}
@@ -41,10 +41,10 @@ def stylised_walk(step_length=0.7, step_frames=15, width=0.2, steps=6, heading=0
 def test_heel_strikes_and_steps_of_a_known_walk():
     markers, stance, strikes = stylised_walk()
     frames = np.arange(len(markers))
-    found, fraction = gait.stance_from_heels(markers, frames / RATE)
+    found, fraction = gait_events.stance_from_heels(markers, frames / RATE)
     assert np.array_equal(found, stance) and np.isnan(fraction).all()     # the heels land at rest on the frames
     stamps = 1_000_000_000 + np.round(frames * 1e9 / RATE).astype(np.int64)
-    walk = gait.steps(frames, stamps, markers, found)
+    walk = gait_events.steps(frames, stamps, markers, found)
     assert [s.frame for s in walk] == strikes
     assert [s.foot for s in walk] == ["right", "left"] * 3
     measured = walk[1:]
@@ -55,13 +55,13 @@ def test_heel_strikes_and_steps_of_a_known_walk():
     assert all(s.step_time_s == pytest.approx(0.5, abs=1e-6) for s in measured)
     assert all(s.cadence_steps_min == pytest.approx(120.0) for s in measured)
     assert all(s.speed_m_s == pytest.approx(1.4) for s in walk[2:])
-    summary = gait.summary(walk)
+    summary = gait_events.summary(walk)
     assert summary["step_length_m"] == pytest.approx(0.7) and summary["stride_time_s"] == pytest.approx(1.0)
     assert summary["symmetry_left_over_right"]["step_length_m"] == pytest.approx(1.0)
     assert summary["stance_fraction"] == 0.5 and "impulsive" in summary["stance_note"]
-    assert f"{gait.WALKER_STRIKE_DELAY:g} x the step time" in summary["stance_note"]
+    assert f"{gait_events.WALKER_STRIKE_DELAY:g} x the step time" in summary["stance_note"]
     assert "sides_note" not in summary
-    assert gait.summary(walk, sides_known=False)["sides_note"] == gait.SIDES_NOTE
+    assert gait_events.summary(walk, sides_known=False)["sides_note"] == gait_events.SIDES_NOTE
 
 
 def test_a_heel_skimming_in_strikes_where_it_has_slowed_and_its_step_lies_where_it_stops():
@@ -80,13 +80,13 @@ def test_a_heel_skimming_in_strikes_where_it_has_slowed_and_its_step_lies_where_
             sliding[strike + lag, heel, 2] = height
     frames = np.arange(len(markers))
     stamps = 1_000_000_000 + np.round(frames * 1e9 / RATE).astype(np.int64)
-    found, fraction = gait.stance_from_heels(sliding, frames / RATE)
+    found, fraction = gait_events.stance_from_heels(sliding, frames / RATE)
     # central differences: 4.5, 3.75, 2.25 then 0.75 m/s three frames after the heel came low: 1 m/s crossed
     # 0.83 of the way into that frame's period
     slowed = [f + 3 for f in strikes]
     assert [int(f) for f in np.flatnonzero(np.diff(found)) + 1] == slowed
     np.testing.assert_allclose(fraction[slowed], (2.25 - 1.0) / (2.25 - 0.75))
-    at_rest = gait.steps(frames, stamps, sliding, found, fraction, at_rest=True)
+    at_rest = gait_events.steps(frames, stamps, sliding, found, fraction, at_rest=True)
     rest_x = [markers[f, M["left_heel" if stance[f] == 0 else "right_heel"], 0] for f in strikes]
     assert [s.x for s in at_rest] == pytest.approx(rest_x, abs=1e-9)
     assert all(s.step_length_m == pytest.approx(0.7, abs=1e-6) for s in at_rest[2:])
@@ -97,13 +97,13 @@ def test_asymmetry_and_comparison_with_the_truth():
     markers, stance, _ = stylised_walk()
     frames = np.arange(len(markers))
     stamps = 1_000_000_000 + np.round(frames * 1e9 / RATE).astype(np.int64)
-    truth = gait.steps(frames, stamps, markers, stance)
+    truth = gait_events.steps(frames, stamps, markers, stance)
     late = np.roll(stance, 2)                    # the estimate sees every strike 2 frames late
     late[:2] = stance[0]
     shifted = markers.copy()
     shifted[:, :, :2] += np.array([0.05, 0.0])   # and 5 cm off (all markers: step lengths unchanged)
-    estimate = gait.steps(frames, stamps, shifted, late)
-    result = gait.compare(estimate, truth)
+    estimate = gait_events.steps(frames, stamps, shifted, late)
+    result = gait_events.compare(estimate, truth)
     assert result["matched_strikes"] == result["true_strikes"] == 6
     assert result["timing_error_s_median"] == pytest.approx(2 / RATE, abs=1e-6)
     assert result["step_length_error_m_median"] == pytest.approx(0.0, abs=0.03)
@@ -113,7 +113,7 @@ def test_asymmetry_and_comparison_with_the_truth():
     limp = markers.copy()
     right = [M["right_heel"], M["right_toe"]]
     limp[:, right, :2] -= 0.1 * np.array([np.cos(0.4), np.sin(0.4)])
-    summary = gait.summary(gait.steps(frames, stamps, limp, stance))
+    summary = gait_events.summary(gait_events.steps(frames, stamps, limp, stance))
     assert summary["symmetry_left_over_right"]["step_length_m"] == pytest.approx(0.8 / 0.6, rel=0.02)
 
 
@@ -126,8 +126,8 @@ def test_strikes_are_timed_within_the_frame_when_the_walker_says_when():
     fraction = np.full(len(frames), np.nan)
     fraction[strikes[0]] = 0.25
     fraction[strikes[1]] = 0.75
-    walk = gait.steps(frames, stamps, markers, stance, fraction)
-    on_frames = gait.steps(frames, stamps, markers, stance)
+    walk = gait_events.steps(frames, stamps, markers, stance, fraction)
+    on_frames = gait_events.steps(frames, stamps, markers, stance)
     assert [s.frame for s in walk] == [s.frame for s in on_frames] == strikes
     assert walk[0].time_s == pytest.approx((strikes[0] - 1 + 0.25) / RATE, abs=1e-9)
     assert walk[1].time_s == pytest.approx((strikes[1] - 1 + 0.75) / RATE, abs=1e-9)
@@ -143,17 +143,17 @@ def test_the_walkers_strike_is_dated_early_by_a_share_of_the_step():
     markers, stance, strikes = stylised_walk()
     frames = np.arange(len(markers))
     stamps = 1_000_000_000 + np.round(frames * 1e9 / RATE).astype(np.int64)
-    plain = gait.steps(frames, stamps, markers, stance)
-    walker = gait.steps(frames, stamps, markers, stance, double_support=gait.WALKER_STRIKE_DELAY)
-    delay = gait.WALKER_STRIKE_DELAY
-    assert delay == pytest.approx(0.5 * 2 * gait.HUMAN_DOUBLE_SUPPORT) and gait.HUMAN_DOUBLE_SUPPORT == pytest.approx(0.1)
+    plain = gait_events.steps(frames, stamps, markers, stance)
+    walker = gait_events.steps(frames, stamps, markers, stance, double_support=gait_events.WALKER_STRIKE_DELAY)
+    delay = gait_events.WALKER_STRIKE_DELAY
+    assert delay == pytest.approx(0.5 * 2 * gait_events.HUMAN_DOUBLE_SUPPORT) and gait_events.HUMAN_DOUBLE_SUPPORT == pytest.approx(0.1)
     # the first step has no step time yet: a typical one (0.55 s)
-    assert walker[0].time_s == pytest.approx(plain[0].time_s - delay * gait.TYPICAL_STEP_TIME_S)
+    assert walker[0].time_s == pytest.approx(plain[0].time_s - delay * gait_events.TYPICAL_STEP_TIME_S)
     assert all(w.time_s == pytest.approx(p.time_s - delay * 0.5) for w, p in zip(walker[1:], plain[1:]))
     assert [w.step_time_s for w in walker[1:]] == pytest.approx([p.step_time_s for p in plain[1:]])
     assert [w.step_length_m for w in walker[1:]] == pytest.approx([p.step_length_m for p in plain[1:]])
     # against heel-marker truth the walker's events are now on time but for the shift itself
-    result = gait.compare(walker, plain)
+    result = gait_events.compare(walker, plain)
     assert result["timing_error_s_median"] == pytest.approx(delay * 0.5, abs=1e-6)
 
 
@@ -163,13 +163,13 @@ def test_strikes_are_matched_one_to_one_and_swapped_feet_are_counted():
     markers, stance, _ = stylised_walk()
     frames = np.arange(len(markers))
     stamps = 1_000_000_000 + np.round(frames * 1e9 / RATE).astype(np.int64)
-    truth = gait.steps(frames, stamps, markers, stance)
+    truth = gait_events.steps(frames, stamps, markers, stance)
     doubled = sorted(truth + [replace(s, time_s=s.time_s + 0.1) for s in truth[:2]], key=lambda s: s.time_s)
-    result = gait.compare(doubled, truth)
+    result = gait_events.compare(doubled, truth)
     assert (result["matched_strikes"], result["missed_strikes"], result["extra_strikes"]) == (6, 0, 2)
     assert result["timing_error_s_median"] == pytest.approx(0.0)
     swapped = [replace(s, foot="left" if s.foot == "right" else "right") for s in truth]
-    result = gait.compare(swapped, truth)
+    result = gait_events.compare(swapped, truth)
     assert (result["matched_strikes"], result["missed_strikes"], result["swapped_strikes"]) == (0, 6, 6)
 
 
@@ -177,7 +177,7 @@ def test_the_live_steps_follow_the_posteriors_stance_foot():
     """PosteriorSteps: a step each time the stance-left probability crosses 0.5 and settles past 0.7 / 0.3,
     timed at the crossing (less the walker's strike delay), one step per change however slowly the particles
     strike; no step for a wobble that does not settle."""
-    steps = gait.PosteriorSteps()
+    steps = gait_events.PosteriorSteps()
     contacts = {0: np.array([0.0, 0.1]), 1: np.array([0.7, -0.1])}
     # left stands, then the particles strike with the right over 4 frames (never a majority within one frame),
     # a wobble to 0.45 and back, then the left strikes
@@ -190,6 +190,6 @@ def test_the_live_steps_follow_the_posteriors_stance_foot():
     assert [s.foot for _, s in out] == ["right", "left"]
     assert [f for f, _ in out] == [8, 21]                       # confirmed past 0.3 / 0.7
     # the right's strike crossed 0.5 halfway between frames 6 and 7; no step time yet: a typical one
-    assert out[0][1].time_s == pytest.approx(6.5 / RATE - gait.WALKER_STRIKE_DELAY * gait.TYPICAL_STEP_TIME_S)
-    assert out[1][1].time_s == pytest.approx(20 / RATE - gait.WALKER_STRIKE_DELAY * (20 / RATE - 6.5 / RATE))
+    assert out[0][1].time_s == pytest.approx(6.5 / RATE - gait_events.WALKER_STRIKE_DELAY * gait_events.TYPICAL_STEP_TIME_S)
+    assert out[1][1].time_s == pytest.approx(20 / RATE - gait_events.WALKER_STRIKE_DELAY * (20 / RATE - 6.5 / RATE))
     assert (out[0][1].x, out[1][1].x) == (0.7, 0.0)

@@ -283,7 +283,7 @@ def flat_foot_frames(markers: np.ndarray, side: str) -> np.ndarray:
 
 def body_from_markers(markers: np.ndarray, template: BodyDescription | None = None) -> BodyDescription:
     """A body description with segment sizes measured from marker trajectories (F, 13, 3) with the floor
-    at z = 0 (``mocap_motion.level_floor``), medians over frames; widths and the other sizes from
+    at z = 0 (``walk_variants.level_floor``), medians over frames; widths and the other sizes from
     ``template``.
 
     The ankle's height over the floor while its foot lies flat on it (``flat_foot_frames``) is what a tape

@@ -68,7 +68,7 @@ class StartDescription:
 
     def step_length_for(self, params: WalkerParams) -> float:
         """The given step length, else a person's usual one at ``speed`` for this leg length (m)."""
-        from awalker_tracker.model.gaits import preferred_step_length
+        from awalker_tracker.model.cyclic_gaits import preferred_step_length
 
         return float(self.step_length) if self.step_length is not None else float(
             preferred_step_length(params, self.speed))
@@ -164,7 +164,7 @@ class TrackerConfig:
     # more from stride to stride (CMU 07_01, bench_accuracy --quick, tracker seeds 0-2: relative error
     # 70/60/52 mm at 0.01, 57/52/47 at 0.02, 53/50/48 at 0.05), and walkers that trip are dropped by the
     # filter (fallen_log_penalty). At 0.05 the filter lost a 600-particle marker track
-    # (test_tracker_model.py), so 0.02.
+    # (test_filter_model.py), so 0.02.
     kappa_bar_variance: float = 0.02
     # Exponent on the likelihood (tempering). The per-part image log-likelihoods are sums over
     # strongly correlated pixels, so differences between particles of tens of log units are not
@@ -179,7 +179,7 @@ class TrackerConfig:
     recovery: RecoveryConfig = RecoveryConfig()
     view: ViewConfig = ViewConfig()      # when the person counts as in view, and the track ends (inference.visibility)
     cloud_size: int = 200
-    # Leg lengths the filter explores (kinematics module doc, *Leg length*; off by default): with
+    # Leg lengths the filter explores (docs/design.md, *Leg length per particle*; off by default): with
     # leg_scale_spread > 0 each particle's thigh and shank are x its own factor, log-normal with this spread
     # when drawn (start, re-seeds), wandering by leg_scale_drift per frame (log, std). Real walks, hand-started,
     # tracker seeds 0-4, 0.04 and 0.001 (bench_realwalks --leg-scale-spread 0.04): medians of the
@@ -191,7 +191,7 @@ class TrackerConfig:
     # docs/design.md, "Leg length per particle".
     leg_scale_spread: float = 0.0
     leg_scale_drift: float = 0.001
-    # Postures the filter explores (kinematics module doc, *Posture*), with at least posture_min_cameras
+    # Postures the filter explores (docs/design.md, *Posture*), with at least posture_min_cameras
     # cameras: each particle's torso pitch rests at its own angle, Table 1's rest (upright) plus
     # N(0, posture_spread^2) rad when drawn (start, re-seeds), wandering by posture_drift rad per frame (std);
     # otherwise, and with posture_spread 0, upright for every particle. Real walks, hand-started, tracker seeds
@@ -201,7 +201,7 @@ class TrackerConfig:
     posture_spread: float = 0.08
     posture_drift: float = 0.002
     posture_min_cameras: int = 2
-    # Pelvis ceilings the filter explores (kinematics module doc, *Pelvis ceiling*), with at least
+    # Pelvis ceilings the filter explores (docs/design.md, *Pelvis ceiling*), with at least
     # pelvis_ceiling_min_cameras cameras: each particle's pelvis stays at most its own fraction of the walker's
     # hip height, pelvis_ceiling plus N(0, pelvis_ceiling_spread^2) when drawn (start, re-seeds) within 0.85-1,
     # wandering by pelvis_ceiling_drift per frame (std); with fewer cameras, or pelvis_ceiling 1, off (the
@@ -370,7 +370,7 @@ class TrackerModel:
                  cameras: list[Any] | None = None) -> None:
         """``cameras``: the image likelihood's cameras, for re-acquiring a lost track (None: no re-acquisition),
         for the postures (``TrackerConfig.posture_min_cameras``) and the pelvis ceiling (``pelvis_ceiling_for``)."""
-        from awalker_tracker.model import control, gaits, kinematics as kin_mod
+        from awalker_tracker.model import control, cyclic_gaits, kinematics as kin_mod
 
         self.body = body
         self.start = start
@@ -378,7 +378,7 @@ class TrackerModel:
         self.likelihood = likelihood
         self.params = params or body.walker_params()
         # the packaged table is solved for L = 0.9 m: rescaled (exactly) to this body's leg length
-        self.gaits = (gait_table if gait_table is not None else gaits.GaitTable.load()).scaled_to(self.params)
+        self.gaits = (gait_table if gait_table is not None else cyclic_gaits.GaitTable.load()).scaled_to(self.params)
         self.prior = prior if prior is not None else control.ControlPrior.from_gait_table(
             self.gaits, kappa_bar_variance=config.kappa_bar_variance)
         # rad: the spread of the particles' postures, 0 (upright) with fewer cameras than posture_min_cameras
@@ -391,7 +391,7 @@ class TrackerModel:
             hip_over_ankle=ceiling < 1.0 or len(cameras or ()) >= config.hip_over_ankle_min_cameras)
         self.cameras = list(cameras or ())
         self._control = control
-        self._gaits = gaits
+        self._cyclic_gaits = cyclic_gaits
         self._kin = kin_mod
         self.monitor = (LostTrackMonitor(cameras, config.recovery, config.dt, body_height_m=self.body.height)
                         if cameras and (config.recovery.reacquire or config.recovery.hold_still) else None)
@@ -427,7 +427,7 @@ class TrackerModel:
         pelvis above ``pelvis_xy`` ((2,) or (N, 2), m), walking along ``heading`` (rad), with ``spread``
         (a random phase within the last ``phase_share`` of the step)."""
         speed, step = self._sample_gaits(speed, step, spread, rng)
-        walker = self._gaits.gait_initial_state(self.params, speed, step, contact_origin=0.0,
+        walker = self._cyclic_gaits.gait_initial_state(self.params, speed, step, contact_origin=0.0,
                                                stance_leg=stance_leg, table=self.gaits)
         _, _, stiffness, impulse = self.gaits.lookup(speed, step)
         control = self._control.initial_control(self.prior, n, rng, stiffness=np.asarray(stiffness, float),
@@ -473,7 +473,7 @@ class TrackerModel:
             return speed, step
         speeds = self.gaits.speeds
         clamped = np.clip(speed, speeds[1], speeds[-2])
-        usual = np.clip(self._gaits.preferred_step_length(self.params, clamped), self.gaits.step_lengths[1],
+        usual = np.clip(self._cyclic_gaits.preferred_step_length(self.params, clamped), self.gaits.step_lengths[1],
                         self.gaits.step_lengths[-2])
         return np.where(known, speed, clamped), np.where(known, step, usual)
 
@@ -561,7 +561,7 @@ class TrackerModel:
                               joint_rad=0.02, random_phase=False)
         speed = states.speed[rows]
         fresh = self._fresh(rows.size, states.kin.contact_point[rows], states.kin.heading[rows], speed,
-                            self._gaits.preferred_step_length(self.params, speed), states.walker.stance_leg[rows],
+                            self._cyclic_gaits.preferred_step_length(self.params, speed), states.walker.stance_leg[rows],
                             rng, still)
         fresh.reseeded[:] = RESEEDED_FALLEN
         fresh.jump[:] = pose_jump(states.take(rows), fresh)
@@ -616,7 +616,7 @@ class TrackerModel:
                          speed_fraction=max(self.config.spread.speed_fraction, 0.25))
         left = np.sum(w[states.walker.stance_leg == LEFT])
         fresh = self._fresh(k, order.position, np.full(k, heading), np.full(k, speed),
-                            self._gaits.preferred_step_length(self.params, np.full(k, speed)),
+                            self._cyclic_gaits.preferred_step_length(self.params, np.full(k, speed)),
                             np.where(rng.random(k) < left, LEFT, RIGHT).astype(np.int8), rng, spread)
         fresh.reseeded[:] = REACQUIRED
         fresh.jump[:] = pose_jump(states.take(rows[half:]), fresh)

@@ -8,9 +8,9 @@ the image stamp of each summary:
   joints of the MAP pose, body cylinders (sizes from the body description), foot contacts (heel
   strikes larger; the contact of a foot that has lifted is sent as a DELETE);
 - ``/awalker/particles`` sensor_msgs/PointCloud2 in the world frame: the heaviest samples of the
-  posterior's head/pelvis/knee/ankle clouds, fields x, y, z, weight, marker (``convert.PARTICLE_POINT``);
+  posterior's head/pelvis/knee/ankle clouds, fields x, y, z, weight, marker (``messages.PARTICLE_POINT``);
 - ``/awalker/gait_steps`` awalker_msgs/GaitStep at every heel strike: each change of the posterior's stance
-  foot (``inference.gait.PosteriorSteps``): where the heel came down, step length and width, step and
+  foot (``inference.gait_events.PosteriorSteps``): where the heel came down, step length and width, step and
   stride time, cadence and speed; online, at the filter's look-ahead lag, the steps gait.csv has; only
   steps whose strike frame had the person in view (``PosteriorSummary.person_in_view``), counted anew for
   each track (``track_id``);
@@ -28,10 +28,10 @@ from sensor_msgs.msg import JointState, PointCloud2
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from awalker_tracker.inference.gait import PosteriorSteps, Step
+from awalker_tracker.inference.gait_events import PosteriorSteps, Step
 from awalker_tracker.model.body import SKELETON_EDGES, BodyDescription
 from awalker_tracker.nodes.base import AwalkerNode, NodeParameter, declare_parameters
-from awalker_tracker.nodes.convert import (
+from awalker_tracker.nodes.messages import (
     POSTERIOR_DEPTH, ns_to_stamp, particles_to_pointcloud2, points_from_msg, stamp_to_ns)
 from awalker_tracker.nodes.spin import run_node
 

@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from awalker_tracker.errors import InputError
-from awalker_tracker.inference.tracker import StartDescription
+from awalker_tracker.inference.filter_model import StartDescription
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.vision.camera import Camera, load_calibration
 

@@ -6,7 +6,7 @@ markers (``MARKER_NAMES``) first, so that any other skeleton points (arms, head)
 - ``level_floor``: CMU walks drift in height (07_01: the pelvis rises 8 cm over 3.6 m); the lowest
   foot point per frame, fitted by a straight line in time over its lower envelope, is made level, and
   then the floor is put ``FOOT_LINE_HEIGHT`` under the heel-toe line of a foot lying flat
-  (``model.mocap.flat_foot_frames``): the skeleton's heel and toe points lie inside the foot, ~3 cm over
+  (``model.acclaim.flat_foot_frames``): the skeleton's heel and toe points lie inside the foot, ~3 cm over
   the sole, and dip that much lower only while the foot rolls (heel strike, toe-off: the lowest point is
   reached there), so a floor at the lowest point floated every flat foot ~3 cm over it.
 - ``loop_to_duration``: repeats the walk from a frame that matches a later one (pose relative to the
@@ -16,16 +16,16 @@ markers (``MARKER_NAMES``) first, so that any other skeleton points (arms, head)
 - ``bend``: turns the walk's heading progressively by ``angle`` over ``[start, start + duration]`` s.
   People turn by pivoting on the stance foot, so the whole body is rotated about the current stance
   foot's ground contact (its lower end, heel or toe), which therefore stays put (no foot skate
-  added); as the foot rolls, or the other heel strikes (``inference.gait.stance_from_heels``), the
+  added); as the foot rolls, or the other heel strikes (``inference.gait_events.stance_from_heels``), the
   pivot moves with the contact and the transform stays continuous.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from awalker_tracker.inference.gait import stance_from_heels
+from awalker_tracker.inference.gait_events import stance_from_heels
+from awalker_tracker.model.acclaim import flat_foot_frames
 from awalker_tracker.model.body import MARKER_NAMES
-from awalker_tracker.model.mocap import flat_foot_frames
 
 _M = {n: i for i, n in enumerate(MARKER_NAMES)}
 #: Height (m) of the heel-toe line over the floor while the foot lies flat: where ``level_floor`` puts the

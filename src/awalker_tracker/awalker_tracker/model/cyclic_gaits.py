@@ -374,7 +374,7 @@ class GaitTable:
         """The cyclic gait with a given stiffness kappa (N m/rad per kg) and step length (m).
 
         Returns (speed m/s, stance_rate, swing_rate, toe_off_impulse) of that gait: at each step
-        length the table's kappa rises with speed (checked in test_gaits.py), so the speed is found
+        length the table's kappa rises with speed (checked in test_cyclic_gaits.py), so the speed is found
         by inverting kappa along the speed axis; queries are clamped to the grid. (Compiled:
         ``_stiffness_kernel``, called at every heel strike of every particle.)
         """

@@ -9,8 +9,8 @@ from conftest import MOCAP_07
 
 from awalker_tracker.errors import InputError
 from awalker_tracker.inference.speed import walking_speed
+from awalker_tracker.model.acclaim import MOCAP_RATE, body_from_markers, load_mocap, segments_from_markers
 from awalker_tracker.model.body import MARKER_NAMES, BodyDescription
-from awalker_tracker.model.mocap import MOCAP_RATE, body_from_markers, load_mocap, segments_from_markers
 
 ASF, AMC = MOCAP_07 / "07.asf", MOCAP_07 / "07_01.amc"
 M = {n: i for i, n in enumerate(MARKER_NAMES)}
@@ -67,7 +67,7 @@ def test_measured_body_stands_as_tall_as_the_person(trial):
     body's standing hip height (``leg_length``, the walker's L) is what the person's hips reach at
     mid-stance (their highest, the knee nearly straight) to 1.5 cm (0.8); the template's ankle stood it
     2.5 cm taller."""
-    from awalker_tools.mocap_motion import level_floor
+    from awalker_tools.walk_variants import level_floor
 
     markers = level_floor(trial.markers, trial.rate)
     body = body_from_markers(markers)

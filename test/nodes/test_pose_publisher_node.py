@@ -28,7 +28,7 @@ def make_summary(stamp_ns: int, frame: int, rng, contacts=None, left_probability
 
 
 def test_summary_message_roundtrip():
-    from awalker_tracker.nodes.convert import summary_from_msg, summary_to_msg
+    from awalker_tracker.nodes.messages import summary_from_msg, summary_to_msg
 
     s = make_summary(1_700_000_000_123_456_789, 4, np.random.default_rng(0))
     msg = summary_to_msg(s, "world")
@@ -46,8 +46,8 @@ def test_summary_message_roundtrip():
 
 
 def test_cylinder_geometry():
-    from awalker_tracker.nodes.convert import summary_to_msg
-    from awalker_tracker.nodes.pose_publisher import MarkerBuilder, body_cylinders, quaternion_z_to
+    from awalker_tracker.nodes.messages import summary_to_msg
+    from awalker_tracker.nodes.pose_publisher_node import MarkerBuilder, body_cylinders, quaternion_z_to
 
     for d in ([0, 0, 1], [1, 0, 0], [0.3, -0.4, 0.5], [0, 0, -1]):
         q = np.array(quaternion_z_to(np.array(d, float)))
@@ -71,8 +71,8 @@ def test_a_reused_marker_builder_gives_the_markers_of_a_fresh_one():
     """The pose publisher keeps one MarkerBuilder and updates its messages: nothing of one frame may stay in the
     next (contacts appear, vanish and change between heel strike and stance). Compared field by field (the
     serialised bytes are not: CDR's padding bytes are left as they were in memory)."""
-    from awalker_tracker.nodes.convert import summary_to_msg
-    from awalker_tracker.nodes.pose_publisher import MarkerBuilder, body_cylinders
+    from awalker_tracker.nodes.messages import summary_to_msg
+    from awalker_tracker.nodes.pose_publisher_node import MarkerBuilder, body_cylinders
 
     rng = np.random.default_rng(5)
     cylinders = body_cylinders(BodyDescription.default())
@@ -98,8 +98,8 @@ def test_a_foot_that_lifts_has_its_contact_marker_deleted():
     no longer the posterior's stance foot with at least CONTACT_MIN_PROBABILITY, or no position."""
     from visualization_msgs.msg import Marker
 
-    from awalker_tracker.nodes.convert import summary_to_msg
-    from awalker_tracker.nodes.pose_publisher import CONTACT_MIN_PROBABILITY, MarkerBuilder, body_cylinders
+    from awalker_tracker.nodes.messages import summary_to_msg
+    from awalker_tracker.nodes.pose_publisher_node import CONTACT_MIN_PROBABILITY, MarkerBuilder, body_cylinders
 
     rng = np.random.default_rng(2)
     builder = MarkerBuilder(body_cylinders(BodyDescription.default()), "w")
@@ -121,7 +121,7 @@ def test_a_foot_that_lifts_has_its_contact_marker_deleted():
 
 
 def test_particle_clouds_pack_into_a_pointcloud2_heaviest_first():
-    from awalker_tracker.nodes.convert import PARTICLE_POINT, particles_to_pointcloud2, summary_to_msg
+    from awalker_tracker.nodes.messages import PARTICLE_POINT, particles_to_pointcloud2, summary_to_msg
 
     rng = np.random.default_rng(3)
     s = dataclasses.replace(make_summary(10, 0, rng), clouds=(
@@ -153,8 +153,8 @@ def _pose_publisher_outputs(ros_context, stamps: list[int], publisher_qos, seed:
     from visualization_msgs.msg import MarkerArray
 
     from awalker_msgs.msg import PosteriorSummary as SummaryMsg
-    from awalker_tracker.nodes.convert import summary_to_msg
-    from awalker_tracker.nodes.pose_publisher import PosePublisherNode
+    from awalker_tracker.nodes.messages import summary_to_msg
+    from awalker_tracker.nodes.pose_publisher_node import PosePublisherNode
 
     node = PosePublisherNode(context=ros_context)
     probe = Node("probe", context=ros_context)
@@ -187,7 +187,7 @@ def _pose_publisher_outputs(ros_context, stamps: list[int], publisher_qos, seed:
 def test_node_publishes_joint_states_and_markers_with_image_stamp(ros_context):
     from rclpy.qos import QoSProfile
 
-    from awalker_tracker.nodes.convert import stamp_to_ns
+    from awalker_tracker.nodes.messages import stamp_to_ns
 
     stamps = [1_000_000_000 + k * 33_333_333 for k in range(5)]
     got = _pose_publisher_outputs(ros_context, stamps, QoSProfile(depth=50), seed=2)
@@ -206,10 +206,10 @@ def test_a_burst_of_posteriors_is_published_whole(ros_context):
     frames' joint states.)"""
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from awalker_tracker.nodes.convert import POSTERIOR_DEPTH, stamp_to_ns
+    from awalker_tracker.nodes.messages import POSTERIOR_DEPTH, stamp_to_ns
 
     stamps = [1_000_000_000 + k * 16_666_667 for k in range(80)]
-    # the tracker's publisher (nodes.tracker): reliable, POSTERIOR_DEPTH
+    # the tracker's publisher (nodes.tracker_node): reliable, POSTERIOR_DEPTH
     got = _pose_publisher_outputs(ros_context, stamps, QoSProfile(depth=POSTERIOR_DEPTH,
                                   reliability=ReliabilityPolicy.RELIABLE), seed=3)
     assert [stamp_to_ns(m.header.stamp) for m in got["joints"]] == stamps
@@ -220,7 +220,7 @@ def test_bad_body_description_is_reported(ros_context, tmp_path):
     from rclpy.parameter import Parameter
 
     from awalker_tracker.errors import InputError
-    from awalker_tracker.nodes.pose_publisher import PosePublisherNode
+    from awalker_tracker.nodes.pose_publisher_node import PosePublisherNode
 
     bad = tmp_path / "body.yaml"
     bad.write_text("body: {upper_leg_length: -1}\n")
@@ -231,14 +231,14 @@ def test_bad_body_description_is_reported(ros_context, tmp_path):
 
 def test_heel_strikes_become_gait_steps(ros_context):
     """The posterior's stance foot changes every 15 frames (0.5 s), alternate feet 0.7 m apart along x and 0.2 m
-    across: GaitStep messages at those frames with the step geometry and timing (inference.gait.PosteriorSteps)."""
+    across: GaitStep messages at those frames with the step geometry and timing (inference.gait_events.PosteriorSteps)."""
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
 
     from awalker_msgs.msg import GaitStep
-    from awalker_tracker.nodes.convert import stamp_to_ns, summary_to_msg
-    from awalker_tracker.nodes.pose_publisher import PosePublisherNode
+    from awalker_tracker.nodes.messages import stamp_to_ns, summary_to_msg
+    from awalker_tracker.nodes.pose_publisher_node import PosePublisherNode
 
     node = PosePublisherNode(context=ros_context, parameter_overrides=[])
     probe = Node("gait_probe", context=ros_context)
@@ -269,8 +269,8 @@ def test_heel_strikes_become_gait_steps(ros_context):
         assert [m.frame_index for m in got] == [15, 30, 45, 60]
         assert [stamp_to_ns(m.header.stamp) for m in got] == [stamps[15], stamps[30], stamps[45], stamps[60]]
         # the strike itself: where the stance probability crossed 0.5 (half way into the frame's period), less the
-        # walker's strike delay (inference.gait.PosteriorSteps)
-        from awalker_tracker.inference.gait import TYPICAL_STEP_TIME_S, WALKER_STRIKE_DELAY
+        # walker's strike delay (inference.gait_events.PosteriorSteps)
+        from awalker_tracker.inference.gait_events import TYPICAL_STEP_TIME_S, WALKER_STRIKE_DELAY
 
         crossed = [0.5 * (stamps[k - 1] + stamps[k]) for k in (15, 30, 45, 60)]
         delays = [WALKER_STRIKE_DELAY * TYPICAL_STEP_TIME_S] + [WALKER_STRIKE_DELAY * 0.5] * 3
@@ -294,8 +294,8 @@ def test_the_skeleton_lines_are_the_body_models_edges():
     from visualization_msgs.msg import Marker
 
     from awalker_tracker.model.body import SKELETON_EDGES
-    from awalker_tracker.nodes.convert import summary_to_msg
-    from awalker_tracker.nodes.pose_publisher import MarkerBuilder, body_cylinders
+    from awalker_tracker.nodes.messages import summary_to_msg
+    from awalker_tracker.nodes.pose_publisher_node import MarkerBuilder, body_cylinders
 
     s = make_summary(10, 0, np.random.default_rng(2))
     array = MarkerBuilder(body_cylinders(BodyDescription.default())).build(summary_to_msg(s))
