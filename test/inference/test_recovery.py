@@ -21,6 +21,7 @@ from awalker_tracker.vision.detection import person_blob
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "vision"))
 from test_detection import features_of  # noqa: E402
 from vision_scene import BODY, PARAMS, side_camera, walking_poses  # noqa: E402
+from side_view import seen  # noqa: E402,F401  (fixture)
 
 PELVIS = MARKER_NAMES.index("pelvis")
 

@@ -7,6 +7,8 @@ import pytest
 from awalker_tracker.inference.visibility import (
     LEFT_EVERY_VIEW, NOT_SUPPORTED, CameraView, ViewConfig, ViewMonitor, camera_views)
 
+from side_view import seen  # noqa: F401  (fixture)
+
 
 def test_a_body_on_the_person_is_in_view(seen):
     camera, features, markers = seen

@@ -1,4 +1,4 @@
-"""Fixtures shared by the inference tests."""
+"""The side camera's view of a walking person, shared by the recovery and visibility tests (import the fixture)."""
 from __future__ import annotations
 
 import sys
