@@ -300,8 +300,8 @@ def _stream_features(ros_context, tracker_files, max_lag_s: float, frames: int =
 def test_a_tracker_slower_than_the_camera_skips_frames_by_stamp_and_keeps_up(ros_context, tracker_files):
     """Features at 60 Hz into a filter that needs longer than a frame period per frame (8000 particles): with
     max_lag_s 0.1 frames that waited longer are skipped and acknowledged, the filter steps over them by their
-    stamps, and the last frame is done soon after the camera sent it; with max_lag_s 0 (never skip) every frame
-    is filtered and the tracker ends far behind."""
+    stamps, and no frame it filters had waited longer; with max_lag_s 0 (never skip) every frame is filtered and
+    the tracker falls behind by seconds."""
     stats, acked, published, stamps = _stream_features(ros_context, tracker_files, max_lag_s=0.1)
     assert sorted(acked) == stamps                               # every frame acknowledged, skipped ones too
     assert stats.frames_skipped > 0 and stats.frames_tracked + stats.frames_skipped == len(stamps)
@@ -313,6 +313,6 @@ def test_a_tracker_slower_than_the_camera_skips_frames_by_stamp_and_keeps_up(ros
     # the time the tracker needs per frame, measured without skipping: more than the camera's period
     per_frame = behind.seconds_in_filter / behind.frames_tracked
     assert per_frame > 1.0 / 60.0, per_frame
-    # keeping up: the skipping run's frames took about as long as the camera's 1 s, the other's as long as filtering
-    # all of them
-    assert stats.seconds_in_filter < 0.6 * behind.seconds_in_filter, (stats.seconds_in_filter, behind.seconds_in_filter)
+    # keeping up: no frame filtered had waited longer than max_lag_s; never skipping, the last ones waited ~ the
+    # time the filter needed for all the frames before them beyond the camera's 1 s
+    assert stats.largest_lag_s <= 0.1 and behind.largest_lag_s > 0.5, (stats.largest_lag_s, behind.largest_lag_s)

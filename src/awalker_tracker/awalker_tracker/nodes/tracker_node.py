@@ -69,6 +69,7 @@ class TrackerNodeStats:
     sync_issues: list[str] = field(default_factory=list)
     seconds_in_filter: float = 0.0
     frames_skipped: int = 0     # frames that waited longer than max_lag_s, skipped to keep up (live)
+    largest_lag_s: float = 0.0  # the longest a frame that was filtered had waited since its features arrived (s)
 
 
 PROFILE_WHERE = "awalker_tracker: parameter 'profile'"
@@ -340,6 +341,7 @@ class TrackerNode(AwalkerNode):
             if self.max_lag_s > 0 and lag > self.max_lag_s and self.tracker is not None:
                 self._skip(frame.last_stamp_ns, lag)
                 continue
+            self.stats.largest_lag_s = max(self.stats.largest_lag_s, lag)
             self._pending.append(_Pending(frame.stamp_ns, self._frame_counter, frame.items))
             self._frame_counter += 1
             self.stats.frames_received += 1
