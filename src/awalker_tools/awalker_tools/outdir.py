@@ -11,8 +11,6 @@ its ``run.yaml`` lists (``check_may_write``) and add theirs to the list (``add_w
 """
 from __future__ import annotations
 
-import argparse
-import math
 import tempfile
 from collections.abc import Collection, Iterable
 from pathlib import Path
@@ -33,18 +31,6 @@ def output_path(text: str | Path, option: str) -> Path:
     if str(text).strip() == "":
         raise InputError(f"{option} '': expected a path")
     return Path(text)
-
-
-def whole_number(text: str) -> int:
-    """argparse type of a count: an integer, also written as 1e5 (``--particles 1e8`` is then refused by its
-    range check, which says the range, rather than by argparse)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if not (math.isfinite(value) and value == int(value)):
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}")
-    return int(value)
 
 
 def files_under(folder: Path) -> set[Path]:

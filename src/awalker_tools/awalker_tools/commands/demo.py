@@ -8,7 +8,7 @@ from awalker_tracker.errors import InputError
 from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES
 from awalker_tracker.inference.smc import MAX_PARTICLES
 
-from awalker_tools.outdir import whole_number
+from awalker_tools.commands import whole_number
 
 REPO_ROOT = Path(__file__).resolve().parents[4]
 

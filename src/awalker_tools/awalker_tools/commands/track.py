@@ -7,7 +7,8 @@ from pathlib import Path
 
 from awalker_tracker.errors import InputError
 
-from awalker_tools.outdir import output_path, whole_number
+from awalker_tools.commands import whole_number
+from awalker_tools.outdir import output_path
 from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES, tracking_profile
 from awalker_tracker.inference.smc import MAX_PARTICLES
 from awalker_tracker.inference.sync import DEFAULT_TOLERANCE
