@@ -84,3 +84,29 @@ def test_an_interrupted_run_writes_what_it_tracked(long_bag: Path, tmp_path: Pat
         err = capsys.readouterr().err.strip().splitlines()
         assert err == [f"awalker report: {out} is incomplete ({run['incomplete']}); reporting the frames it holds"]
         assert "Incomplete run:</strong> interrupted by SIGTERM" in (out / "report.html").read_text()
+
+
+def test_a_signal_during_the_first_pass_fit_stops_the_fit(long_bag: Path, tmp_path: Path):
+    """SIGINT while `awalker track --fit-body` weighs its candidate legs: the candidate filters stop at their next
+    frame (the fit's check), not after the whole fit; run.yaml says where it stopped."""
+    out = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "awalker_tools.cli", "track", str(long_bag), "--out", str(out),
+                             "--particles", "50", "--fit-body", "--no-overlay"], stderr=subprocess.PIPE,
+                            stdout=subprocess.DEVNULL, text=True)
+    lines = []
+    try:
+        for line in proc.stderr:
+            lines.append(line)
+            if "awalker track: fitting" in line:
+                break
+        else:
+            pytest.fail("awalker track never reached its fit:\n" + "".join(lines))
+        proc.send_signal(signal.SIGINT)
+        err = "".join(lines) + proc.communicate(timeout=120)[1]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 128 + signal.SIGINT, err
+    assert "during the first pass's fit" in err and "tracking again" not in err, err
+    assert "during the first pass's fit" in yaml.safe_load((out / "run.yaml").read_text())["incomplete"]

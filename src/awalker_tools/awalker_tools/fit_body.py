@@ -14,7 +14,7 @@ is new or one the run's run.yaml lists (checked before the fit), and is added to
 from __future__ import annotations
 
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -92,13 +92,15 @@ def _yaml_file(path: Path) -> dict:
     return data
 
 
-def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **settings: int) -> dict:
+def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None,
+                check: Callable[[], None] | None = None, **settings: int) -> dict:
     """Fit the leg length of the tracking run in ``run_dir`` (module docstring), write
     ``run_dir/body_fitted.yaml`` and return a summary (factor, leg lengths, evidence, the file written; with
     the stance leg fitted, the leg, each leg's evidence and ``start_written``). ``leg_factors``: the
     candidates; None: by the body's source (``GIVEN_BODY_FACTORS`` or ``HEIGHT_SCALED_FACTORS``); ``(1.0,)``:
     the body as it is (only the stance leg is weighed). ``settings``: the other ``BodyFitConfig`` fields
-    (frames, particles, seed, stance_repeats, stance_max_repeats). Progress goes to stderr."""
+    (frames, particles, seed, stance_repeats, stance_max_repeats); ``check``: called before each frame of each
+    candidate filter, it may raise to stop the fit (`awalker track` stops on a signal). Progress goes to stderr."""
     from awalker_tracker.inference.autostart import AUTO_SPREAD
     from awalker_tracker.inference.bodyfit import BodyFitConfig, fit_leg_length, fit_stance_leg
     from awalker_tracker.inference.filter_model import ImageObservation, StartDescription, TrackerConfig, image_likelihood
@@ -164,7 +166,7 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
                   f"`awalker track --fit-body` fits on a first pass with {FeatureConfig.downsample} x "
                   f"{FeatureConfig.downsample} maps", file=sys.stderr)
         fit = fit_leg_length(body, start, likelihood_for, observations, config, fit_config, cameras=cameras,
-                             progress=report)
+                             progress=report, check=check)
         fitted_body = fit.body
         summary = {"leg_factor": fit.factor, "leg_length_m": round(fitted_body.leg_length, 4),
                    "height_kept": fit_config.keep_height,
@@ -179,7 +181,7 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None, **set
               f"{fit_config.stance_max_repeats} while the legs lie within {fit_config.stance_tie_nats:g} nats)",
               file=sys.stderr)
         stance = fit_stance_leg(fitted_body, start, likelihood_for, observations, config, fit_config,
-                                cameras=cameras, progress=report)
+                                cameras=cameras, progress=report, check=check)
         fitted_start = replace(start, stance_leg=stance.leg)
         start_out = run_dir / FITTED_START_FILE
         start_out.write_text(fitted_start.to_yaml_text())

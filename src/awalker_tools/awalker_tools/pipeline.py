@@ -443,7 +443,8 @@ def _run_passes(options: TrackOptions, reader: Any, stop: StopRequest) -> TrackR
     stop.check("after the first pass")
     _progress(options, f"awalker track: fitting {fitting} to the images of {first_dir}")
     # the fit's own particle count (BodyFitConfig: 5000; fewer pick less reliably), whatever the run's
-    fitted = fit_run_dir(first_dir, None if fit_legs else (1.0,), seed=options.seed, frames=fit_frames)
+    fitted = fit_run_dir(first_dir, None if fit_legs else (1.0,), seed=options.seed, frames=fit_frames,
+                         check=lambda: stop.check("during the first pass's fit"))
     chosen = ([f"legs x {fitted['leg_factor']:.2f} (leg length {fitted['leg_length_m']} m"
                + (", the seen height kept" if fitted.get("height_kept") else "") + ")"] if fit_legs else []) + (
         [f"stance leg {fitted['stance_leg']} at the start"] if "stance_leg" in fitted else [])
