@@ -3,6 +3,7 @@ per camera in run.yaml and the final line, and the frame numbers stay those of t
 encoding the tracker cannot read stops the run at once, and `awalker info` says so."""
 from __future__ import annotations
 
+import re
 import time
 from pathlib import Path
 from typing import Any
@@ -132,6 +133,8 @@ def test_a_camera_none_of_whose_images_decode_stops_the_run(synth_bag: Path, tmp
     out = tmp_path / "run"
     assert main(["track", str(bag), "--out", str(out), "--particles", PARTICLES]) == 2
     err = capsys.readouterr().err.strip().splitlines()[-1]
-    assert "none of the first 10 images of camera cam0 could be decoded" in err and "/cam0/image_raw: 160x120" in err
+    # (the feature thread may have taken an image or two more by the time the replay loop looks: 10 or more)
+    seen = re.search(r"none of the first (\d+) images of camera cam0 could be decoded", err)
+    assert seen is not None and int(seen.group(1)) >= 10 and "/cam0/image_raw: 160x120" in err, err
     run = yaml.safe_load((out / "run.yaml").read_text())
     assert "could be decoded" in run["incomplete"]
