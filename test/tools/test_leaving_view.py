@@ -16,7 +16,7 @@ import yaml
 
 from awalker_tools import evaluation
 from awalker_tools.cli import main
-from awalker_tracker.inference.visibility import LEFT_EVERY_VIEW, NOT_SUPPORTED
+from awalker_tracker.inference.visibility import LEFT_EVERY_VIEW, NOT_SUPPORTED, ViewConfig
 from awalker_tracker.model.body import MARKER_NAMES
 from awalker_tracker.vision.camera import load_calibration
 
@@ -35,11 +35,12 @@ def track(bag: Path, out: Path) -> dict:
 
 
 def truth_in_view(sequence: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Frames of the truth and whether its body was in view (pelvis and half the markers inside the image)."""
+    """Frames of the truth and whether its body was in view (pelvis and ViewConfig's share of the markers inside the
+    image)."""
     truth = evaluation.read_poses_csv(sequence / "ground_truth.csv")
     (camera,) = load_calibration(sequence / "calibration.yaml")
     inside = camera.in_image(truth.markers)                       # (F, M)
-    return truth.frames, inside[:, PELVIS] & (inside.mean(axis=1) >= 0.5)
+    return truth.frames, inside[:, PELVIS] & (inside.mean(axis=1) >= ViewConfig().min_inside_fraction)
 
 
 def gait_rows(run: Path) -> list[dict]:

@@ -38,7 +38,7 @@ def files_under(folder: Path) -> set[Path]:
     return {p.relative_to(folder) for p in folder.rglob("*") if p.is_file() or p.is_symlink()}
 
 
-def _read_run_file(folder: Path) -> dict:
+def read_run_file(folder: Path) -> dict:
     path = folder / RUN_FILE
     if not path.is_file():
         return {}
@@ -51,13 +51,13 @@ def _read_run_file(folder: Path) -> dict:
 def incomplete_reason(folder: Path) -> str | None:
     """Why the run in ``folder`` stopped early (its run.yaml's ``incomplete``: an error, or SIGINT / SIGTERM), or
     None: it ran to the end (or has no run.yaml)."""
-    reason = _read_run_file(folder).get(INCOMPLETE_KEY)
+    reason = read_run_file(folder).get(INCOMPLETE_KEY)
     return None if reason is None else str(reason)
 
 
 def listed_outputs(folder: Path) -> set[Path]:
     """The files ``folder/run.yaml`` lists as its run's own (none without a run.yaml or a list)."""
-    written = _read_run_file(folder).get(WRITTEN_KEY) or []
+    written = read_run_file(folder).get(WRITTEN_KEY) or []
     where = folder / RUN_FILE
     if not isinstance(written, list):
         raise InputError(f"{where}: '{WRITTEN_KEY}' must be a list of file paths relative to {folder}")
@@ -122,7 +122,7 @@ def prepare_output_dir(out: Path | str, option: str = "--out", force: bool = Fal
 def record_written(out: Path, kept: Collection[Path], extra: dict | None = None) -> list[str]:
     """List in ``out/run.yaml`` (created if the run wrote none) every file of ``out`` but ``kept`` as this
     run's; ``extra`` keys are added too (e.g. why a run stopped). Returns the list."""
-    info = _read_run_file(out)
+    info = read_run_file(out)
     info.update(extra or {})
     run_file = Path(RUN_FILE)
     written = sorted(str(p) for p in (files_under(out) | {run_file}) - set(kept))
@@ -144,7 +144,7 @@ def add_written(folder: Path, names: Iterable[str]) -> None:
     """Add ``names`` (files now written in ``folder``) to its run.yaml's list (a run.yaml made for it, and
     listed, when the folder has none), so that the command may replace them when it runs again."""
     new = [] if (folder / RUN_FILE).is_file() else [RUN_FILE]
-    info = _read_run_file(folder)
+    info = read_run_file(folder)
     written = set(str(p) for p in listed_outputs(folder)) | {str(Path(n)) for n in [*names, *new]}
     info[WRITTEN_KEY] = sorted(written)
     (folder / RUN_FILE).write_text(yaml.safe_dump(info, sort_keys=False))

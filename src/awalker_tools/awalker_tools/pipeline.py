@@ -665,10 +665,10 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
         # one camera cannot tell the near leg from the far one: unless the start named the standing foot, say
         # that left and right may be swapped (a leg fitted to the images, fitted_start, is evidence, not knowledge)
         sides_known = len(cameras) > 1 or (start is not None and start.stance_leg is not None)
-        tracks = [t for t in tracker.all_tracks() if t.completed_frames]
-        track, walk = write_outputs(out, [(t.track_id, t.map_trajectory()) for t in tracks], tracker.summaries,
+        tracks = [(t, t.map_trajectory()) for t in tracker.all_tracks() if t.completed_frames]
+        track, walk = write_outputs(out, [(t.track_id, trajectory) for t, trajectory in tracks], tracker.summaries,
                                     sides_known)
-        result.tracks = [track_record(t) for t in tracks]
+        result.tracks = [track_record(t, trajectory) for t, trajectory in tracks]
     finally:
         if feature_thread is not None:
             feature_thread.stop()
@@ -714,14 +714,13 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
     return result
 
 
-def track_record(tracker: Any) -> dict[str, object]:
-    """run.yaml's entry for one track (an ``inference.filter_model.Tracker``): its first and last frame, the frames the
-    person was in view, and how it ended: where the person left (frame, reason, last frame in view), or
-    ``ended: null``, tracked to the end of the input."""
-    frames = tracker.map_trajectory().frames
-    end = tracker.ended
+def track_record(tracker: Any, trajectory: Any) -> dict[str, object]:
+    """run.yaml's entry for one track (an ``inference.filter_model.Tracker`` and its ``MapTrajectory``): its first
+    and last frame, the frames the person was in view, and how it ended: where the person left (frame, reason, last
+    frame in view), or ``ended: null``, tracked to the end of the input."""
+    frames, end = trajectory.frames, tracker.ended
     return {"track": tracker.track_id, "first_frame": int(frames[0]), "last_frame": int(frames[-1]),
-            "frames_in_view": int(sum(tracker.in_view_frames)),
+            "frames_in_view": int(np.sum(trajectory.in_view)),
             "ended": None if end is None else {"frame": end.frame_index, "reason": end.reason,
                                                "last_in_view_frame": end.last_in_view_frame}}
 

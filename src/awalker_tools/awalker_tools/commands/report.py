@@ -18,10 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
-from awalker_tracker.errors import InputError, parse_yaml
+from awalker_tracker.errors import InputError
 
 from awalker_tools import evaluation, plots
-from awalker_tools.outdir import add_written, check_may_write, incomplete_reason
+from awalker_tools.outdir import add_written, check_may_write, incomplete_reason, read_run_file
 
 REPORT_FILE = "report.html"
 
@@ -43,13 +43,11 @@ def _fmt(value: object, digits: int = 2) -> str:
     return f"{value:.{digits}f}" if isinstance(value, (int, float)) and np.isfinite(value) else "-"
 
 
-def _start_section(run_yaml: Path) -> list[str]:
-    """How the run started (run.yaml): the start's and the body's sources and what the first pass fitted."""
-    if not run_yaml.is_file():
+def _start_section(info: dict) -> list[str]:
+    """How the run started (run.yaml's ``info``; none: no section): the start's and the body's sources and what the
+    first pass fitted."""
+    if not info:
         return []
-    info = parse_yaml(run_yaml.read_text(), str(run_yaml))
-    if not isinstance(info, dict):
-        raise InputError(f"{run_yaml}: expected a YAML mapping (the run.yaml `awalker track` writes)")
     row = {"start": info.get("start_source", "-"), "body": info.get("body_source", "-")}
     columns = ["start", "body"]
     fit = info.get("body_fit") or {}
@@ -67,12 +65,10 @@ def _start_section(run_yaml: Path) -> list[str]:
     return ["<h2>How it started</h2>", _table([row], columns)]
 
 
-def _tracks_section(run_yaml: Path) -> list[str]:
-    """The run's tracks (run.yaml ``tracks``): frames, frames in view, and where and why each ended."""
-    if not run_yaml.is_file():
-        return []
-    info = parse_yaml(run_yaml.read_text(), str(run_yaml))
-    tracks = info.get("tracks") if isinstance(info, dict) else None
+def _tracks_section(info: dict) -> list[str]:
+    """The run's tracks (run.yaml's ``info``, its ``tracks``): frames, frames in view, and where and why each
+    ended."""
+    tracks = info.get("tracks")
     if not isinstance(tracks, list) or not tracks:
         return []
     rows = [{"track": t["track"], "frames": f"{t['first_frame']}-{t['last_frame']}", "in view": t["frames_in_view"],
@@ -148,8 +144,9 @@ def build_report(run_dir: Path) -> Path:
             int(np.sum((summary["stance_left_probability"] > 0.2) & (summary["stance_left_probability"] < 0.8))),
     }], ["frames", "N_eff median", "N_eff min", "resampled frames", "re-acquisitions", "fallen walkers re-seeded",
          "frames standing still (walkers held)", "frames with an uncertain stance leg (0.2-0.8)"]))
-    parts += _tracks_section(run_dir / "run.yaml")
-    parts += _start_section(run_dir / "run.yaml")
+    info = read_run_file(run_dir)
+    parts += _tracks_section(info)
+    parts += _start_section(info)
     if (run_dir / "eval.json").is_file():
         result = json.loads((run_dir / "eval.json").read_text())
         parts.append("<h2>Against ground truth</h2>")

@@ -833,8 +833,8 @@ class Tracker:
         return [] if self.ended is not None else self._completed(self.filter.finish())
 
     def released(self) -> "Tracker":
-        """This ended track without its particles and pending frames (what ``map_trajectory`` and ``in_view_frames``
-        need stays); returns self."""
+        """This ended track without its particles and pending frames (what ``map_trajectory`` needs stays); returns
+        self."""
         self.filter = None
         self._features.clear()
         return self
@@ -843,11 +843,6 @@ class Tracker:
     def completed_frames(self) -> int:
         """Frames whose summaries are out."""
         return len(self._in_view)
-
-    @property
-    def in_view_frames(self) -> list[bool]:
-        """Per completed frame: the person in view of some camera."""
-        return list(self._in_view)
 
     def _completed(self, steps: list[FilterStep]) -> list[PosteriorSummary]:
         """The summaries of ``steps``, up to the one that ends the track."""

@@ -532,8 +532,7 @@ class TrackerNode(AwalkerNode):
             f"frame {end.frame_index}: track {tracker.track_id} ended: the person {end.reason} (last in view at "
             f"frame {end.last_in_view_frame}); no more poses for them; waiting for a person to come into view")
         self.tracker, self.start, self.start_found_automatically = None, None, False
-        self.auto_start, self._finder, self._dirty = True, None, False
-        self._seen.clear()
+        self.auto_start, self._finder, self._dirty = True, None, False    # (a new finder keeps a new _seen)
 
     def all_tracks(self) -> list[Tracker]:
         """Every track of the run in order: the ended ones, then the current one (if any)."""
