@@ -18,6 +18,9 @@ from awalker_tools import evaluation
 from awalker_tools.cli import main
 
 FRAMES, BACKGROUND = 150, 4
+# Enough particles that the 150 frames take ~15 s on a quiet machine (5 s at 5000): at 50 the whole run streamed in
+# 1.5 s, before its first progress line (every 2 s), and ended before the test could interrupt it.
+INTERRUPTED_PARTICLES = 15000
 
 
 
@@ -31,7 +34,8 @@ def _interrupt(bag: Path, out: Path, signum: int) -> tuple[int, str, float]:
     """Run `awalker track` on ``bag``, send ``signum`` once its progress line counts posteriors; returns (exit
     status, stderr, seconds from the signal to the exit)."""
     proc = subprocess.Popen([sys.executable, "-m", "awalker_tools.cli", "track", str(bag), "--out", str(out),
-                             "--particles", "50"], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+                             "--particles", str(INTERRUPTED_PARTICLES)], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                            text=True)
     lines = []
     try:
         for line in proc.stderr:
