@@ -11,7 +11,9 @@ against the motion capture.
 
 Report (per setting and mode; only ever quote the reporting set's): median of the walk medians (a walk's
 median: over its runs of each run's median error over frames, pelvis, thorax, hips, knees, ankles), the 90th
-percentile run and the worst run, runs with legs swapped on more than 5 % of frames, the largest
+percentile run and the worst run, runs with legs swapped on more than 5 % of frames, runs whose cadence
+(steps per minute) is more than 15 % off the person's (a walker stepping twice as often as a slow walker
+swaps its legs at every extra step), the largest
 frame-to-frame pelvis step of the MAP path (poses.csv) and of the live path (the published MAP pose), the
 turning trials' median, runs that ended on the person, per subject the heel-strike timing and step length
 errors (medians over runs of each run's median); hands off: the ratio to the hand-started figure and, per
@@ -43,6 +45,7 @@ from bench_accuracy import evaluate_run  # noqa: E402  (one `awalker eval` wrapp
 SETTINGS = {"mono": 1, "two": 2}
 MODES = ("hand", "handsoff")
 SWAPPED_FRACTION = 0.05       # a run with legs swapped on more of its frames counts as swapped
+CADENCE_OFF = 0.15            # a run whose steps per minute are more than this fraction off the truth's
 FAILED = "failed.txt"         # in a run's directory: why `awalker track` refused to track (the run counts as lost)
 
 
@@ -81,6 +84,7 @@ def start_leg_right(run_dir: Path, truth_csv: Path) -> bool | None:
 def score(result: dict, run_dir: Path, truth_csv: Path) -> dict:
     """The figures of one run."""
     walk, gait = result["walk"], result.get("gait", {}).get("comparison", {})
+    estimate, truth = (result.get("gait", {}).get(k, {}).get("cadence_steps_min") for k in ("estimate", "truth"))
     continuity = result.get("continuity", {})
     return {"absolute_median_mm": round(result["absolute_mm"]["median"], 1),
             "relative_median_mm": round(result["relative_mm"]["median"], 1),
@@ -94,6 +98,7 @@ def score(result: dict, run_dir: Path, truth_csv: Path) -> dict:
             "heel_strike_error_s": gait.get("timing_error_s_median"),
             "heel_strike_bias_s": gait.get("timing_bias_s_median"),
             "step_length_error_m": gait.get("step_length_error_m_median"),
+            "cadence_ratio": round(estimate / truth, 3) if estimate and truth else None,
             "start_leg_right": start_leg_right(run_dir, truth_csv),
             "reacquisitions": result.get("recovery", {}).get("reacquisitions", 0)}
 
@@ -105,7 +110,8 @@ def failed_run(why: str) -> dict:
     return {"failed": why, "absolute_median_mm": inf, "relative_median_mm": inf, "frames": 0, "swap_fraction": 1.0,
             "heading_median_deg": inf, "ended_on_person": False, "off_person_frames": None,
             "map_max_step_m_s": float("nan"), "live_max_step_m_s": float("nan"), "heel_strike_error_s": None,
-            "heel_strike_bias_s": None, "step_length_error_m": None, "start_leg_right": None, "reacquisitions": 0}
+            "heel_strike_bias_s": None, "step_length_error_m": None, "cadence_ratio": None,
+            "start_leg_right": None, "reacquisitions": 0}
 
 
 def summarise(runs: dict[tuple[str, int], dict], trials: dict) -> dict:
@@ -124,6 +130,8 @@ def summarise(runs: dict[tuple[str, int], dict], trials: dict) -> dict:
                                                                  for trial in walk_medians])),
            "turning_median_of_walk_medians_mm": float(np.median(turning)) if turning else None,
            "runs_legs_swapped": int(sum(r["swap_fraction"] > SWAPPED_FRACTION for r in runs.values())),
+           "runs_cadence_off": int(sum(r["cadence_ratio"] is None or abs(r["cadence_ratio"] - 1) > CADENCE_OFF
+                                       for r in runs.values())),
            "largest_map_step_m_s": float(np.nanmax([r["map_max_step_m_s"] for r in runs.values()])),
            "largest_live_step_m_s": float(np.nanmax([r["live_max_step_m_s"] for r in runs.values()])),
            "runs_ended_on_person": int(sum(r["ended_on_person"] for r in runs.values())),
@@ -167,6 +175,8 @@ def markdown(report: dict) -> str:
         if m == "handsoff" and f"{s} hand" in report["summary"] else "-"))
     row(f"runs with legs swapped on > {SWAPPED_FRACTION:.0%} of frames",
         lambda x, s, m: f"{x['runs_legs_swapped']} of {x['runs']}")
+    row(f"runs whose cadence is more than {CADENCE_OFF:.0%} off the person's (steps/min)",
+        lambda x, s, m: f"{x['runs_cadence_off']} of {x['runs']}")
     row("largest pelvis step between frames, MAP path / live (m/s)",
         lambda x, s, m: f"{x['largest_map_step_m_s']:.1f} / {x['largest_live_step_m_s']:.1f}")
     row("starts naming the wrong stance leg, worst walk",
