@@ -21,6 +21,11 @@ FRAMES, BACKGROUND = 150, 4
 # Enough particles that the 150 frames take ~15 s on a quiet machine (5 s at 5000): at 50 the whole run streamed in
 # 1.5 s, before its first progress line (every 2 s), and ended before the test could interrupt it.
 INTERRUPTED_PARTICLES = 15000
+# Posteriors the progress line must count before the signal: the synthetic walker enters the picture at its left
+# edge and is in view (inference.visibility) from about its 7th frame, and `awalker eval` scores frames in view
+# only; signalled at the first progress line, a run once held 4 posteriors, none in view, and eval had nothing to
+# score.
+POSTERIORS_BEFORE_SIGNAL = 15
 
 
 
@@ -31,8 +36,8 @@ def long_bag(tmp_path_factory) -> Path:
 
 
 def _interrupt(bag: Path, out: Path, signum: int) -> tuple[int, str, float]:
-    """Run `awalker track` on ``bag``, send ``signum`` once its progress line counts posteriors; returns (exit
-    status, stderr, seconds from the signal to the exit)."""
+    """Run `awalker track` on ``bag``, send ``signum`` once its progress line counts ``POSTERIORS_BEFORE_SIGNAL``
+    posteriors; returns (exit status, stderr, seconds from the signal to the exit)."""
     proc = subprocess.Popen([sys.executable, "-m", "awalker_tools.cli", "track", str(bag), "--out", str(out),
                              "--particles", str(INTERRUPTED_PARTICLES)], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL,
                             text=True)
@@ -40,7 +45,8 @@ def _interrupt(bag: Path, out: Path, signum: int) -> tuple[int, str, float]:
     try:
         for line in proc.stderr:
             lines.append(line)
-            if re.search(r"frame \d+/\d+, [1-9]\d* posteriors", line):
+            done = re.search(r"frame \d+/\d+, (\d+) posteriors", line)
+            if done and int(done.group(1)) >= POSTERIORS_BEFORE_SIGNAL:
                 break
         else:
             pytest.fail("awalker track ended before it was interrupted:\n" + "".join(lines))
