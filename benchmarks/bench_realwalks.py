@@ -13,7 +13,8 @@ Report (per setting and mode; only ever quote the reporting set's): median of th
 median: over its runs of each run's median error over frames, pelvis, thorax, hips, knees, ankles), the 90th
 percentile run and the worst run, runs with legs swapped on more than 5 % of frames, runs whose cadence
 (steps per minute) is more than 15 % off the person's (a walker stepping twice as often as a slow walker
-swaps its legs at every extra step), the largest
+swaps its legs at every extra step), the pelvis's mean error along the first camera's line of sight (its
+depth, ``awalker eval``'s ``view_bias``: what one camera sees least), the largest
 frame-to-frame pelvis step of the MAP path (poses.csv) and of the live path (the published MAP pose), the
 turning trials' median, runs that ended on the person, per subject the heel-strike timing and step length
 errors (medians over runs of each run's median); hands off: the ratio to the hand-started figure and, per
@@ -85,6 +86,7 @@ def score(result: dict, run_dir: Path, truth_csv: Path) -> dict:
     """The figures of one run."""
     walk, gait = result["walk"], result.get("gait", {}).get("comparison", {})
     estimate, truth = (result.get("gait", {}).get(k, {}).get("cadence_steps_min") for k in ("estimate", "truth"))
+    first_camera = next(iter(result.get("view_bias", {}).values()), None)
     continuity = result.get("continuity", {})
     return {"absolute_median_mm": round(result["absolute_mm"]["median"], 1),
             "relative_median_mm": round(result["relative_mm"]["median"], 1),
@@ -99,6 +101,7 @@ def score(result: dict, run_dir: Path, truth_csv: Path) -> dict:
             "heel_strike_bias_s": gait.get("timing_bias_s_median"),
             "step_length_error_m": gait.get("step_length_error_m_median"),
             "cadence_ratio": round(estimate / truth, 3) if estimate and truth else None,
+            "depth_bias_mm": None if first_camera is None else first_camera["depth_mm"],
             "start_leg_right": start_leg_right(run_dir, truth_csv),
             "reacquisitions": result.get("recovery", {}).get("reacquisitions", 0)}
 
@@ -111,7 +114,7 @@ def failed_run(why: str) -> dict:
             "heading_median_deg": inf, "ended_on_person": False, "off_person_frames": None,
             "map_max_step_m_s": float("nan"), "live_max_step_m_s": float("nan"), "heel_strike_error_s": None,
             "heel_strike_bias_s": None, "step_length_error_m": None, "cadence_ratio": None,
-            "start_leg_right": None, "reacquisitions": 0}
+            "depth_bias_mm": None, "start_leg_right": None, "reacquisitions": 0}
 
 
 def summarise(runs: dict[tuple[str, int], dict], trials: dict) -> dict:
@@ -132,6 +135,8 @@ def summarise(runs: dict[tuple[str, int], dict], trials: dict) -> dict:
            "runs_legs_swapped": int(sum(r["swap_fraction"] > SWAPPED_FRACTION for r in runs.values())),
            "runs_cadence_off": int(sum(r["cadence_ratio"] is None or abs(r["cadence_ratio"] - 1) > CADENCE_OFF
                                        for r in runs.values())),
+           "median_abs_depth_bias_mm": float(np.median([abs(r["depth_bias_mm"]) for r in runs.values()
+                                                         if r["depth_bias_mm"] is not None] or [np.nan])),
            "largest_map_step_m_s": float(np.nanmax([r["map_max_step_m_s"] for r in runs.values()])),
            "largest_live_step_m_s": float(np.nanmax([r["live_max_step_m_s"] for r in runs.values()])),
            "runs_ended_on_person": int(sum(r["ended_on_person"] for r in runs.values())),
@@ -177,6 +182,8 @@ def markdown(report: dict) -> str:
         lambda x, s, m: f"{x['runs_legs_swapped']} of {x['runs']}")
     row(f"runs whose cadence is more than {CADENCE_OFF:.0%} off the person's (steps/min)",
         lambda x, s, m: f"{x['runs_cadence_off']} of {x['runs']}")
+    row("pelvis depth bias along the first camera's view, median over runs of its size (mm)",
+        lambda x, s, m: f"{x['median_abs_depth_bias_mm']:.0f}")
     row("largest pelvis step between frames, MAP path / live (m/s)",
         lambda x, s, m: f"{x['largest_map_step_m_s']:.1f} / {x['largest_live_step_m_s']:.1f}")
     row("starts naming the wrong stance leg, worst walk",
@@ -256,6 +263,9 @@ def main(argv: list[str] | None = None) -> int:
                     except InputError as exc:       # e.g. no walking person found: the run failed, say so
                         run_dir.mkdir(parents=True, exist_ok=True)
                         (run_dir / FAILED).write_text(str(exc))
+                elif (run_dir / "eval.json").exists() and "view_bias" not in json.loads(
+                        (run_dir / "eval.json").read_text()):
+                    evaluate_run(run_dir)           # evaluated before eval split the error by camera: again
                 if (run_dir / FAILED).exists():
                     entry = failed_run((run_dir / FAILED).read_text())
                 else:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -283,3 +284,29 @@ def test_marker_bias_in_the_persons_frame_and_the_error_without_it():
     assert result["bias"]["per_marker_mm"]["right_knee"]["up"] == pytest.approx(0.0)
     assert result["bias"]["absolute_median_without_offsets_mm"] == pytest.approx(result["absolute_mm"]["median"])
     assert "mean offsets (mm, along/left/up): pelvis +0/+0/+0" in evaluation.format_table(result)
+
+
+def test_view_bias_splits_the_pelvis_error_along_and_across_each_cameras_line_of_sight():
+    from awalker_tracker.vision.camera import Camera
+
+    truth = walking_truth()                     # walks along +x from the origin, 1 m/s for 1 s
+    ahead = Camera.look_at("ahead", 640, 480, 500.0, np.array([6.0, 0.0, 1.5]), np.array([0.0, 0.0, 1.0]))
+    beside = Camera.look_at("beside", 640, 480, 500.0, np.array([0.5, -6.0, 1.5]), np.array([0.5, 0.0, 1.0]))
+    # the whole body 0.2 m behind the person (towards -x): farther from the camera ahead, to the left of the one
+    # beside (which looks along +y)
+    est = shifted(truth, NAMES, np.array([-0.2, 0.0, 0.0]))
+    seen = evaluation.view_bias(est, truth, [ahead, beside])
+    assert seen["ahead"]["depth_mm"] == pytest.approx(200.0, abs=0.1)
+    assert seen["ahead"]["across_mm"] == pytest.approx(0.0, abs=0.1)
+    assert seen["beside"]["across_mm"] == pytest.approx(200.0, abs=1.0)       # rays within 5 degrees of +y
+    assert abs(seen["beside"]["depth_mm"]) < 10.0
+    # an error that swings from nearer to farther has no mean but a size
+    markers = truth.markers.copy()
+    markers[:, :, 0] += np.where(np.arange(FRAMES) % 2 == 0, 0.1, -0.1)[:, None]
+    swing = PoseTrack(truth.frames, truth.stamps_ns, NAMES, markers)
+    result = evaluation.evaluate(swing, truth, cameras=[ahead])
+    assert result["view_bias"]["ahead"]["depth_mm"] == pytest.approx(0.0, abs=0.1)
+    assert result["view_bias"]["ahead"]["depth_median_abs_mm"] == pytest.approx(100.0, abs=0.1)
+    assert re.search(r"pelvis seen from ahead: depth [+-]0 mm mean \(\+ farther\), 100 median size",
+                     evaluation.format_table(result))
+    assert evaluation.evaluate(swing, truth)["view_bias"] == {}

@@ -19,6 +19,8 @@ Metrics:
   the marker offset of the body model);
 - constant offsets (``marker_bias``): each marker's mean error along the way the person faces, to their
   left and up, and the absolute error without them;
+- the pelvis error seen from each camera (``view_bias``): along the camera's line of sight over the ground
+  (depth, what one camera sees least) and across it;
 - walk quality (``walk_quality``): facing-direction error, left/right leg swaps, frames fallen or
   off the person, and the state at the last frame (did the track end on the person, upright?).
 """
@@ -226,6 +228,27 @@ def marker_bias(estimate: PoseTrack, truth: PoseTrack, markers: Sequence[str] = 
             "absolute_median_without_offsets_mm": float(without)}
 
 
+def view_bias(estimate: PoseTrack, truth: PoseTrack, cameras: Sequence[object]) -> dict[str, dict[str, float]]:
+    """Per camera (``vision.camera.Camera``, by name) the pelvis error (mm) over the ground split along the camera's
+    horizontal line of sight to the true pelvis (``depth``, + = the estimate farther from the camera) and across
+    it (``across``, + = to the left seen from the camera): the mean over frames, and the median of each frame's
+    size (``depth_median_abs``, ``across_median_abs``). With one camera the error is mostly depth."""
+    est_rows, true_rows = align_tracks(estimate, truth)
+    true_pelvis = _select(truth, ["pelvis"], true_rows, "ground truth")[:, 0]
+    error = _select(estimate, ["pelvis"], est_rows, "estimate")[:, 0] - true_pelvis
+    out = {}
+    for camera in cameras:
+        ray = true_pelvis[:, :2] - np.asarray(camera.position, float)[None, :2]
+        ray /= np.linalg.norm(ray, axis=1, keepdims=True)
+        depth = np.einsum("fk,fk->f", error[:, :2], ray)
+        across = error[:, 0] * -ray[:, 1] + error[:, 1] * ray[:, 0]
+        out[camera.name] = {"depth_mm": round(1000.0 * float(np.nanmean(depth)), 1),
+                            "across_mm": round(1000.0 * float(np.nanmean(across)), 1),
+                            "depth_median_abs_mm": round(1000.0 * float(np.nanmedian(np.abs(depth))), 1),
+                            "across_median_abs_mm": round(1000.0 * float(np.nanmedian(np.abs(across))), 1)}
+    return out
+
+
 def statistics(values: np.ndarray) -> dict[str, float]:
     """Median, mean and standard deviation over frames."""
     values = np.asarray(values, float)
@@ -327,9 +350,10 @@ def live_track_from_bag(path: Path) -> PoseTrack | None:
 
 
 def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarray] | None = None,
-             live: PoseTrack | None = None) -> dict[str, object]:
+             live: PoseTrack | None = None, cameras: Sequence[object] = ()) -> dict[str, object]:
     """All metrics as a JSON-ready dict (per-frame series included); ``live``: the pose published frame by
-    frame (``live_track_from_bag``), whose continuity is scored beside the MAP trajectory's. Only the frames
+    frame (``live_track_from_bag``), whose continuity is scored beside the MAP trajectory's; ``cameras``: the
+    run's calibrated cameras, for the error seen from each (``view_bias``). Only the frames
     summary.csv has in view are scored (``frames_out_of_view_left_out`` says how many were not)."""
     left_out = 0
     if summary is not None:
@@ -355,6 +379,7 @@ def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarra
         "relative_mm": statistics(errors["relative_mm"]),
         "per_marker_absolute_mm": errors["per_marker_mm"],
         "bias": marker_bias(estimate, truth),
+        "view_bias": view_bias(estimate, truth, cameras),
         "estimate_feet": foot_plausibility(estimate, stance_left=stance_left, replaced=replaced),
         "truth_feet": foot_plausibility(truth),
         "walk": walk_quality(estimate, truth),
@@ -567,6 +592,10 @@ def format_table(result: dict[str, object], label: str = "") -> str:
                  for group, offset in group_offsets(result["bias"]).items()]
         lines.append(f"mean offsets (mm, along/left/up): {', '.join(parts)}; absolute median without them "
                      f"{result['bias']['absolute_median_without_offsets_mm']:.1f} mm")
+    for camera, seen in result.get("view_bias", {}).items():
+        lines.append(f"pelvis seen from {camera}: depth {seen['depth_mm']:+.0f} mm mean (+ farther), "
+                     f"{seen['depth_median_abs_mm']:.0f} median size; across {seen['across_mm']:+.0f} mm mean, "
+                     f"{seen['across_median_abs_mm']:.0f} median size")
     if "walk" in result:
         walk, frames = result["walk"], a["frames"]
         end = walk["end"]

@@ -10,6 +10,7 @@ import numpy as np
 import yaml
 
 from awalker_tracker.errors import InputError
+from awalker_tracker.vision.camera import load_calibration
 
 from awalker_tools import evaluation, plots
 from awalker_tools.outdir import add_written, check_may_write, check_new_path, incomplete_reason
@@ -68,7 +69,9 @@ def run(args: argparse.Namespace) -> int:
     summary = evaluation.read_summary_csv(summary_path) if summary_path.is_file() else None
     result_bag = run_dir / "result.bag"
     live = evaluation.live_track_from_bag(result_bag) if result_bag.exists() else None
-    result = evaluation.evaluate(estimate, truth, summary, live)
+    calibration = run_dir / "calibration.yaml"      # written by `awalker track`: the run's cameras
+    cameras = load_calibration(calibration) if calibration.is_file() else []
+    result = evaluation.evaluate(estimate, truth, summary, live, cameras)
     result["truth_source"] = str(truth_path)
     out.write_text(json.dumps(result, indent=1))
     per_frame = result["per_frame"]
