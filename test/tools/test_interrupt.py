@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -35,18 +36,25 @@ def long_bag(tmp_path_factory) -> Path:
     return synth_walk(tmp_path_factory, FRAMES, BACKGROUND)
 
 
-def _interrupt(bag: Path, out: Path, signum: int) -> tuple[int, str, float]:
-    """Run `awalker track` on ``bag``, send ``signum`` once its progress line counts ``POSTERIORS_BEFORE_SIGNAL``
-    posteriors; returns (exit status, stderr, seconds from the signal to the exit)."""
-    proc = subprocess.Popen([sys.executable, "-m", "awalker_tools.cli", "track", str(bag), "--out", str(out),
-                             "--particles", str(INTERRUPTED_PARTICLES)], stderr=subprocess.PIPE, stdout=subprocess.DEVNULL,
-                            text=True)
+def _tracked_enough(line: str) -> bool:
+    """A progress line counting at least ``POSTERIORS_BEFORE_SIGNAL`` posteriors."""
+    done = re.search(r"frame \d+/\d+, (\d+) posteriors", line)
+    return done is not None and int(done.group(1)) >= POSTERIORS_BEFORE_SIGNAL
+
+
+def _interrupt(bag: Path, out: Path, signum: int,
+               options: tuple[str, ...] = ("--particles", str(INTERRUPTED_PARTICLES)),
+               ready: Callable[[str], bool] = _tracked_enough) -> tuple[int, str, float]:
+    """Run `awalker track` on ``bag`` with ``options``, send ``signum`` once a line of its stderr is ``ready``
+    (by default: the progress line counts ``POSTERIORS_BEFORE_SIGNAL`` posteriors); returns (exit status, stderr,
+    seconds from the signal to the exit)."""
+    proc = subprocess.Popen([sys.executable, "-m", "awalker_tools.cli", "track", str(bag), "--out", str(out), *options],
+                            stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
     lines = []
     try:
         for line in proc.stderr:
             lines.append(line)
-            done = re.search(r"frame \d+/\d+, (\d+) posteriors", line)
-            if done and int(done.group(1)) >= POSTERIORS_BEFORE_SIGNAL:
+            if ready(line):
                 break
         else:
             pytest.fail("awalker track ended before it was interrupted:\n" + "".join(lines))
@@ -100,23 +108,8 @@ def test_a_signal_during_the_first_pass_fit_stops_the_fit(long_bag: Path, tmp_pa
     """SIGINT while `awalker track --fit-body` weighs its candidate legs: the candidate filters stop at their next
     frame (the fit's check), not after the whole fit; run.yaml says where it stopped."""
     out = tmp_path / "run"
-    proc = subprocess.Popen([sys.executable, "-m", "awalker_tools.cli", "track", str(long_bag), "--out", str(out),
-                             "--particles", "50", "--fit-body", "--no-overlay"], stderr=subprocess.PIPE,
-                            stdout=subprocess.DEVNULL, text=True)
-    lines = []
-    try:
-        for line in proc.stderr:
-            lines.append(line)
-            if "awalker track: fitting" in line:
-                break
-        else:
-            pytest.fail("awalker track never reached its fit:\n" + "".join(lines))
-        proc.send_signal(signal.SIGINT)
-        err = "".join(lines) + proc.communicate(timeout=120)[1]
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    assert proc.returncode == 128 + signal.SIGINT, err
+    status, err, _ = _interrupt(long_bag, out, signal.SIGINT, ("--particles", "50", "--fit-body", "--no-overlay"),
+                                ready=lambda line: "awalker track: fitting" in line)
+    assert status == 128 + signal.SIGINT, err
     assert "during the first pass's fit" in err and "tracking again" not in err, err
     assert "during the first pass's fit" in yaml.safe_load((out / "run.yaml").read_text())["incomplete"]
