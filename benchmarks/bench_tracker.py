@@ -88,6 +88,7 @@ def instrument(model: TrackerModel, totals: dict[str, float]) -> None:
         "sample_posed_kinematics": staticmethod(Timed(totals, "kinematics+pose_body",
                                                       kin.sample_posed_kinematics)),
         "pose_body": staticmethod(Timed(totals, "kinematics+pose_body", kin.pose_body)),
+        "mirrored_legs": staticmethod(Timed(totals, "kinematics+pose_body", kin.mirrored_legs)),
         "initial_kinematics": staticmethod(kin.initial_kinematics)})
     model.likelihood = Timed(totals, "likelihood", model.likelihood)
     model.initial = OneOff(totals, "initial", model.initial)

@@ -190,3 +190,23 @@ def test_the_lineage_takes_the_naming_the_posterior_favoured():
     out, _, out_stance = relabel_lineage(lineage, lineage_angles, lineage_stance, flipped, last_naming)
     np.testing.assert_array_equal(out_stance, 1 - stance)
     np.testing.assert_allclose(out[9:], lineage[9:])
+
+
+def test_a_renaming_of_the_whole_posterior_names_anew_only_the_frames_since_its_evidence_rose():
+    """Every particle renamed its legs at frame 9 (the naming test), the evidence for it rising since frame 6: the
+    frames 6-8 are named as after the renaming (mirrored, the posterior's probabilities there read the other way
+    round), the frames before 6 keep their naming (the walker went wrong at 6), and the posterior's frames, read
+    so, keep that labelling rather than mirroring the whole path."""
+    from awalker_tracker.inference.filter_model import mirror_poses, relabel_lineage
+
+    (markers, angles, stance), (lineage, lineage_angles, lineage_stance), flipped = _renamed_walk(9)
+    posterior = np.where(np.arange(len(stance)) < 9, np.where(stance == 0, 0.9, 0.1),
+                         np.where(lineage_stance == 0, 0.7, 0.3))  # as measured: in the naming of the time
+    since = np.zeros(len(stance), bool)
+    since[6:9] = True
+    out, _, out_stance = relabel_lineage(lineage, lineage_angles, lineage_stance, np.zeros_like(flipped), posterior,
+                                         since)
+    np.testing.assert_array_equal(out_stance, np.where(np.arange(len(stance)) < 6, stance, 1 - stance))
+    np.testing.assert_allclose(out[:6], markers[:6], atol=1e-9)
+    np.testing.assert_allclose(out[6:9], mirror_poses(lineage, lineage_angles, since)[0][6:9], atol=1e-9)
+    np.testing.assert_allclose(out[9:], lineage[9:])

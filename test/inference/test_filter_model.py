@@ -279,3 +279,33 @@ def test_the_filter_steps_through_a_gap_in_the_stamps(walk):
         walked = pelvis_error(kept, seed)                         # the stamps as they came, gaps included
         slipped = pelvis_error(list(range(len(kept))), seed)      # the same images one frame apart
         assert walked < 0.09 and walked < 0.6 * slipped, (seed, walked, slipped)
+
+
+@pytest.mark.parametrize("test_particles", [256, 0])
+def test_a_wrong_leg_naming_is_corrected_by_the_naming_test(walk, test_particles):
+    """Started on the wrong leg (every particle), the naming test renames the legs of the whole posterior once
+    the markers (which name left and right) say so; without it the MAP path keeps the wrong naming."""
+    body, markers, legs, _ = walk
+    start = StartDescription(0, tuple(markers[0, 0, :2]), 0.4, 1.3, 0.7, 1 - LEFT)
+    rng = np.random.default_rng(7)
+    config = TrackerConfig(smc=SMCConfig(num_particles=600, seed=0), dt=1 / 30, naming_test_particles=test_particles)
+    model = TrackerModel(body, start, marker_likelihood(0.03), config)
+    tracker = Tracker(model)
+    obs = markers + 0.01 * rng.standard_normal(markers.shape)
+    for k, o in enumerate(obs):
+        tracker.push(k, 1_000 + k * 33_333_333, o)
+    tracker.finish()
+    traj = tracker.map_trajectory()
+    from awalker_tools.evaluation import PoseTrack, legs_swapped
+
+    stamps = np.arange(len(markers))
+    swapped = legs_swapped(PoseTrack(stamps, stamps, traj.marker_names, traj.markers),
+                           PoseTrack(stamps, stamps, MARKER_NAMES, markers))
+    if test_particles:
+        assert model.renamed_frames and model.renamed_frames[0] <= 5, model.renamed_frames
+        assert not swapped[model.renamed_frames[0]:].any()
+        err = np.linalg.norm(traj.markers[:, EVAL] - markers[:, EVAL], axis=2).mean(axis=1) * 1000
+        assert np.median(err) < 80.0, err
+    else:
+        assert not model.renamed_frames
+        assert np.mean(swapped) > 0.5

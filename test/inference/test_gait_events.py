@@ -193,3 +193,18 @@ def test_the_live_steps_follow_the_posteriors_stance_foot():
     assert out[0][1].time_s == pytest.approx(6.5 / RATE - gait_events.WALKER_STRIKE_DELAY * gait_events.TYPICAL_STEP_TIME_S)
     assert out[1][1].time_s == pytest.approx(20 / RATE - gait_events.WALKER_STRIKE_DELAY * (20 / RATE - 6.5 / RATE))
     assert (out[0][1].x, out[1][1].x) == (0.7, 0.0)
+
+
+def test_a_renaming_of_the_legs_is_no_live_step():
+    """When the posterior renames the legs (the naming test), the stance-left probability flips at once: read as
+    it stands that is a step; told of the renaming, PosteriorSteps renames the foot it stood on and counts the
+    next real change of stance as the next step."""
+    contacts = {0: np.array([0.0, 0.1]), 1: np.array([0.7, -0.1])}
+    p = [0.95] * 5 + [0.05] * 5 + [0.4, 0.9] + [0.95] * 3      # renamed at frame 5, a real strike at frame 11
+    for told in (True, False):
+        steps = gait_events.PosteriorSteps()
+        out = [(frame, step) for frame, left in enumerate(p)
+               if (step := steps.add(frame, frame * 33_333_333, frame / RATE, left, contacts,
+                                     legs_renamed=told and frame == 5)) is not None]
+        assert [f for f, _ in out] == ([11] if told else [5, 11])
+        assert steps.foot == 0

@@ -43,6 +43,9 @@ def test_summary_message_roundtrip():
     assert np.allclose(back.clouds[0].weights, s.clouds[0].weights, atol=1e-7)
     assert back.clouds[0].points.shape == (20, 3) and np.allclose(back.clouds[0].points, s.clouds[0].points, atol=1e-6)
     assert back.speed == 1.3 and back.resampled and back.effective_sample_size == 321.0
+    assert not back.legs_renamed
+    from dataclasses import replace
+    assert summary_from_msg(summary_to_msg(replace(s, legs_renamed=True), "world")).legs_renamed
 
 
 def test_cylinder_geometry():

@@ -516,6 +516,18 @@ def facing(track: PoseTrack, rows: np.ndarray) -> np.ndarray:
     return np.arctan2(across[:, 0], -across[:, 1])
 
 
+def legs_swapped(estimate: PoseTrack, truth: PoseTrack) -> np.ndarray:
+    """(F,) bool over the frames the two tracks share (``align_tracks``): the estimate's knees and ankles lie
+    nearer the truth's with left and right swapped."""
+    est_rows, true_rows = align_tracks(estimate, truth)
+    legs = [f"{side}_{joint}" for side in ("left", "right") for joint in ("knee", "ankle")]
+    mirrored = [f"{'right' if n.startswith('left') else 'left'}_{n.split('_', 1)[1]}" for n in legs]
+    est = _select(estimate, legs, est_rows, "estimate")
+    same = np.linalg.norm(est - _select(truth, legs, true_rows, "ground truth"), axis=2).sum(axis=1)
+    swapped = np.linalg.norm(est - _select(truth, mirrored, true_rows, "ground truth"), axis=2).sum(axis=1)
+    return swapped < same
+
+
 def walk_quality(estimate: PoseTrack, truth: PoseTrack, fallen_fraction: float = 0.6,
                  off_person_m: float = 0.5) -> dict[str, object]:
     """How the estimate follows a walk, beyond marker errors:
@@ -528,11 +540,6 @@ def walk_quality(estimate: PoseTrack, truth: PoseTrack, fallen_fraction: float =
     - ``end``: the last frame's pelvis ground error (m), heading error (deg), fallen and off-person flags."""
     est_rows, true_rows = align_tracks(estimate, truth)
     heading = np.degrees(np.abs(np.angle(np.exp(1j * (facing(estimate, est_rows) - facing(truth, true_rows))))))
-    legs = [f"{side}_{joint}" for side in ("left", "right") for joint in ("knee", "ankle")]
-    mirrored = [f"{'right' if n.startswith('left') else 'left'}_{n.split('_', 1)[1]}" for n in legs]
-    est = _select(estimate, legs, est_rows, "estimate")
-    same = np.linalg.norm(est - _select(truth, legs, true_rows, "ground truth"), axis=2).sum(axis=1)
-    swapped = np.linalg.norm(est - _select(truth, mirrored, true_rows, "ground truth"), axis=2).sum(axis=1)
     est_p = _select(estimate, ["pelvis"], est_rows, "estimate")[:, 0]
     tru_p = _select(truth, ["pelvis"], true_rows, "ground truth")[:, 0]
     fallen = est_p[:, 2] < fallen_fraction * tru_p[:, 2]
@@ -540,7 +547,7 @@ def walk_quality(estimate: PoseTrack, truth: PoseTrack, fallen_fraction: float =
     off = ground_error > off_person_m
     return {
         "heading_error_deg": statistics(heading),
-        "swap_fraction": float(np.mean(swapped < same)),
+        "swap_fraction": float(np.mean(legs_swapped(estimate, truth))),
         "fallen_frames": int(fallen.sum()),
         "off_person_frames": int(off.sum()),
         "end": {"pelvis_ground_error_m": float(ground_error[-1]), "heading_error_deg": float(heading[-1]),

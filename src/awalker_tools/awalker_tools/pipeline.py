@@ -717,10 +717,12 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
 def track_record(tracker: Any, trajectory: Any) -> dict[str, object]:
     """run.yaml's entry for one track (an ``inference.filter_model.Tracker`` and its ``MapTrajectory``): its first
     and last frame, the frames the person was in view, and how it ended: where the person left (frame, reason, last
-    frame in view), or ``ended: null``, tracked to the end of the input."""
+    frame in view), or ``ended: null``, tracked to the end of the input; the frames at which the posterior renamed
+    the legs (``legs_renamed_at``, the naming test)."""
     frames, end = trajectory.frames, tracker.ended
     return {"track": tracker.track_id, "first_frame": int(frames[0]), "last_frame": int(frames[-1]),
             "frames_in_view": int(np.sum(trajectory.in_view)),
+            "legs_renamed_at": [int(f) for f in tracker.renamed_frames],
             "ended": None if end is None else {"frame": end.frame_index, "reason": end.reason,
                                                "last_in_view_frame": end.last_in_view_frame}}
 

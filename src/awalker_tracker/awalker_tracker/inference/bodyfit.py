@@ -138,7 +138,8 @@ def _log_evidence(candidates: dict[object, tuple[BodyDescription, StartDescripti
     def evidence(key: object) -> tuple[float, int]:
         body, start, seed = candidates[key]
         smc = replace(tracker_config.smc, num_particles=config.particles, seed=seed)
-        run_config = replace(tracker_config, smc=smc)
+        # (no naming test: the stance-leg candidates are the two namings, each kept by its own filter)
+        run_config = replace(tracker_config, smc=smc, naming_test_particles=0)
         model = TrackerModel(body, start, likelihood_for(body), run_config,
                              cameras=list(cameras) if cameras is not None else None)
         pf = ParticleFilter(model, smc)

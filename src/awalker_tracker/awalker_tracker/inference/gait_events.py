@@ -208,9 +208,14 @@ class PosteriorSteps:
         self._crossed: tuple[float, int, int] | None = None  # (time s, frame, stamp) of the last 0.5 crossing
 
     def add(self, frame: int, stamp_ns: int, time_s: float, left_probability: float,
-            contacts: dict[int, np.ndarray]) -> Step | None:
-        """The step this frame completes, if any; ``contacts``: foot (LEFT 0 / RIGHT 1) -> its contact xy (m)."""
+            contacts: dict[int, np.ndarray], legs_renamed: bool = False) -> Step | None:
+        """The step this frame completes, if any; ``contacts``: foot (LEFT 0 / RIGHT 1) -> its contact xy (m);
+        ``legs_renamed``: the posterior renamed the legs at this frame (``PosteriorSummary.legs_renamed``), so the
+        foot it stood on and the last probability are renamed too, and the flip of the probability is no step."""
         p = float(left_probability)
+        if legs_renamed:
+            self.foot = None if self.foot is None else 1 - self.foot
+            self._last = None if self._last is None else (self._last[0], 1.0 - self._last[1])
         if self._last is not None and (self._last[1] - 0.5) * (p - 0.5) <= 0.0 and self._last[1] != p:
             t0, p0 = self._last
             self._crossed = (t0 + (0.5 - p0) / (p - p0) * (time_s - t0), int(frame), int(stamp_ns))

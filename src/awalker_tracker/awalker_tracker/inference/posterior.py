@@ -88,6 +88,8 @@ class PosteriorSummary:
     track_id: int = 1               # which track of the run (a new one each time a person is found anew)
     person_in_view: bool = True     # in view of some camera (inference.visibility; True without images)
     cameras_in_view: tuple[str, ...] = ()   # the cameras that see the person
+    legs_renamed: bool = False      # every particle renamed its legs at this frame (the naming test): the stance
+                                    # foot's name changed, the foot did not
 
     @property
     def heel_strike_foot(self) -> str:

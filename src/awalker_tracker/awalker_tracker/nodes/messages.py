@@ -97,6 +97,7 @@ def summary_to_msg(summary: core.PosteriorSummary, world_frame: str = "world") -
     msg.track_id = int(summary.track_id)
     msg.person_in_view = bool(summary.person_in_view)
     msg.cameras_in_view = list(summary.cameras_in_view)
+    msg.legs_renamed = bool(summary.legs_renamed)
     msg.contacts = [FootContact(foot=int(c.foot), position=Point(**dict(zip("xyz", map(float, c.position)))),
                                 probability=float(c.probability), heel_strike=bool(c.heel_strike))
                     for c in summary.contacts]
@@ -128,7 +129,7 @@ def summary_from_msg(msg: PosteriorSummary) -> core.PosteriorSummary:
         effective_sample_size=float(msg.effective_sample_size), num_particles=int(msg.num_particles),
         resampled=bool(msg.resampled), reseeded_fallen=int(msg.reseeded_fallen), reacquired=int(msg.reacquired),
         person_still=bool(msg.person_still), track_id=int(msg.track_id), person_in_view=bool(msg.person_in_view),
-        cameras_in_view=tuple(msg.cameras_in_view),
+        cameras_in_view=tuple(msg.cameras_in_view), legs_renamed=bool(msg.legs_renamed),
         contacts=tuple(core.FootContactEstimate(int(c.foot), np.array([c.position.x, c.position.y, c.position.z]),
                                                 float(c.probability), bool(c.heel_strike)) for c in msg.contacts),
         clouds=tuple(core.MarkerCloud(c.marker_name, cloud_positions(c), np.asarray(c.weights, float))

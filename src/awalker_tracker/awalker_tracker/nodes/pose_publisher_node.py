@@ -225,7 +225,8 @@ class PosePublisherNode(AwalkerNode):
             del self._in_view[old]
         step = self.steps.add(msg.frame_index, stamp, (stamp - self._first_stamp_ns) * 1e-9,
                               msg.stance_left_probability,
-                              {int(c.foot): np.array([c.position.x, c.position.y]) for c in msg.contacts})
+                              {int(c.foot): np.array([c.position.x, c.position.y]) for c in msg.contacts},
+                              bool(msg.legs_renamed))
         if step is not None and self._in_view.get(step.frame, msg.person_in_view):
             self.gait_pub.publish(gait_step_to_msg(step, msg.header, self._first_stamp_ns + round(step.time_s * 1e9)))
         if self.tf_broadcaster is not None:

@@ -509,7 +509,11 @@ class TrackerNode(AwalkerNode):
                 continue     # background-only frames before the person appears
             started = time.perf_counter()
             obs = ImageObservation(features=tuple(item.messages))
+            renamed = len(self.tracker.renamed_frames)
             summaries = self.tracker.push(item.frame_index, item.stamp_ns, obs)
+            for frame in self.tracker.renamed_frames[renamed:]:
+                self.get_logger().info(f"frame {frame}: left and right renamed: the images favour the other naming "
+                                       "of the legs")
             self.stats.seconds_in_filter += time.perf_counter() - started
             self.stats.frames_tracked += 1
             self._dirty = True

@@ -368,23 +368,25 @@ def _score_states(origin: np.ndarray, rotation: np.ndarray, lengths: np.ndarray,
 
 
 class SilhouetteMemo:
-    """The last poses' projected axes per camera ((N, P, 6) arrays). A tracker's next frame scores
+    """The last ``keep`` calls' projected axes per camera ((N, P, 6) arrays). A tracker's next frame scores
     new poses against these poses as its previous ones (the flow term), so with a memo they are
-    projected once instead of twice. Matched by object identity of the ``BodySegments``."""
+    projected once instead of twice; two are kept, as the tracker also scores a few mirrored poses between
+    its frames (``TrackerConfig.naming_test_particles``). Matched by object identity of the ``BodySegments``."""
 
-    def __init__(self) -> None:
-        self._segments: BodySegments | None = None
-        self._axes: list[np.ndarray] = []
+    def __init__(self, keep: int = 2) -> None:
+        self.keep = int(keep)
+        self._entries: list[tuple[BodySegments, list[np.ndarray]]] = []
 
     def lookup(self, segments: BodySegments, camera_index: int) -> np.ndarray | None:
         """The stored projected axes of ``segments`` in camera ``camera_index``, or None."""
-        if segments is self._segments and camera_index < len(self._axes):
-            return self._axes[camera_index]
+        for stored, axes in self._entries:
+            if segments is stored and camera_index < len(axes):
+                return axes[camera_index]
         return None
 
     def store(self, segments: BodySegments, axes: list[np.ndarray]) -> None:
-        """Remember ``segments``' projected axes, one (N, P, 6) array per camera."""
-        self._segments, self._axes = segments, axes
+        """Remember ``segments``' projected axes, one (N, P, 6) array per camera (the oldest entry goes)."""
+        self._entries = [(segments, axes)] + [e for e in self._entries if e[0] is not segments][: self.keep - 1]
 
 
 def _check_inputs(parts: tuple[PartShape, ...], segments: BodySegments, camera: Camera,
