@@ -574,11 +574,7 @@ class TrackerModel:
         its own mirror image, pelvis kept): the prior's jump between the two namings a side view cannot tell apart."""
         if rows.size == 0:
             return states
-        chosen = states.take(rows)
-        pelvis = chosen.pose.markers[:, MARKER_NAMES.index("pelvis"), :2]
-        walker, kin = self._kin.mirrored_legs(chosen.walker, chosen.kin, pelvis, self.body, self.params, self.kin_config)
-        pose = self._kin.pose_body(self.body, self.params, walker, kin, self.kin_config)
-        flipped = replace(chosen, walker=walker, kin=kin, pose=pose, flipped=np.ones(rows.size, bool))
+        flipped = replace(self._mirrored(states.take(rows)), flipped=np.ones(rows.size, bool))
         return put_rows(states, rows, flipped)
 
     def _reseed_fallen(self, states: TrackerStates, rows: np.ndarray, rng: np.random.Generator) -> TrackerStates:
@@ -606,7 +602,7 @@ class TrackerModel:
     @property
     def renamed_frames(self) -> list[int]:
         """Filter frame indices at which every particle renamed its legs (the naming test)."""
-        return sorted(f for f, renamed in self.naming_decisions.items() if renamed)
+        return sorted(self.naming_onsets)
 
     def _named(self, frame: int, log_weights: np.ndarray, parent: TrackerStates | None, states: TrackerStates,
                obs: Any) -> TrackerStates:
@@ -633,8 +629,8 @@ class TrackerModel:
         return states
 
     def _mirrored(self, states: TrackerStates) -> TrackerStates:
-        """Every particle of ``states`` with its legs named the other way round (``kinematics.mirrored_legs``),
-        poses only (for scoring)."""
+        """Every particle of ``states`` with its legs named the other way round (``kinematics.mirrored_legs``: each
+        body its own mirror image, pelvis kept), posed."""
         pelvis = states.pose.markers[:, MARKER_NAMES.index("pelvis"), :2]
         walker, kin = self._kin.mirrored_legs(states.walker, states.kin, pelvis, self.body, self.params, self.kin_config)
         return replace(states, walker=walker, kin=kin,

@@ -509,11 +509,7 @@ class TrackerNode(AwalkerNode):
                 continue     # background-only frames before the person appears
             started = time.perf_counter()
             obs = ImageObservation(features=tuple(item.messages))
-            renamed = len(self.tracker.renamed_frames)
             summaries = self.tracker.push(item.frame_index, item.stamp_ns, obs)
-            for frame in self.tracker.renamed_frames[renamed:]:
-                self.get_logger().info(f"frame {frame}: left and right renamed: the images favour the other naming "
-                                       "of the legs")
             self.stats.seconds_in_filter += time.perf_counter() - started
             self.stats.frames_tracked += 1
             self._dirty = True
@@ -549,6 +545,9 @@ class TrackerNode(AwalkerNode):
             if s.reacquired:
                 self.get_logger().info(f"frame {s.frame_index}: track lost, {s.reacquired} particles re-seeded "
                                        "at the person seen in the images")
+            if s.legs_renamed:
+                self.get_logger().info(f"frame {s.frame_index}: left and right renamed: the images favour the other "
+                                       "naming of the legs")
             if s.person_still != self._person_still:
                 self._person_still = s.person_still
                 self.get_logger().info(
