@@ -158,6 +158,25 @@ def test_two_cameras_catch_a_depth_error_one_camera_catches_only_a_gross_one(see
         RecoveryConfig(feet_row_height_ratio=(1.1, 0.85))
 
 
+def test_one_camera_far_and_low_holds_the_depth_only_to_its_feet_rows_resolution():
+    """From 10 m at 0.5 m high one map row of the feet row spans ~1.3 m of depth (a hand start is right to
+    ~0.1 m): a pelvis 1.2 m off along the view, lost from 4 m, is not lost there (the median gap must pass
+    ``lost_rows_one_camera`` rows as well as 0.6 m), 4 m off still is; the depth band is a row wide, not
+    ``depth_band_m``. With the rows set to 0 the fixed distances hold again."""
+    far = Camera.look_at("far", 320, 240, 300.0, np.array([0.3, -10.0, 0.5]), np.array([0.3, 0.0, 0.9]))
+    features = features_of(far, walking_poses(3, x0=0.4), 2)[0][-1]
+    markers = pose_body(BODY, PARAMS, walking_poses(3, x0=0.4)[-1].walker, walking_poses(3, x0=0.4)[-1].kin).markers[0]
+    pelvis = markers[PELVIS]
+    for rows, offset, lost in ((2.0, 1.2, False), (2.0, 4.0, True), (0.0, 1.2, True)):
+        config = RecoveryConfig(lost_after_s=0.0, lost_rows_one_camera=rows, depth_band_rows=rows / 2)
+        monitor = LostTrackMonitor([far], config, dt=1 / 30, body_height_m=BODY.height)
+        orders = [monitor.update(f, [features], pelvis + np.array([0.0, offset, 0.0])) for f in range(20)]
+        assert any(order is not None for order in orders) == lost, (rows, offset)
+        band = monitor.depth_band(19)
+        assert band is not None and np.linalg.norm(band[0] - pelvis[:2]) < 1.0
+        assert 1.0 < band[1] < 1.8 if rows else band[1] == config.depth_band_m   # one row's depth, or 0.3 m
+
+
 def test_a_second_larger_person_does_not_count_as_losing_the_first():
     """Two people in view: the one followed stands at x = 0.4 m; another, nearer the camera (larger),
     at x = -0.5 m. The track on the first is not lost; a track on neither is."""

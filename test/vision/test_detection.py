@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from awalker_tracker.model.kinematics import pose_body
+from awalker_tracker.vision.camera import Camera
 from awalker_tracker.vision.detection import detect_person, ground_point, person_blob
 from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
 from awalker_tracker.vision.flow import FlowConfig
@@ -59,6 +60,27 @@ def test_one_and_two_camera_positions_and_height(scene):
     assert np.linalg.norm(both.position - truth) < 0.1           # two vertical planes meet under the person
     assert both.height == pytest.approx(BODY.height, abs=0.05)
     assert {b.camera for b in both.blobs} == {"side", "front"}
+
+
+def test_one_feet_row_resolves_depth_to_d_squared_over_h(scene):
+    """A feet-row position is as fine as one map row: over the ground a row lower moves it by about
+    (D^2 + h^2) / h x (row height / focal length) (D: ground distance, h: camera height). A camera 2.5
+    times as far and at half the height resolves depth ~13 times worse. Triangulated: 0."""
+    cameras, features, markers = scene
+    side = cameras[0]
+    mono = detect_person(features[:1], cameras[:1])
+    distance = float(np.linalg.norm(mono.position - side.position[:2]))
+    height = float(side.position[2])
+    row = CONFIG.downsample / 300.0                             # focal length 300 px
+    expected = (distance**2 + height**2) / height * row
+    assert mono.row_depth_m == pytest.approx(expected, rel=0.15)
+    assert 0.03 < mono.row_depth_m < 0.15                       # ~0.09 m from 4 m at 1.1 m high
+    assert detect_person(features, cameras).row_depth_m == 0.0  # two planes: no feet row
+    far = Camera.look_at("far", 320, 240, 300.0, np.array([0.3, -10.0, 0.5]), np.array([0.3, 0.0, 0.9]))
+    seen_far = detect_person([features_of(far, walking_poses(3, x0=0.4), 2)[0][-1]], [far])
+    d_far = float(np.linalg.norm(seen_far.position - far.position[:2]))
+    assert seen_far.row_depth_m == pytest.approx((d_far**2 + 0.25) / 0.5 * row, rel=0.15)
+    assert seen_far.row_depth_m > 10 * mono.row_depth_m
 
 
 def test_no_person_no_detection():

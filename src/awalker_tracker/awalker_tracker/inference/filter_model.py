@@ -414,7 +414,7 @@ class TrackerModel:
         self.reseeded_fallen = 0     # particles re-seeded after a fall, over the run
         # frame periods the next transition spans (``Tracker.push``: from the stamps; > 1 over frames no image came for)
         self.frames_per_step = 1
-        self._depth_band_centre: np.ndarray | None = None   # this frame's, one camera (rejuvenate)
+        self._depth_band: tuple[np.ndarray, float] | None = None   # this frame's centre and half width, one camera
         # the naming test (TrackerConfig.naming_test_particles): log odds of the other naming, each frame's evidence
         # (filter frame index -> nats), the decision taken at each frame (True: every particle renamed its legs
         # there), and what this frame's likelihood call needs (rejuvenate -> log_likelihood)
@@ -656,14 +656,14 @@ class TrackerModel:
                    obs: Any, rng: np.random.Generator) -> TrackerStates:
         """Hold the walkers while the person stands still and re-acquire a lost track from the image
         (``inference.recovery``)."""
-        self._depth_band_centre = None
+        self._depth_band = None
         if self.monitor is None or not isinstance(obs, ImageObservation):
             return states
         w = np.exp(log_weights - np.max(log_weights))
         w /= w.sum()
         pelvis = w @ states.pose.markers[:, MARKER_NAMES.index("pelvis")]
         order = self.monitor.update(frame, obs.features, pelvis)
-        self._depth_band_centre = self.monitor.depth_band_centre(frame)
+        self._depth_band = self.monitor.depth_band(frame)
         if parent is not None and self.monitor.still(frame):
             # the person stands still: the frame's walkers are the previous frame's, not walking, but free to
             # turn where they stand (a person turning round on the spot)
@@ -739,17 +739,19 @@ class TrackerModel:
         return self.config.likelihood_scale * loglik - penalty - self.depth_band_penalty(states)
 
     def depth_band_penalty(self, states: TrackerStates) -> np.ndarray:
-        """(N,) nats taken from walkers whose pelvis strays over the ground beyond ``depth_band_m`` from the
+        """(N,) nats taken from walkers whose pelvis strays over the ground beyond the band's half width
+        (``depth_band_m``, or ``depth_band_rows`` map rows of the feet row's depth if wider) from the
         frame's one-camera feet-row position (``inference.recovery``, *One camera's depth*); zeros where
         the frame has none (several cameras, a blob not as tall as the body, the first
         ``depth_band_delay_s`` of the track, recovery off). The feet row
         is an outlier with probability ``depth_band_outlier``: the penalty levels off at about
         -log(outlier) nats, so a feet row far from every walker (hidden feet) changes no weights."""
         r = self.config.recovery
-        if self._depth_band_centre is None or r.depth_band_m <= 0:
+        if self._depth_band is None or r.depth_band_m <= 0:
             return np.zeros(len(states))
-        gap = np.linalg.norm(states.pose.markers[:, MARKER_NAMES.index("pelvis"), :2] - self._depth_band_centre, axis=1)
-        inlier = -0.5 * (np.maximum(gap - r.depth_band_m, 0.0) / r.depth_band_sigma_m) ** 2
+        centre, half_width = self._depth_band
+        gap = np.linalg.norm(states.pose.markers[:, MARKER_NAMES.index("pelvis"), :2] - centre, axis=1)
+        inlier = -0.5 * (np.maximum(gap - half_width, 0.0) / r.depth_band_sigma_m) ** 2
         outlier = np.log(r.depth_band_outlier)
         return np.logaddexp(0.0, outlier) - np.logaddexp(inlier, outlier)
 

@@ -13,7 +13,12 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   person-sized blob in every camera that sees the person; or, where cameras at different angles place
   the person on the ground (``PersonDetection.triangulated``), lies more than ``lost_distance_m`` from
   that place over the ground; or, with one camera, lies a median ``lost_distance_one_camera_m`` (0.6 m)
-  over ``track_window_s`` from where the blob's feet row places the person. One camera's feet row is
+  over ``track_window_s`` from where the blob's feet row places the person, or ``lost_rows_one_camera``
+  (2) map rows of that feet row's depth if farther (``PersonDetection.row_depth_m``: one row spans about
+  (D^2 + h^2) / h x row / focal length over the ground, 0.05-0.15 m from 3-5 m at 1.5-2 m high, but ~1 m
+  from 9.6 m at 0.8 m high, where a fixed 0.6 m fired on feet-row noise, moved a hand-started track
+  that was 0.1 m from the person onto a feet row 0.8 m too far and lost it: real walks 07_01-uturn and
+  91_10, seed 0, 868 and 1510 mm). One camera's feet row is
   0.06-0.25 m too near on the real walks (``benchmarks/bench_realwalks.py``, median per walk) and
   scattered by ~0.1 m, too coarse to hold the depth, but a body drifting along the line of sight stays
   on the person's image and the blob test alone never fired (8 of 60 one-camera runs ended 0.5-1.6 m
@@ -39,7 +44,8 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   percentile 0.56 m). With ``depth_band_m`` > 0, where this frame's feet row counts (above), from
   ``depth_band_delay_s`` after the first frame tracked on (``depth_band_centre``), walkers whose pelvis
   lies more than ``depth_band_m`` from it over the ground lose up to 0.5 (excess / ``depth_band_sigma_m``)^2
-  nats (``TrackerModel.depth_band_penalty``), levelling off at ~-log(``depth_band_outlier``) because a
+  nats (``TrackerModel.depth_band_penalty``; the band is ``depth_band_rows`` (1) map rows of the feet
+  row's depth wide where that is wider), levelling off at ~-log(``depth_band_outlier``) because a
   feet row can be wrong (feet hidden behind something put it metres away while the blob still looks as
   tall as the body). The feet row is a map row (4 px at 320x240: ~0.27 m of depth at 5 m) and biased by
   the look of the feet (~0.2 m too near on the dressed renders, their contact shadow; on our own body's
@@ -84,6 +90,7 @@ class RecoveryConfig:
     box_margin: float = 0.25           # the blob box is widened by this fraction of its size on each side
     lost_distance_m: float = 0.4       # triangulated detections: the pelvis this far off over the ground is lost
     lost_distance_one_camera_m: float = 0.6  # feet-row detections (one camera): the median over track_window_s
+    lost_rows_one_camera: float = 2.0  # ... or this many map rows of the feet row's depth (row_depth_m), if farther
     feet_row_height_ratio: tuple[float, float] = (0.85, 1.10)  # ... of frames whose blob is this tall (x body height)
     reach_m: float = 0.5               # ... and whose feet row lies within this of where the counted ones put the
     reach_m_s: float = 0.5             # ... person now, plus this per second since the last counted one,
@@ -94,6 +101,7 @@ class RecoveryConfig:
     still_m_s: float = 0.15            # a ground track slower than this over still_window_s: standing still
     still_window_s: float = 0.3
     depth_band_m: float = 0.3          # one camera: the pelvis this far from the feet-row position is free ...
+    depth_band_rows: float = 1.0       # ... or this many map rows of its depth (row_depth_m), if farther
     depth_band_sigma_m: float = 0.1    # ... beyond it each frame costs 0.5 (excess / sigma)^2 nats; band 0: off
     depth_band_outlier: float = 0.05   # ... up to ~-log(this): a feet row may be wrong (feet hidden)
     depth_band_delay_s: float = 0.5    # ... from this long (s) after the first frame tracked: the start holds before
@@ -109,7 +117,7 @@ class RecoveryConfig:
                self.box_margin, self.track_window_s, self.moving_m_s, self.lost_distance_m,
                self.lost_distance_one_camera_m, self.still_m_s,
                self.still_window_s, self.depth_band_m, self.depth_band_delay_s, self.reach_m, self.reach_m_s,
-               self.reach_reset_s) < 0:
+               self.reach_reset_s, self.lost_rows_one_camera, self.depth_band_rows) < 0:
             raise ValueError("RecoveryConfig: times, spreads and margins must be >= 0")
         if not (self.depth_band_sigma_m > 0 and 0 < self.depth_band_outlier < 1):
             raise ValueError(f"RecoveryConfig: depth_band_sigma_m must be > 0 and depth_band_outlier in (0, 1), got "
@@ -153,6 +161,7 @@ class LostTrackMonitor:
         self._orders: dict[int, Reacquisition | None] = {}
         self._still: dict[int, bool] = {}
         self._gaps: dict[int, float] = {}   # one camera: the pelvis's ground distance from the feet-row position
+        self._row_depths: dict[int, float] = {}   # one camera: the counted feet rows' depth per map row (m)
         self._feet_rows = GroundTrack(dt)   # one camera: the feet-row ground position per frame (None: it does not count)
         self._quiet_until = -1
         self._first_frame: int | None = None
@@ -176,10 +185,13 @@ class LostTrackMonitor:
         self._feet_rows.add(frame, detection.position.copy() if counts else None)
         if counts:
             self._gaps[frame] = float(np.linalg.norm(pelvis[:2] - detection.position))
+            self._row_depths[frame] = detection.row_depth_m
         span = self.track.span(self.config.track_window_s)
-        gaps = [g for f in range(frame - span + 1, frame + 1) if (g := self._gaps.get(f)) is not None]
-        if 2 * len(gaps) >= span and float(np.median(gaps)) > self.config.lost_distance_one_camera_m:
-            return True
+        window = [f for f in range(frame - span + 1, frame + 1) if f in self._gaps]
+        if 2 * len(window) >= span:
+            rows = self.config.lost_rows_one_camera * float(np.median([self._row_depths[f] for f in window]))
+            if float(np.median([self._gaps[f] for f in window])) > max(self.config.lost_distance_one_camera_m, rows):
+                return True
         by_name = {c.name: c for c in self.cameras}
         return not any(on_blob(by_name[blob.camera], pelvis, blob, self.config.box_margin)
                        for blobs in seen for blob in blobs)
@@ -205,13 +217,15 @@ class LostTrackMonitor:
         (a reliable blob as tall as the body; decided by ``update``), else None."""
         return self._feet_rows.positions.get(frame)
 
-    def depth_band_centre(self, frame: int) -> np.ndarray | None:
-        """One camera: the centre (m, world xy) of the depth band at ``frame``: its feet-row position where it
-        counts (``feet_row_position``), from ``depth_band_delay_s`` after the first frame tracked on; else None."""
+    def depth_band(self, frame: int) -> tuple[np.ndarray, float] | None:
+        """One camera: the depth band at ``frame``, its centre (m, world xy: the feet-row position where it
+        counts, ``feet_row_position``) and half width (m: ``depth_band_m``, or ``depth_band_rows`` map rows of
+        the feet row's depth if wider), from ``depth_band_delay_s`` after the first frame tracked on; else None."""
         delay = int(round(self.config.depth_band_delay_s / self.dt))
-        if self._first_frame is None or frame - self._first_frame < delay:
+        centre = self.feet_row_position(frame)
+        if self._first_frame is None or frame - self._first_frame < delay or centre is None:
             return None
-        return self.feet_row_position(frame)
+        return centre, max(self.config.depth_band_m, self.config.depth_band_rows * self._row_depths[frame])
 
     def still(self, frame: int) -> bool:
         """Whether the person stood still at ``frame`` (decided by ``update``; False if not yet)."""
@@ -252,7 +266,7 @@ class LostTrackMonitor:
             self._quiet_until = frame + max(1, int(round(self.config.cooldown_s / self.dt)))
             self.reacquisitions += 1
         self._orders[frame] = order
-        for store in (self._run, self._orders, self._still, self._gaps):     # keep a few seconds of history (the tracks keep their own)
+        for store in (self._run, self._orders, self._still, self._gaps, self._row_depths):     # keep a few seconds of history (the tracks keep their own)
             for old in [f for f in store if f < frame - 300]:
                 del store[old]
         return order

@@ -45,6 +45,7 @@ class PersonBlob:
     area_px: float
     feet_uv: tuple[float, float]             # the blob's column (module docstring), lowest row
     head_uv: tuple[float, float]             # the blob's column, highest row
+    row_px: float = 1.0                      # height of one row of the map the blob was found in (px)
 
 
 @dataclass(frozen=True)
@@ -55,6 +56,9 @@ class PersonDetection:
     height: float
     blobs: tuple[PersonBlob, ...]
     triangulated: bool = False        # position from several cameras' planes (~0.1 m), not one feet row
+    row_depth_m: float = 0.0          # feet-row positions: how far over the ground one map row lower moves
+                                      # the position (m; the feet row's resolution: ~d^2 / h per radian of row);
+                                      # 0 when triangulated
 
 
 def _join_stacked(labels: np.ndarray, stats: np.ndarray, min_pixels: float) -> None:
@@ -132,7 +136,7 @@ def person_blobs(features: FrameFeatures, camera_name: str = "", threshold: floa
         # the upper half's mean column (module docstring)
         middle = centre(float(np.mean(cols[rows <= 0.5 * (top + bottom)])))
         box = (d * cols.min() - 0.5, d * top - 0.5, d * (cols.max() + 1) - 0.5, d * (bottom + 1) - 0.5)
-        blobs.append(PersonBlob(camera_name, box, area, (middle, centre(bottom)), (middle, centre(top))))
+        blobs.append(PersonBlob(camera_name, box, area, (middle, centre(bottom)), (middle, centre(top)), d))
     return blobs
 
 
@@ -254,21 +258,25 @@ def locate_person(seen: list[list[PersonBlob]], cameras: list[Camera], min_plane
         if spread >= min_plane_angle_deg:
             position = np.linalg.lstsq(normals, np.array([p[1] for p in planes]), rcond=None)[0]
             triangulated = True
+    by_camera = {c.name: c for c in cameras}
+    row_depth = 0.0
     if position is None:
-        by_camera = {c.name: c for c in cameras}
-        points = []
+        points, row_depths = [], []
         for b in blobs:
             camera = by_camera[b.camera]
             point = ground_point(camera, b.feet_uv)
             if point is not None:
                 away = point - camera.position[:2]
                 points.append(point + near_edge_m * away / max(float(np.linalg.norm(away)), 1e-9))
+                lower = ground_point(camera, (b.feet_uv[0], b.feet_uv[1] + b.row_px))
+                row_depths.append(float(np.linalg.norm(point - lower)) if lower is not None else 0.0)
         if not points:
             return None
         position = np.mean(points, axis=0)
-    by_camera = {c.name: c for c in cameras}
+        row_depth = float(np.mean(row_depths))
     heights = [_height_over(by_camera[b.camera], b.head_uv, position) for b in blobs]
-    return PersonDetection(np.asarray(position, float), float(np.nanmedian(heights)), tuple(blobs), triangulated)
+    return PersonDetection(np.asarray(position, float), float(np.nanmedian(heights)), tuple(blobs), triangulated,
+                           row_depth)
 
 
 def wholly_in_view(detection: PersonDetection, cameras: list[Camera], border_px: float = 2.0) -> bool:
