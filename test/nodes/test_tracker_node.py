@@ -316,3 +316,43 @@ def test_a_tracker_slower_than_the_camera_skips_frames_by_stamp_and_keeps_up(ros
     # keeping up: no frame filtered had waited longer than max_lag_s; never skipping, the last ones waited ~ the
     # time the filter needed for all the frames before them beyond the camera's 1 s
     assert stats.largest_lag_s <= 0.1 and behind.largest_lag_s > 0.5, (stats.largest_lag_s, behind.largest_lag_s)
+
+
+def test_an_automatic_start_found_only_at_the_end_still_tracks(ros_context, tmp_path):
+    """Hands off, a clip shorter than the start finder's fit window (1 s of walking; 1.3 s to fit): the finder
+    has taken every frame and found the walk without finishing its fit when the stream ends; the final flush
+    starts from what it has and tracks the frames kept since the start (before, nothing was tracked: no frame
+    was left pending at the end, so the finder was never asked to finish)."""
+    import sys
+    from pathlib import Path
+
+    from rclpy.parameter import Parameter
+
+    from awalker_tracker.nodes.features_node import features_to_msg
+    from awalker_tracker.nodes.messages import header
+    from awalker_tracker.nodes.tracker_node import TrackerNode
+    from awalker_tracker.vision.camera import save_calibration
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "inference"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "vision"))
+    from test_autostart import side_scene, walking  # noqa: E402
+    from vision_scene import noisy, render_frames  # noqa: E402
+
+    camera, background, rng, extractor = side_scene()
+    features = [extractor.process(noisy(background, rng)) for _ in range(4)]
+    images, _ = render_frames(camera, walking(30, x0=-0.8), background, seed=2)
+    features += [extractor.process(image) for image in images]
+    save_calibration([camera], tmp_path / "calibration.yaml")
+    node = TrackerNode(context=ros_context, parameter_overrides=[
+        Parameter("cameras", value=[camera.name]), Parameter("calibration", value=str(tmp_path / "calibration.yaml")),
+        Parameter("auto_start", value=True), Parameter("num_particles", value=50), Parameter("frame_rate", value=30.0)])
+    try:
+        for k, f in enumerate(features):
+            node._on_features(camera.name, features_to_msg(f, header(1_000_000_000 + k * 33_333_333, "side_optical"),
+                                                           camera.name))
+        assert node.start is None and node._finder is not None and not node._pending   # all taken, none fitted
+        node.flush()
+        assert node.start is not None and node.start_found_automatically and 8 <= node.start.frame <= 24
+        assert node.tracker is not None and node.stats.summaries == len(features) - node.start.frame
+    finally:
+        node.destroy_node()

@@ -383,7 +383,7 @@ def test_track_without_start_description_looks_for_the_person(tmp_path: Path, ca
     assert main(["track", str(bag), "--out", str(tmp_path / "out"), "--no-overlay"]) == 2
     err = capsys.readouterr().err
     assert "finding the walking person automatically" in err
-    assert "no walking person found in 3 frames" in err and "--start" in err
+    assert "no walking person found in 3 frames (no person seen in 3 frames)" in err and "--start" in err
     assert main(["track", str(tmp_path / "missing.bag"), "--out", str(tmp_path / "out")]) == 2
     assert "no such bag" in capsys.readouterr().err
     # a start description but no body description: refused, saying what to give

@@ -657,9 +657,10 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
             if interrupted:
                 raise stop.interrupted(f"at frame {result.frames} of {num_frames}, before any frame was tracked")
             if tracker.start is None:
-                raise InputError(f"{bag}: no walking person found in {result.frames} frames (automatic start: "
-                                 "a person wholly in view of a camera, moving steadily for 0.7 s); give a start "
-                                 "description with --start")
+                seen = tracker.autostart_status()
+                raise InputError(f"{bag}: no walking person found in {result.frames} frames"
+                                 + (f" ({seen})" if seen else "") + " (automatic start: a person wholly in view "
+                                 "of a camera, moving steadily for 0.7 s); give a start description with --start")
             raise InputError(f"{bag}: no frame was tracked (frames received: {result.frames}; "
                              f"start frame {tracker.start.frame}); check that the bag has images for every camera")
         # one camera cannot tell the near leg from the far one: unless the start named the standing foot, say

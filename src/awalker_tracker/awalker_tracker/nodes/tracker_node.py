@@ -437,6 +437,10 @@ class TrackerNode(AwalkerNode):
                                       "nothing tracked")
         return False
 
+    def autostart_status(self) -> str | None:
+        """What the automatic start has seen so far (``StartFinder.status``); None before it saw a frame."""
+        return None if self._finder is None else self._finder.status()
+
     def _take_fitted_stance_leg(self) -> None:
         """A start naming no stance leg takes the fitted start's (``fitted_start``) when both start at the
         same frame; otherwise a warning, and both legs are sampled."""
@@ -492,7 +496,9 @@ class TrackerNode(AwalkerNode):
         return True
 
     def _process_pending(self, final: bool = False) -> None:
-        if not self.ready() or not self._pending:
+        # at the end, a start finder that has seen every frame may still find the walk it has not finished fitting
+        finding = final and self.start is None and self._finder is not None
+        if not self.ready() or not (self._pending or finding):
             return
         for item in self._pending:
             item.messages = self._filled(item.messages)
