@@ -117,6 +117,30 @@ def test_a_person_standing_still_does_not_start_it(frames):
     assert "not yet walking" in finder.status()
 
 
+def test_a_person_who_stood_where_the_background_was_learned_is_found_walking_off_their_ghost():
+    """No empty frames: the background is learned while the person stands at x = -0.8 m, so where they stood
+    stays foreground once they walk off (a motionless "ghost" blob, beside them at first). The finder follows
+    the ghost and the person apart, and starts on the one who walks, at their position, heading and speed (a
+    finder following only the first one seen kept to the ghost and never started)."""
+    camera = side_camera()
+    background = background_image(camera, seed=0)
+    rng = np.random.default_rng(5)
+    poses = walking(40, x0=-0.8)
+    standing, _ = render_frames(camera, poses[:1], background, seed=2)
+    extractor = FeatureExtractor(CONFIG)
+    for _ in range(CONFIG.background_frames):
+        extractor.process(noisy(standing[0], rng))
+    images, _ = render_frames(camera, poses, background, seed=2)
+    features = [extractor.process(image) for image in images]
+    found, finder = _start(camera, features, AutoStartConfig(fit_window_s=0.9))
+    assert found is not None, finder.status()
+    pose = poses[found.frame]
+    pelvis = pose_body(BODY, PARAMS, pose.walker, pose.kin).markers[0, 0, :2]
+    assert np.linalg.norm(np.array(found.position) - pelvis) < 0.25
+    assert abs(np.angle(np.exp(1j * (found.heading - HEADING)))) < np.radians(20)
+    assert found.speed == pytest.approx(SPEED, rel=0.2)
+
+
 @pytest.fixture(scope="module")
 def two_walking():
     """The side camera's features of two people walking along +x: A from x = -0.8 m as in ``frames``, B from

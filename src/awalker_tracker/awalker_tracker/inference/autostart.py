@@ -1,13 +1,20 @@
 """Starting without a start description: find the walking person in the first frames.
 
-``StartFinder`` is fed each frame's image features. Per frame it detects the person
-(``vision.detection``: the largest foreground blob, placed on the ground through the calibrated
-cameras; with several, the other cameras' blobs where its feet put the person; once someone was seen,
-within ``gate_s``, each camera's blob nearest to them, so that with two people in view the first one
-seen is followed; ``follow_near`` chooses another: until someone is seen, only a person within
-``follow_radius_m`` of that ground point counts) and keeps the frames where the person is wholly in view of some camera. Once the detections over ``window_s``
+``StartFinder`` is fed each frame's image features. Per frame it follows everyone it has seen
+(``vision.detection``: each person-sized foreground blob, placed on the ground through the calibrated
+cameras; with several cameras, the other cameras' blobs where its feet put the person): each one
+followed takes, within ``gate_s`` of their last sighting, each camera's blob nearest to where they
+would be now (the one seen first chooses first; a detection farther than ``gate_m`` is someone else, or
+two people's blobs merged), and every blob nobody took is someone new (up to ``max_candidates``;
+``follow_near`` chooses one: the person nearest that ground point, within ``follow_radius_m``, and only
+them). Following several at once is
+what starts on a person who stood still before walking off: with no empty frames the background is
+learned from the walk itself, the standing person becomes part of it, and where they stood a "ghost"
+blob stays behind them, motionless; a finder following only the first one seen followed the ghost
+and never started (real walks hands off, one camera: 69_01 seed 0). Only frames where the person is
+wholly in view of some camera count. Once someone's detections over ``window_s``
 (at least ``min_fraction`` of its frames) form a ground track moving at ``min_speed_m_s`` or
-faster, the start is the central frame of that window's detections (the caller keeps the window's
+faster (the first seen of those who do, then the larger blob), the start is the central frame of that window's detections (the caller keeps the window's
 frames and tracks from there: the track begins about ``window_s`` / 2 before the walk was found).
 Its position, heading and speed (clamped to ``speed_range_m_s``, the gaits the tracker knows) come
 from a straight-line fit of the track over ``fit_window_s`` from the window's first frame: the
@@ -27,7 +34,8 @@ import numpy as np
 
 from awalker_tracker.inference.filter_model import InitialSpread, StartDescription
 from awalker_tracker.vision.camera import Camera
-from awalker_tracker.vision.detection import GroundTrack, PersonDetection, detect_person, wholly_in_view
+from awalker_tracker.vision.detection import (
+    GroundTrack, PersonBlob, ground_point, locate_person, person_blobs, wholly_in_view)
 
 
 # Initial particles of an automatic start: wider than around a hand-written start (one camera places the
@@ -49,15 +57,28 @@ class AutoStartConfig:
     speed_range_m_s: tuple[float, float] = (0.6, 1.9)
     follow_near: tuple[float, float] | None = None   # world ground point (m): follow the person first seen near it
     follow_radius_m: float = 1.5                     # ... within this distance (several people in view)
+    max_candidates: int = 4         # people (or ghosts) followed at once while none walks steadily
 
     def __post_init__(self) -> None:
         if not (0 < self.window_s <= self.fit_window_s and 0 < self.min_fraction <= 1 and self.gate_s >= 0
                 and self.gate_m > 0 and self.min_speed_m_s >= 0 and 0 < self.speed_range_m_s[0] < self.speed_range_m_s[1]
-                and self.follow_radius_m > 0):
+                and self.follow_radius_m > 0 and self.max_candidates >= 1):
             raise ValueError(f"AutoStartConfig: invalid settings {self}")
         if self.follow_near is not None and not (len(self.follow_near) == 2 and np.all(np.isfinite(self.follow_near))):
             raise ValueError(f"AutoStartConfig: follow_near must be a finite ground point (x, y) in m, got "
                              f"{self.follow_near!r}")
+
+
+@dataclass
+class _Candidate:
+    """Someone the finder follows: a person, or the ghost a person leaves where they stood in a background
+    learned from the walk itself (ground positions per frame, the last sighting, heights seen)."""
+
+    track: GroundTrack
+    first_frame: int
+    area_px: float                       # the first blob's (a tie between two found walking at once: the larger)
+    last_seen: tuple[int, np.ndarray]
+    heights: list[float]
 
 
 class StartFinder:
@@ -66,63 +87,99 @@ class StartFinder:
     def __init__(self, cameras: list[Camera], dt: float, config: AutoStartConfig = AutoStartConfig()) -> None:
         self.cameras = list(cameras)
         self.config = config
-        self.track = GroundTrack(dt)
+        self.dt = float(dt)
         self.frames_seen = 0
         self.frames_detected = 0
-        self.last_detection: PersonDetection | None = None
-        self.heights: list[float] = []
-        self._found: tuple[int, int] | None = None     # (start frame, first frame of its window) once walking
-        self._last_seen: tuple[int, np.ndarray] | None = None   # (frame, ground position) of the last sighting
+        self._candidates: list[_Candidate] = []
+        self._found: tuple[int, int, _Candidate] | None = None   # (start frame, its window's first frame, who)
         self._last_frame = -1
 
     @property
     def keep_frames(self) -> int:
         """How many frames before the current one a start can reach back to (the caller keeps them)."""
-        return int(np.ceil(self.config.fit_window_s / self.track.dt)) + 2
+        return int(np.ceil(self.config.fit_window_s / self.dt)) + 2
 
     def estimated_height(self) -> float | None:
-        """Median height (m) of the person over the frames seen wholly so far (None before any)."""
-        return float(np.median(self.heights)) if self.heights else None
+        """Median height (m) of the person found walking (before that: of the one seen wholly in the most
+        frames) over the frames seen wholly so far (None before any)."""
+        if self._found is not None:
+            heights = self._found[2].heights
+        else:
+            heights = max((c.heights for c in self._candidates), key=len, default=[])
+        return float(np.median(heights)) if heights else None
+
+    def _predicted(self, candidate: _Candidate, frame: int) -> tuple[np.ndarray, float]:
+        """Where ``candidate`` would be at ``frame`` (carried on at their velocity over the window, once half
+        its frames have a position) and how far from there a detection may lie (m; with no velocity, as far
+        as a fast walk reaches since the last sighting)."""
+        cfg = self.config
+        last, position = candidate.last_seen
+        since = (frame - last) * self.dt
+        velocity = candidate.track.velocity(last, cfg.window_s, min_fraction=0.5)
+        if velocity is None:
+            return position, cfg.gate_m + cfg.speed_range_m_s[1] * since
+        return position + since * velocity, cfg.gate_m
 
     def push(self, frame: int, features: list[Any]) -> StartDescription | None:
         """The start description once the person was found walking and ``fit_window_s`` of track is in,
         else None. Its frame is the central frame of the window the walk was found over."""
         self.frames_seen += 1
         self._last_frame = frame
-        # the person seen last (within gate_s), where they would be now (carried on at their velocity over
-        # the window, once half its frames have a position; else anywhere a fast walk reaches): each
-        # camera's blob nearest to there, and a detection farther than gate_m from it is someone else (or
-        # two people's blobs merged)
         cfg = self.config
-        predicted, reach = None, cfg.gate_m
-        since = None if self._last_seen is None else (frame - self._last_seen[0]) * self.track.dt
-        if since is not None and since <= cfg.gate_s:
-            velocity = self.track.velocity(self._last_seen[0], cfg.window_s, min_fraction=0.5)
-            predicted = self._last_seen[1] + (0.0 if velocity is None else since * velocity)
-            reach = cfg.gate_m + (cfg.speed_range_m_s[1] * since if velocity is None else 0.0)
-        elif self._last_seen is None and cfg.follow_near is not None:
-            predicted, reach = np.asarray(cfg.follow_near, float), cfg.follow_radius_m
-        detection = detect_person(list(features), self.cameras,
-                                  near=None if predicted is None else np.append(predicted, 0.9))
-        whole = detection is not None and wholly_in_view(detection, self.cameras) and (
-            predicted is None or np.linalg.norm(detection.position - predicted) <= reach)
-        self.track.add(frame, detection.position if whole else None)
-        if whole:
-            self._last_seen = (frame, detection.position)
+        seen = [person_blobs(f, c.name) for f, c in zip(features, self.cameras)]
+        taken: set[PersonBlob] = set()
+        # everyone followed (within gate_s of their last sighting): each camera's blob nearest to where they
+        # would be now, a detection farther than the reach someone else (or two people's blobs merged); the
+        # one seen first chooses first
+        followed = [self._found[2]] if self._found is not None else self._candidates
+        for candidate in followed:
+            predicted, reach = self._predicted(candidate, frame)
+            detection = locate_person(seen, self.cameras, near=np.append(predicted, 0.9))
+            whole = (detection is not None and wholly_in_view(detection, self.cameras)
+                     and np.linalg.norm(detection.position - predicted) <= reach
+                     and not taken.intersection(detection.blobs))
+            candidate.track.add(frame, detection.position if whole else None)
+            if whole:
+                taken.update(detection.blobs)
+                candidate.last_seen = (frame, detection.position)
+                if np.isfinite(detection.height):
+                    candidate.heights.append(float(detection.height))
         if self._found is not None:
-            if frame - self._found[1] >= self.track.span(cfg.fit_window_s):
+            if frame - self._found[1] >= self._found[2].track.span(cfg.fit_window_s):
                 return self.finish()
             return None
-        if not whole:
-            return None
-        self.frames_detected += 1
-        self.last_detection = detection
-        if np.isfinite(detection.height):
-            self.heights.append(float(detection.height))
-        velocity = self.track.velocity(frame, cfg.window_s, cfg.min_fraction)
-        if velocity is None or np.linalg.norm(velocity) < cfg.min_speed_m_s:
-            return None
-        self._found = (int(self.track.central_frame(frame, cfg.window_s)), frame - self.track.span(cfg.window_s))
+        self._candidates = [c for c in self._candidates if (frame - c.last_seen[0]) * self.dt <= cfg.gate_s]
+        # newcomers: every person-sized blob nobody followed took; with follow_near, only the one nearest that
+        # point (within follow_radius_m) while nobody is followed yet
+        newcomers = []
+        for blobs, camera in zip(seen, self.cameras):
+            for blob in blobs:
+                if blob in taken or len(self._candidates) + len(newcomers) >= cfg.max_candidates:
+                    continue
+                ground = ground_point(camera, blob.feet_uv)
+                detection = None if ground is None else locate_person(seen, self.cameras, near=np.append(ground, 0.9))
+                if detection is None or not wholly_in_view(detection, self.cameras) or taken.intersection(detection.blobs):
+                    continue
+                taken.update(detection.blobs)
+                newcomers.append((blob, detection))
+        if cfg.follow_near is not None:
+            gap = lambda d: float(np.linalg.norm(d.position - np.asarray(cfg.follow_near)))  # noqa: E731
+            near = [(b, d) for b, d in newcomers if gap(d) <= cfg.follow_radius_m]
+            newcomers = [] if self._candidates or not near else [min(near, key=lambda bd: gap(bd[1]))]
+        for blob, detection in newcomers:
+            track = GroundTrack(self.dt)
+            track.add(frame, detection.position)
+            heights = [float(detection.height)] if np.isfinite(detection.height) else []
+            self._candidates.append(_Candidate(track, frame, blob.area_px, (frame, detection.position), heights))
+        if any(c.last_seen[0] == frame for c in self._candidates):
+            self.frames_detected += 1
+        # the first seen (then the larger) of those walking steadily over window_s
+        for candidate in sorted(self._candidates, key=lambda c: (c.first_frame, -c.area_px)):
+            velocity = candidate.track.velocity(frame, cfg.window_s, cfg.min_fraction)
+            if velocity is not None and np.linalg.norm(velocity) >= cfg.min_speed_m_s:
+                self._found = (int(candidate.track.central_frame(frame, cfg.window_s)),
+                               frame - candidate.track.span(cfg.window_s), candidate)
+                break
         return None
 
     def finish(self) -> StartDescription | None:
@@ -130,10 +187,10 @@ class StartFinder:
         once ``fit_window_s`` is in; call it when the sequence ends before that), else None."""
         if self._found is None:
             return None
-        central, first = self._found
-        window_s = (self._last_frame - first) * self.track.dt
-        velocity = self.track.velocity(self._last_frame, window_s, min_fraction=0.0)
-        position = self.track.fitted_position(self._last_frame, window_s, at=central)
+        central, first, candidate = self._found
+        window_s = (self._last_frame - first) * self.dt
+        velocity = candidate.track.velocity(self._last_frame, window_s, min_fraction=0.0)
+        position = candidate.track.fitted_position(self._last_frame, window_s, at=central)
         speed = float(np.clip(np.linalg.norm(velocity), *self.config.speed_range_m_s))
         return StartDescription(frame=central, position=(float(position[0]), float(position[1])),
                                 heading=float(np.arctan2(velocity[1], velocity[0])), speed=speed,
