@@ -141,6 +141,27 @@ def test_a_person_who_stood_where_the_background_was_learned_is_found_walking_of
     assert found.speed == pytest.approx(SPEED, rel=0.2)
 
 
+def test_a_camera_too_far_and_low_to_place_the_feet_does_not_start_it():
+    """From 10 m at 0.5 m high one map row at the feet spans ~1.3 m of depth: the feet rows would put the
+    person metres off, so the finder does not start and says why; allowed such rows, it starts."""
+    from awalker_tracker.vision.camera import Camera
+
+    far = Camera.look_at("far", 320, 240, 300.0, np.array([0.3, -10.0, 0.5]), np.array([0.3, 0.0, 0.9]))
+    background = background_image(far, seed=0)
+    rng = np.random.default_rng(5)
+    extractor = FeatureExtractor(CONFIG)
+    for _ in range(CONFIG.background_frames):
+        extractor.process(noisy(background, rng))
+    images, _ = render_frames(far, walking(40, x0=-0.8), background, seed=2)
+    features = [extractor.process(image) for image in images]
+    found, finder = _start(far, features, AutoStartConfig(fit_window_s=0.9))
+    assert found is None and "too far or too low" in finder.status(), finder.status()
+    allowed, finder = _start(far, features, AutoStartConfig(fit_window_s=0.9, max_row_depth_m=2.0))
+    assert allowed is not None, finder.status()
+    with pytest.raises(ValueError, match="invalid settings"):
+        AutoStartConfig(max_row_depth_m=0.0)
+
+
 @pytest.fixture(scope="module")
 def two_walking():
     """The side camera's features of two people walking along +x: A from x = -0.8 m as in ``frames``, B from

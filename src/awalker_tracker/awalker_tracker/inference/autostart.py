@@ -12,7 +12,10 @@ what starts on a person who stood still before walking off: with no empty frames
 learned from the walk itself, the standing person becomes part of it, and where they stood a "ghost"
 blob stays behind them, motionless; a finder following only the first one seen followed the ghost
 and never started (real walks hands off, one camera: 69_01 seed 0). Only frames where the person is
-wholly in view of some camera count. Once someone's detections over ``window_s``
+wholly in view of some camera count, and with one camera only where one map row at the feet spans at most
+``max_row_depth_m`` of depth (``PersonDetection.row_depth_m``): from far and low (9.4 m at 1.6 m high, 0.9 m
+per row on a tuning walk) the feet rows were metres off, and a track restarted there began 6.8 m from the
+person; the finder then says the camera is too far or too low rather than start. Once someone's detections over ``window_s``
 (at least ``min_fraction`` of its frames) form a ground track moving at ``min_speed_m_s`` or
 faster (the first seen of those who do, then the larger blob), the start is the central frame of that window's detections (the caller keeps the window's
 frames and tracks from there: the track begins about ``window_s`` / 2 before the walk was found).
@@ -27,6 +30,7 @@ person's height (``estimated_height``), from which a body can be scaled when nob
 """
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,7 +39,7 @@ import numpy as np
 from awalker_tracker.inference.filter_model import InitialSpread, StartDescription
 from awalker_tracker.vision.camera import Camera
 from awalker_tracker.vision.detection import (
-    GroundTrack, PersonBlob, ground_point, locate_person, person_blobs, wholly_in_view)
+    GroundTrack, PersonBlob, PersonDetection, ground_point, locate_person, person_blobs, wholly_in_view)
 
 
 # Initial particles of an automatic start: wider than around a hand-written start (one camera places the
@@ -58,11 +62,12 @@ class AutoStartConfig:
     follow_near: tuple[float, float] | None = None   # world ground point (m): follow the person first seen near it
     follow_radius_m: float = 1.5                     # ... within this distance (several people in view)
     max_candidates: int = 4         # people (or ghosts) followed at once while none walks steadily
+    max_row_depth_m: float = 0.5    # one camera: a feet row spanning more depth than this per map row does not count
 
     def __post_init__(self) -> None:
         if not (0 < self.window_s <= self.fit_window_s and 0 < self.min_fraction <= 1 and self.gate_s >= 0
                 and self.gate_m > 0 and self.min_speed_m_s >= 0 and 0 < self.speed_range_m_s[0] < self.speed_range_m_s[1]
-                and self.follow_radius_m > 0 and self.max_candidates >= 1):
+                and self.follow_radius_m > 0 and self.max_candidates >= 1 and self.max_row_depth_m > 0):
             raise ValueError(f"AutoStartConfig: invalid settings {self}")
         if self.follow_near is not None and not (len(self.follow_near) == 2 and np.all(np.isfinite(self.follow_near))):
             raise ValueError(f"AutoStartConfig: follow_near must be a finite ground point (x, y) in m, got "
@@ -91,6 +96,7 @@ class StartFinder:
         self.frames_seen = 0
         self.frames_detected = 0
         self._candidates: list[_Candidate] = []
+        self._coarse: deque[float] = deque(maxlen=300)   # row depths (m) of recent detections too coarse to count
         self._found: tuple[int, int, _Candidate] | None = None   # (start frame, its window's first frame, who)
         self._last_frame = -1
 
@@ -128,6 +134,15 @@ class StartFinder:
         cfg = self.config
         seen = [person_blobs(f, c.name) for f, c in zip(features, self.cameras)]
         taken: set[PersonBlob] = set()
+
+        def placed(detection: PersonDetection | None) -> bool:
+            """Wholly in view, and (one camera's feet row) placed to within ``max_row_depth_m`` per map row."""
+            if detection is None or not wholly_in_view(detection, self.cameras):
+                return False
+            if detection.row_depth_m > cfg.max_row_depth_m:
+                self._coarse.append(detection.row_depth_m)
+                return False
+            return True
         # everyone followed (within gate_s of their last sighting): each camera's blob nearest to where they
         # would be now, a detection farther than the reach someone else (or two people's blobs merged); the
         # one seen first chooses first
@@ -135,8 +150,7 @@ class StartFinder:
         for candidate in followed:
             predicted, reach = self._predicted(candidate, frame)
             detection = locate_person(seen, self.cameras, near=np.append(predicted, 0.9))
-            whole = (detection is not None and wholly_in_view(detection, self.cameras)
-                     and np.linalg.norm(detection.position - predicted) <= reach
+            whole = (placed(detection) and np.linalg.norm(detection.position - predicted) <= reach
                      and not taken.intersection(detection.blobs))
             candidate.track.add(frame, detection.position if whole else None)
             if whole:
@@ -158,7 +172,7 @@ class StartFinder:
                     continue
                 ground = ground_point(camera, blob.feet_uv)
                 detection = None if ground is None else locate_person(seen, self.cameras, near=np.append(ground, 0.9))
-                if detection is None or not wholly_in_view(detection, self.cameras) or taken.intersection(detection.blobs):
+                if not placed(detection) or taken.intersection(detection.blobs):
                     continue
                 taken.update(detection.blobs)
                 newcomers.append((blob, detection))
@@ -198,6 +212,10 @@ class StartFinder:
 
     def status(self) -> str:
         """What has been seen so far, for a log line while waiting."""
+        if self.frames_detected == 0 and self._coarse:
+            return (f"no person placed in {self.frames_seen} frames: one image row at their feet spans a median "
+                    f"{np.median(self._coarse):.2f} m of depth (more than {self.config.max_row_depth_m:g} m: the "
+                    "camera is too far or too low to place them from the feet)")
         if self.frames_detected == 0:
             near = ("" if self.config.follow_near is None else
                     f" within {self.config.follow_radius_m:g} m of ({self.config.follow_near[0]:g}, "
