@@ -156,6 +156,38 @@ def test_stride_update_at_heel_strike(table: cyclic_gaits.GaitTable, rule: str) 
     np.testing.assert_allclose(ctrl.time_since_strike, (1 - ev.strike_fraction) / 30)
 
 
+def test_the_usual_gait_target_pulls_towards_the_stiffness_of_a_persons_gait_at_the_target_speed(
+        table: cyclic_gaits.GaitTable) -> None:
+    """stiffness_target "usual_gait": at the strike eq. (5) pulls kappa_bar towards the cyclic gait's kappa at
+    ``target_speed`` and the usual step length there (0.8 m/s: ~0.23 N m/rad per kg, a third of mu_kappa),
+    not towards the constant; without a target speed, towards the gait at the speed of the stride just taken."""
+    quiet = control.ControlPrior.from_gait_table(table, kappa_noise_variance=1e-10, kappa_bar_variance=1e-6,
+                                                 impulse_variance=1e-12, stiffness_target="usual_gait")
+    rng = np.random.default_rng(2)
+    walkers, ctrl = _start(quiet, table, 5, rng)
+    for _ in range(30):
+        before = ctrl.copy()
+        pre_walkers = walkers
+        walkers, ctrl, ev = control.sample_transition(PARAMS, quiet, walkers, ctrl, 1 / 30, rng, target_speed=0.8)
+        if ev.heel_strike.any():
+            break
+    assert ev.heel_strike.all()
+    usual = table.lookup(0.8, cyclic_gaits.preferred_step_length(PARAMS, 0.8))[2]
+    assert 0.1 < usual < 0.35
+    m_next = quiet.beta * usual + (1 - quiet.beta) * before.stiffness_mean_mean
+    assert np.all(np.abs(ctrl.stiffness - m_next) < 0.01)            # the new stride's kappa_t, drawn there
+    assert np.all(ctrl.stiffness < 0.5 * quiet.mu_kappa)
+    # the stride's own speed: step length over the stride's time
+    stride_time = np.full(5, 0.55)
+    own = quiet.stiffness_mean_target(PARAMS, pre_walkers, stride_time)
+    speed = np.clip(PARAMS.step_length(-pre_walkers.stance_angle) / stride_time, table.speeds[0], table.speeds[-1])
+    np.testing.assert_allclose(own, table.lookup(speed, cyclic_gaits.preferred_step_length(PARAMS, speed))[2])
+    constant = dataclasses.replace(quiet, stiffness_target="constant")
+    np.testing.assert_allclose(constant.stiffness_mean_target(PARAMS, pre_walkers, stride_time), quiet.mu_kappa)
+    with pytest.raises(ValueError, match="stiffness_target"):
+        dataclasses.replace(quiet, stiffness_target="psychic")
+
+
 def test_take_and_copy(prior: control.ControlPrior, table: cyclic_gaits.GaitTable) -> None:
     rng = np.random.default_rng(3)
     _, ctrl = _start(prior, table, 4, rng)

@@ -167,6 +167,8 @@ class TrackerConfig:
     # filter (fallen_log_penalty). At 0.05 the filter lost a 600-particle marker track
     # (test_filter_model.py), so 0.02.
     kappa_bar_variance: float = 0.02
+    # what eq. (5) pulls each stride's mean stiffness towards (control.ControlPrior.stiffness_target)
+    stiffness_target: str = "constant"
     # Exponent on the likelihood (tempering). The per-part image log-likelihoods are sums over
     # strongly correlated pixels, so differences between particles of tens of log units are not
     # independent evidence; at 1.0 the weights collapse onto a few particles every frame (ESS 4-9
@@ -396,7 +398,7 @@ class TrackerModel:
         # the packaged table is solved for L = 0.9 m: rescaled (exactly) to this body's leg length
         self.gaits = (gait_table if gait_table is not None else cyclic_gaits.GaitTable.load()).scaled_to(self.params)
         self.prior = prior if prior is not None else control.ControlPrior.from_gait_table(
-            self.gaits, kappa_bar_variance=config.kappa_bar_variance)
+            self.gaits, kappa_bar_variance=config.kappa_bar_variance, stiffness_target=config.stiffness_target)
         # rad: the spread of the particles' postures, 0 (upright) with fewer cameras than posture_min_cameras
         self.posture_spread = config.posture_spread if len(cameras or ()) >= config.posture_min_cameras else 0.0
         ceiling, self.pelvis_ceiling_spread, ceiling_drift = config.pelvis_ceiling_for(len(cameras or ()))
@@ -415,6 +417,7 @@ class TrackerModel:
         # frame periods the next transition spans (``Tracker.push``: from the stamps; > 1 over frames no image came for)
         self.frames_per_step = 1
         self._depth_band: tuple[np.ndarray, float] | None = None   # this frame's centre and half width, one camera
+        self._target_speed = float(start.speed)      # m/s, the posterior's walking speed (rejuvenate)
         # the naming test (TrackerConfig.naming_test_particles): log odds of the other naming, each frame's evidence
         # (filter frame index -> nats), the decision taken at each frame (True: every particle renamed its legs
         # there), and what this frame's likelihood call needs (rejuvenate -> log_likelihood)
@@ -511,7 +514,7 @@ class TrackerModel:
         offsets = (((1.0 - share) + share * rng.random(walker.stance_angle.size)) * frames_per_step).astype(int)
         for j in range(int(offsets.max())):
             moved, moved_control, events = self._control.sample_transition(
-                self.params, self.prior, walker, control, self.config.dt, rng)
+                self.params, self.prior, walker, control, self.config.dt, rng, target_speed=self._target_speed)
             # stop before a heel strike or a fall: the start description fixes the stance leg
             stop = np.asarray(events.heel_strike, bool) | np.asarray(events.fallen, bool)
             offsets = np.where(stop, 0, offsets)
@@ -549,7 +552,8 @@ class TrackerModel:
     def _transition_frame(self, states: TrackerStates, rng: np.random.Generator) -> tuple[TrackerStates, Any]:
         """One frame period of the dynamics, s_t ~ p(s_t | s_{t-1})."""
         walker, control, events = self._control.sample_transition(
-            self.params, self.prior, states.walker, states.control, self.config.dt, rng)
+            self.params, self.prior, states.walker, states.control, self.config.dt, rng,
+            target_speed=self._target_speed)
         kin, pose = self._kin.sample_posed_kinematics(self.kin_config, self.body, self.params, walker,
                                                       states.kin, rng)
         # walking speed (inference.speed): horizontal pelvis displacement per frame, averaged over about one step
@@ -657,10 +661,11 @@ class TrackerModel:
         """Hold the walkers while the person stands still and re-acquire a lost track from the image
         (``inference.recovery``)."""
         self._depth_band = None
-        if self.monitor is None or not isinstance(obs, ImageObservation):
-            return states
         w = np.exp(log_weights - np.max(log_weights))
         w /= w.sum()
+        self._target_speed = float(w @ states.speed)      # the posterior's speed: eq. (5)'s "usual_gait" target
+        if self.monitor is None or not isinstance(obs, ImageObservation):
+            return states
         pelvis = w @ states.pose.markers[:, MARKER_NAMES.index("pelvis")]
         order = self.monitor.update(frame, obs.features, pelvis)
         self._depth_band = self.monitor.depth_band(frame)

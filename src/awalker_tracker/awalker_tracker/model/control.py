@@ -45,7 +45,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from .cyclic_gaits import GaitTable, fit_impulse_mean, gait_initial_state
+from .cyclic_gaits import GaitTable, fit_impulse_mean, gait_initial_state, preferred_step_length
 from .dynamics import StepEvents, advance, impulse_for_stance_rate
 from .walker import WalkerParams, WalkerState
 
@@ -53,6 +53,7 @@ from .walker import WalkerParams, WalkerState
 MIN_IMPULSE_MEAN = 1e-3
 #: Toe-off rules for the Gamma mean of iota (see the module docstring).
 TOE_OFF_RULES = ("cyclic_gait", "bilinear")
+STIFFNESS_TARGETS = ("constant", "usual_gait")
 
 
 @dataclass(frozen=True)
@@ -68,6 +69,9 @@ class ControlPrior:
     impulse_mean_coefficients: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     toe_off_rule: str = "cyclic_gait"
     gait_table: GaitTable | None = field(default=None, compare=False, repr=False)  # "cyclic_gait" rule
+    # what eq. (5) pulls kappa_bar towards at each stride: "constant" mu_kappa (the paper), or "usual_gait": the
+    # stiffness of the cyclic gait at the speed of the stride just taken and a person's usual step length there
+    stiffness_target: str = "constant"
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.beta <= 1.0:
@@ -81,6 +85,11 @@ class ControlPrior:
             raise ValueError(f"ControlPrior.toe_off_rule must be one of {TOE_OFF_RULES}, got {self.toe_off_rule!r}")
         if self.toe_off_rule == "cyclic_gait" and self.gait_table is None:
             raise ValueError("ControlPrior: the 'cyclic_gait' toe-off rule needs gait_table")
+        if self.stiffness_target not in STIFFNESS_TARGETS:
+            raise ValueError(f"ControlPrior.stiffness_target must be one of {STIFFNESS_TARGETS}, got "
+                             f"{self.stiffness_target!r}")
+        if self.stiffness_target == "usual_gait" and self.gait_table is None:
+            raise ValueError("ControlPrior: the 'usual_gait' stiffness target needs gait_table")
 
     @classmethod
     def from_gait_table(cls, table: GaitTable, **overrides) -> "ControlPrior":
@@ -109,6 +118,26 @@ class ControlPrior:
             _, stance_rate, _, _ = self.gait_table.gait_for_stiffness(stride_stiffness, step)
             mean = impulse_for_stance_rate(params, pre_state, stance_rate)
         return np.maximum(np.nan_to_num(mean, nan=MIN_IMPULSE_MEAN), MIN_IMPULSE_MEAN)
+
+    def stiffness_mean_target(self, params: WalkerParams, pre_state: WalkerState, stride_time: np.ndarray,
+                              speed: float | None = None) -> np.ndarray:
+        """mu_kappa of eq. (5) for walkers just before their heel strike (N m/rad per kg): the constant, or
+        ("usual_gait") the cyclic gait's kappa at ``speed`` (m/s; None: the speed of the stride ending, step
+        length / ``stride_time`` s), clamped to the table's speeds, and the usual step length at that speed;
+        mu_kappa where the table has no gait there."""
+        if self.stiffness_target == "constant":
+            return np.full(np.shape(stride_time), self.mu_kappa)
+        table = self.gait_table
+        if speed is None:
+            speed = params.step_length(-pre_state.stance_angle) / np.maximum(stride_time, 1e-3)
+        speed = np.clip(np.broadcast_to(np.asarray(speed, float), np.shape(stride_time)), table.speeds[0],
+                        table.speeds[-1])
+        usual = preferred_step_length(params, speed)
+        covered = table.covers(speed, usual)
+        target = np.full(np.shape(speed), self.mu_kappa)
+        if covered.any():
+            target[covered] = table.lookup(speed[covered], usual[covered])[2]
+        return target
 
     def sample_impulse(self, rng: np.random.Generator, mean: np.ndarray) -> np.ndarray:
         """iota ~ Gamma with the given mean (m/s) and variance sigma_iota^2 (shape mean^2/var, scale var/mean)."""
@@ -167,8 +196,11 @@ def sample_transition(
     dt: float,
     rng: np.random.Generator,
     substeps: int | None = None,
+    target_speed: float | None = None,
 ) -> tuple[WalkerState, ControlState, StepEvents]:
-    """Sample one frame of the prior for N particles: kappa_t, dynamics, iota at strikes, kappa_bar stats."""
+    """Sample one frame of the prior for N particles: kappa_t, dynamics, iota at strikes, kappa_bar stats.
+    ``target_speed`` (m/s): the speed whose usual gait eq. (5) pulls towards with the "usual_gait" target
+    (a tracker's posterior speed); None: each walker's stride just taken."""
     m, v = control.stiffness_mean_mean, control.stiffness_mean_variance
     noise = prior.kappa_noise_variance
     kappa = m + np.sqrt(v + noise) * rng.standard_normal(m.shape)
@@ -184,6 +216,10 @@ def sample_transition(
     stride_kappa = np.full(m.shape, np.nan)
 
     def impulse_at_strike(indices: np.ndarray, pre_state: WalkerState) -> np.ndarray:
+        if prior.stiffness_target != "constant":
+            stride_time = control.time_since_strike[indices] + 0.5 * dt
+            m_next[indices] = (prior.beta * prior.stiffness_mean_target(params, pre_state, stride_time, target_speed)
+                               + keep * m_post[indices])
         # the new stride's first kappa_t, from the predictive law of its kappa_bar; the toe-off aims at it
         drawn = m_next[indices] + np.sqrt(v_next[indices] + noise) * rng.standard_normal(indices.size)
         stride_kappa[indices] = drawn
