@@ -599,8 +599,12 @@ class TrackerModel:
                    obs: Any, rng: np.random.Generator) -> TrackerStates:
         """Called by the filter with the particles' current log weights, the states before the transition
         (``parent``, None at the first frame) and after it, before the likelihood of ``obs`` is computed: the
-        recovery (``_recovered``), then the naming test's renaming (``_named``)."""
-        states = self._recovered(frame, log_weights, parent, states, obs, rng)
+        recovery (``_recovered``), then the naming test's renaming (``_named``). Also keeps the posterior's walking
+        speed, eq. (5)'s target with ``TrackerConfig.stiffness_target`` "usual_gait"."""
+        w = np.exp(log_weights - np.max(log_weights))
+        w /= w.sum()
+        self._target_speed = float(w @ states.speed)
+        states = self._recovered(frame, log_weights, w, parent, states, obs, rng)
         return self._named(frame, log_weights, parent, states, obs)
 
     @property
@@ -656,14 +660,11 @@ class TrackerModel:
         self._naming_evidence[frame] = float(logsumexp(w + scale * np.asarray(mirrored, float))
                                              - logsumexp(w + scale * loglik[rows]))
 
-    def _recovered(self, frame: int, log_weights: np.ndarray, parent: TrackerStates | None, states: TrackerStates,
-                   obs: Any, rng: np.random.Generator) -> TrackerStates:
+    def _recovered(self, frame: int, log_weights: np.ndarray, w: np.ndarray, parent: TrackerStates | None,
+                   states: TrackerStates, obs: Any, rng: np.random.Generator) -> TrackerStates:
         """Hold the walkers while the person stands still and re-acquire a lost track from the image
-        (``inference.recovery``)."""
+        (``inference.recovery``); ``w``: the normalised weights of ``log_weights``."""
         self._depth_band = None
-        w = np.exp(log_weights - np.max(log_weights))
-        w /= w.sum()
-        self._target_speed = float(w @ states.speed)      # the posterior's speed: eq. (5)'s "usual_gait" target
         if self.monitor is None or not isinstance(obs, ImageObservation):
             return states
         pelvis = w @ states.pose.markers[:, MARKER_NAMES.index("pelvis")]

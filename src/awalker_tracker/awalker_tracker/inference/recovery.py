@@ -42,7 +42,7 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   single camera sees a step toward or away from it hardly at all, so the depth wanders like a random
   walk (the real walks' pelvis error along the view over the last second of a run: median 0.18 m, 90th
   percentile 0.56 m). With ``depth_band_m`` > 0, where this frame's feet row counts (above), from
-  ``depth_band_delay_s`` after the first frame tracked on (``depth_band_centre``), walkers whose pelvis
+  ``depth_band_delay_s`` after the first frame tracked on (``LostTrackMonitor.depth_band``), walkers whose pelvis
   lies more than ``depth_band_m`` from it over the ground lose up to 0.5 (excess / ``depth_band_sigma_m``)^2
   nats (``TrackerModel.depth_band_penalty``; the band is ``depth_band_rows`` (1) map rows of the feet
   row's depth wide where that is wider), levelling off at ~-log(``depth_band_outlier``) because a

@@ -70,7 +70,8 @@ class ControlPrior:
     toe_off_rule: str = "cyclic_gait"
     gait_table: GaitTable | None = field(default=None, compare=False, repr=False)  # "cyclic_gait" rule
     # what eq. (5) pulls kappa_bar towards at each stride: "constant" mu_kappa (the paper), or "usual_gait": the
-    # stiffness of the cyclic gait at the speed of the stride just taken and a person's usual step length there
+    # stiffness of the cyclic gait at sample_transition's target_speed (else the speed of the stride just taken)
+    # and a person's usual step length there
     stiffness_target: str = "constant"
 
     def __post_init__(self) -> None:
