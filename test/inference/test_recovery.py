@@ -164,8 +164,9 @@ def test_one_camera_far_and_low_holds_the_depth_only_to_its_feet_rows_resolution
     ``lost_rows_one_camera`` rows as well as 0.6 m), 4 m off still is; the depth band is a row wide, not
     ``depth_band_m``. With the rows set to 0 the fixed distances hold again."""
     far = Camera.look_at("far", 320, 240, 300.0, np.array([0.3, -10.0, 0.5]), np.array([0.3, 0.0, 0.9]))
-    features = features_of(far, walking_poses(3, x0=0.4), 2)[0][-1]
-    markers = pose_body(BODY, PARAMS, walking_poses(3, x0=0.4)[-1].walker, walking_poses(3, x0=0.4)[-1].kin).markers[0]
+    poses = walking_poses(3, x0=0.4)
+    features = features_of(far, poses, 2)[0][-1]
+    markers = pose_body(BODY, PARAMS, poses[-1].walker, poses[-1].kin).markers[0]
     pelvis = markers[PELVIS]
     for rows, offset, lost in ((2.0, 1.2, False), (2.0, 4.0, True), (0.0, 1.2, True)):
         config = RecoveryConfig(lost_after_s=0.0, lost_rows_one_camera=rows, depth_band_rows=rows / 2)
