@@ -109,37 +109,6 @@ def test_a_sequence_ending_before_the_fit_window_is_in_still_starts(frames):
     assert StartFinder([camera], DT).finish() is None
 
 
-def test_a_person_whose_hips_look_like_the_background_is_still_placed_by_the_feet(frames):
-    """Hips whose colours lie near the background leave a band of weak foreground between the trunk and the
-    legs; the finder bridges it (``bridge_rows``) and starts where the person is. Without the bridge the
-    pieces part: the trunk alone, placed by its lowest row, stands metres behind the person."""
-    from dataclasses import replace
-
-    from awalker_tracker.vision.detection import person_blob
-
-    camera, features, poses = frames
-    banded = []
-    for f in features:
-        blob = person_blob(f) if f is not None else None
-        if blob is None:
-            banded.append(f)
-            continue
-        d = f.downsample
-        top, bottom = (int(round((v + 0.5) / d)) for v in blob.box[1::2])
-        hips = top + (bottom - top) // 2
-        llr = f.llr.copy()
-        band = llr[:, hips - 2: hips + 2, :]
-        band[...] = np.where(np.max(band, axis=0) > 2.0, 1.0, band)     # 4 map rows: weak foreground
-        banded.append(replace(f, llr=llr))
-    found, _ = _start(camera, banded, AutoStartConfig(fit_window_s=0.9))
-    assert found is not None
-    pose = poses[found.frame - 4]
-    pelvis = pose_body(BODY, PARAMS, pose.walker, pose.kin).markers[0, 0, :2]
-    assert np.linalg.norm(np.array(found.position) - pelvis) < 0.25
-    cut, _ = _start(camera, banded, AutoStartConfig(fit_window_s=0.9, bridge_rows=0))
-    assert cut is None or np.linalg.norm(np.array(cut.position) - pelvis) > 1.0
-
-
 def test_a_person_standing_still_does_not_start_it(frames):
     camera, features, _ = frames
     finder = StartFinder([camera], DT)
@@ -242,8 +211,6 @@ def test_config_is_checked():
         AutoStartConfig(follow_near=(np.nan, 0.0))
     with pytest.raises(ValueError, match="invalid settings"):
         AutoStartConfig(follow_near=(0.0, 0.0), follow_radius_m=0.0)
-    with pytest.raises(ValueError, match="invalid settings"):
-        AutoStartConfig(bridge_rows=-1)
 
 
 def test_the_automatic_start_follows_one_of_two_people(tmp_path):

@@ -197,40 +197,6 @@ def test_a_row_lost_across_the_waist_does_not_cut_the_person_in_two(scene):
     assert any(b.box[:2] == clean.box[:2] and b.box[3] == clean.box[3] for b in blobs)   # the person alone
 
 
-def test_a_band_of_weak_foreground_across_the_hips_does_not_cut_the_legs_off(scene):
-    """Hips whose colours lie near a background learned from the walk leave a band a few rows high where the
-    foreground is likelier than the background but under the threshold: the trunk and the legs stay one blob,
-    and the height and feet row with it. A band crossed by a row where the background is likelier, or one
-    taller than ``bridge_rows``, still parts the pieces (the floor between a person and a ghost)."""
-    from dataclasses import replace
-
-    from awalker_tracker.vision.detection import locate_person, person_blobs
-
-    cameras, features, _ = scene
-    side = features[0]
-    clean = person_blob(side, "side")
-    d = side.downsample
-    _, v0, _, v1 = (int(round((c + 0.5) / d)) for c in clean.box)
-    hips = v0 + (v1 - v0) // 2
-    weak = side.llr.copy()
-    band = weak[:, hips - 2 : hips + 3, :]
-    band[...] = np.where(np.max(band, axis=0) > 2.0, 1.0, band)      # 5 rows of the body: weak foreground
-    blobs = person_blobs(replace(side, llr=weak), "side", bridge_rows=8)
-    assert blobs[0].box == clean.box and blobs[0].feet_uv == pytest.approx(clean.feet_uv, abs=d)
-    whole = locate_person([[clean]], cameras[:1])
-    assert locate_person([blobs[:1]], cameras[:1]).height == pytest.approx(whole.height, abs=0.02)
-    # without the bridge (the default): the trunk's piece ends at the hips, and placed by its lowest row it is
-    # far behind and much taller
-    apart = person_blobs(replace(side, llr=weak), "side")
-    trunk = next(b for b in apart if b.box[1] == clean.box[1])
-    assert trunk.box[3] < clean.box[3] - 10 * d
-    assert locate_person([[trunk]], cameras[:1]).height > whole.height + 0.2
-    floor = weak.copy()
-    floor[:, hips, :] = -5.0                                          # one row of the band: background
-    assert person_blobs(replace(side, llr=floor), "side", bridge_rows=8)[0].box != clean.box
-    assert person_blobs(replace(side, llr=weak), "side", bridge_rows=4)[0].box != clean.box
-
-
 def test_ground_track_fit_drops_a_misplaced_detection():
     """A blob broken in two puts one frame's person metres away: the line fit drops it."""
     from awalker_tracker.vision.detection import GroundTrack

@@ -63,13 +63,11 @@ class AutoStartConfig:
     follow_radius_m: float = 1.5                     # ... within this distance (several people in view)
     max_candidates: int = 4         # people (or ghosts) followed at once while none walks steadily
     max_row_depth_m: float = 0.5    # one camera: a feet row spanning more depth than this per map row does not count
-    bridge_rows: int = 8            # map rows of weak foreground bridged in a blob's column (detection.person_blobs)
 
     def __post_init__(self) -> None:
         if not (0 < self.window_s <= self.fit_window_s and 0 < self.min_fraction <= 1 and self.gate_s >= 0
                 and self.gate_m > 0 and self.min_speed_m_s >= 0 and 0 < self.speed_range_m_s[0] < self.speed_range_m_s[1]
-                and self.follow_radius_m > 0 and self.max_candidates >= 1 and self.max_row_depth_m > 0
-                and self.bridge_rows >= 0):
+                and self.follow_radius_m > 0 and self.max_candidates >= 1 and self.max_row_depth_m > 0):
             raise ValueError(f"AutoStartConfig: invalid settings {self}")
         if self.follow_near is not None and not (len(self.follow_near) == 2 and np.all(np.isfinite(self.follow_near))):
             raise ValueError(f"AutoStartConfig: follow_near must be a finite ground point (x, y) in m, got "
@@ -134,7 +132,7 @@ class StartFinder:
         self.frames_seen += 1
         self._last_frame = frame
         cfg = self.config
-        seen = [person_blobs(f, c.name, bridge_rows=cfg.bridge_rows) for f, c in zip(features, self.cameras)]
+        seen = [person_blobs(f, c.name) for f, c in zip(features, self.cameras)]
         taken: set[PersonBlob] = set()
 
         def placed(detection: PersonDetection | None) -> bool:

@@ -5,10 +5,8 @@ The features of every camera carry per-class log-likelihood ratios (foreground v
 foreground; the largest connected blob covering at least ``min_area_fraction`` of the image is the person
 (``person_blob``), or, when the caller knows roughly where the person followed is (``near``: a tracked
 pelvis), the blob nearest to where that point projects (``blob_near``), so that a second person in
-view is not mixed into the detection. A band of weak foreground (likelier than the background, under
-the threshold) across the hips can cut the legs off; with ``bridge_rows`` a column's short run of it
-between foreground pixels joins the blob (``_bridge_weak_runs``; the start finder's). Its image is placed
-in the world with the calibrated camera and the ground plane z = 0 (``detect_person``):
+view is not mixed into the detection. Its image is placed in the world with the calibrated camera and
+the ground plane z = 0 (``detect_person``):
 
 The blob's column is the mean column of its upper half (head, shoulders, trunk): the pelvis is
 under it, while the lower half follows the stride (a planted foot, a trailing leg), the contact
@@ -32,7 +30,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import cv2
-import numba
 import numpy as np
 
 from awalker_tracker.vision.camera import Camera
@@ -115,41 +112,12 @@ def _fill_row_gaps(labels: np.ndarray, stats: np.ndarray) -> None:
         np.add.at(stats[:, cv2.CC_STAT_AREA], filled, 1)
 
 
-@numba.njit(cache=True, nogil=True)
-def _bridge_weak_runs(strong: np.ndarray, weak: np.ndarray, max_rows: int) -> np.ndarray:
-    """``strong`` (bool map) with each vertical run of at most ``max_rows`` ``weak`` pixels (foreground more
-    likely than background, not by the threshold) that has a strong pixel right above and right below it in
-    its column made strong too: hips or trousers whose colours lie near a background learned from the walk
-    itself (no empty frames; the person stood there) leave a band a few rows high between the trunk and the
-    legs, which would cut the legs off, and a torso alone puts the feet row metres too far. A run that
-    crosses one pixel where the background is likelier (the floor between a person and a ghost or a lamp)
-    is not bridged."""
-    out = strong.copy()
-    rows, cols = strong.shape
-    last_strong = np.full(cols, -1)      # per column: the row of the last strong pixel, only weak ones since
-    for r in range(rows):
-        for c in range(cols):
-            if strong[r, c]:
-                if last_strong[c] >= 0 and 0 < r - last_strong[c] - 1 <= max_rows:
-                    out[last_strong[c] + 1: r, c] = True
-                last_strong[c] = r
-            elif not weak[r, c]:
-                last_strong[c] = -1
-    return out
-
-
 def person_blobs(features: FrameFeatures, camera_name: str = "", threshold: float = 2.0,
-                 min_area_fraction: float = 0.0015, bridge_rows: int = 0) -> list[PersonBlob]:
+                 min_area_fraction: float = 0.0015) -> list[PersonBlob]:
     """Every foreground blob big enough to be a person (``threshold`` nats, at least ``min_area_fraction``
-    of the image: 460 px of 640x480), largest first; with ``bridge_rows`` > 0 a column's gap of at most that
-    many map rows of weak foreground between foreground pixels is bridged (``_bridge_weak_runs``); pieces of
-    one person parted by a single map row are one blob (``_join_stacked``) and its one-row notches are
-    filled (``_fill_row_gaps``)."""
-    best = np.max(features.llr, axis=0)
-    mask = best > threshold
-    if bridge_rows > 0:
-        mask = _bridge_weak_runs(mask, best > 0.0, bridge_rows)
-    mask = mask.astype(np.uint8)
+    of the image: 460 px of 640x480), largest first; pieces of one person parted by a single map row
+    are one blob (``_join_stacked``) and its one-row notches are filled (``_fill_row_gaps``)."""
+    mask = (np.max(features.llr, axis=0) > threshold).astype(np.uint8)
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     d = float(features.downsample)
     min_area = min_area_fraction * features.image_width * features.image_height
