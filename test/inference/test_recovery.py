@@ -178,6 +178,32 @@ def test_one_camera_far_and_low_holds_the_depth_only_to_its_feet_rows_resolution
         assert 1.0 < band[1] < 1.8 if rows else band[1] == config.depth_band_m   # one row's depth, or 0.3 m
 
 
+def test_one_camera_far_and_low_counts_a_feet_row_that_moves_by_one_map_row():
+    """From 10 m at 0.5 m high a map row spans ~1.3 m of depth, so a person walking along the view moves the
+    feet row in steps of ~1.3 m, more than ``reach_m``: within ``reach_rows`` rows of its depth such a step
+    still counts (the band and the lost test keep the depth), where a fixed 0.5 m dropped every feet row
+    after it for ``reach_reset_s``."""
+    far = Camera.look_at("far", 320, 240, 300.0, np.array([0.3, -10.0, 0.5]), np.array([0.3, 0.0, 0.9]))
+    there = walking_poses(3, x0=0.4)
+    nearer = walking_poses(3, x0=0.4)
+    nearer[-1].kin.contact_point = nearer[-1].kin.contact_point + np.array([0.0, -1.0])   # 1 m nearer the camera
+    frames = [features_of(far, poses, 2)[0][-1] for poses in (there, nearer)]
+    pelvis = [pose_body(BODY, PARAMS, p[-1].walker, p[-1].kin).markers[0, PELVIS] for p in (there, nearer)]
+    for rows, counts in ((RecoveryConfig.reach_rows, True), (0.0, False)):
+        monitor = LostTrackMonitor([far], RecoveryConfig(reach_rows=rows), dt=1 / 30, body_height_m=BODY.height)
+        for f in range(20):
+            monitor.update(f, [frames[f >= 10]], pelvis[f >= 10])
+        before, after = monitor.feet_row_position(9), monitor.feet_row_position(10)
+        assert before is not None
+        if counts:
+            assert after is not None and 0.8 < np.linalg.norm(after - before) < 1.8     # one row's step
+            assert all(monitor.feet_row_position(f) is not None for f in range(10, 20))
+            assert monitor.depth_band(19) is not None
+        else:
+            assert all(monitor.feet_row_position(f) is None for f in range(10, 20))
+            assert monitor.depth_band(19) is None
+
+
 def test_a_second_larger_person_does_not_count_as_losing_the_first():
     """Two people in view: the one followed stands at x = 0.4 m; another, nearer the camera (larger),
     at x = -0.5 m. The track on the first is not lost; a track on neither is."""

@@ -25,7 +25,8 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   off). A feet row counts only where the blob stands as tall as the body (``feet_row_height_ratio``,
   0.85-1.10 of its height; a walking person's blob is 0.91-0.96 on the real walks): legs hidden behind
   something, or a blob that lost the head or merged with a shadow, misplace it by metres. Nor where it
-  jumps: a feet row counts only within ``reach_m`` + ``reach_m_s`` x (time since the last one counted)
+  jumps: a feet row counts only within ``reach_m`` (or ``reach_rows`` map rows of its depth, where farther: a
+  far, low camera's feet row moves in steps of a whole row) + ``reach_m_s`` x (time since the last one counted)
   of where the counted ones put the person now (the last of them, moved on at their velocity over
   ``track_window_s``), unless none has counted for ``reach_reset_s``. Legs hidden behind a box put the
   blob's lowest row on the box's top edge, metres behind the person, and with the camera near head
@@ -93,7 +94,8 @@ class RecoveryConfig:
     lost_rows_one_camera: float = 2.0  # ... or this many map rows of the feet row's depth (row_depth_m), if farther
     feet_row_height_ratio: tuple[float, float] = (0.85, 1.10)  # ... of frames whose blob is this tall (x body height)
     reach_m: float = 0.5               # ... and whose feet row lies within this of where the counted ones put the
-    reach_m_s: float = 0.5             # ... person now, plus this per second since the last counted one,
+    reach_rows: float = 1.5            # ... person (or this many map rows of the feet row's depth, if farther),
+    reach_m_s: float = 0.5             # ... now, plus this per second since the last counted one,
     reach_reset_s: float = 2.0         # ... unless none counted for this long (module docstring)
     track_window_s: float = 0.5        # detections over this time give the person's ground velocity
     moving_m_s: float = 0.3            # slower ground tracks give no heading (and do not end a stop)
@@ -117,7 +119,7 @@ class RecoveryConfig:
                self.box_margin, self.track_window_s, self.moving_m_s, self.lost_distance_m,
                self.lost_distance_one_camera_m, self.still_m_s,
                self.still_window_s, self.depth_band_m, self.depth_band_delay_s, self.reach_m, self.reach_m_s,
-               self.reach_reset_s, self.lost_rows_one_camera, self.depth_band_rows) < 0:
+               self.reach_reset_s, self.lost_rows_one_camera, self.depth_band_rows, self.reach_rows) < 0:
             raise ValueError("RecoveryConfig: times, spreads and margins must be >= 0")
         if not (self.depth_band_sigma_m > 0 and 0 < self.depth_band_outlier < 1):
             raise ValueError(f"RecoveryConfig: depth_band_sigma_m must be > 0 and depth_band_outlier in (0, 1), got "
@@ -181,7 +183,7 @@ class LostTrackMonitor:
         low, high = self.config.feet_row_height_ratio
         as_tall = self.body_height_m is None or low <= detection.height / self.body_height_m <= high
         counts = (as_tall and not any(ends_on_occlusion(blob, features[blob.camera]) for blob in detection.blobs)
-                  and self._reachable(frame, detection.position))
+                  and self._reachable(frame, detection.position, detection.row_depth_m))
         self._feet_rows.add(frame, detection.position.copy() if counts else None)
         if counts:
             self._gaps[frame] = float(np.linalg.norm(pelvis[:2] - detection.position))
@@ -196,9 +198,10 @@ class LostTrackMonitor:
         return not any(on_blob(by_name[blob.camera], pelvis, blob, self.config.box_margin)
                        for blobs in seen for blob in blobs)
 
-    def _reachable(self, frame: int, position: np.ndarray) -> bool:
-        """Whether a feet-row ground position (m) at ``frame`` is within reach of the counted ones (module
-        docstring: ``reach_m``, ``reach_m_s``, ``reach_reset_s``)."""
+    def _reachable(self, frame: int, position: np.ndarray, row_depth_m: float) -> bool:
+        """Whether a feet-row ground position (m) at ``frame``, whose map row spans ``row_depth_m`` of depth, is
+        within reach of the counted ones (module docstring: ``reach_m`` or ``reach_rows``, ``reach_m_s``,
+        ``reach_reset_s``)."""
         cfg = self.config
         reset = int(round(cfg.reach_reset_s / self.dt))
         counted = self._feet_rows.positions
@@ -210,7 +213,8 @@ class LostTrackMonitor:
         velocity = self._feet_rows.velocity(last, cfg.track_window_s)
         elapsed = (frame - last) * self.dt
         predicted = (counted[last] if where is None else where) + (0.0 if velocity is None else velocity * elapsed)
-        return bool(np.linalg.norm(position - predicted) <= cfg.reach_m + cfg.reach_m_s * elapsed)
+        reach = max(cfg.reach_m, cfg.reach_rows * row_depth_m)
+        return bool(np.linalg.norm(position - predicted) <= reach + cfg.reach_m_s * elapsed)
 
     def feet_row_position(self, frame: int) -> np.ndarray | None:
         """One camera: the person's ground position (m, world xy) from ``frame``'s feet row where it counts
