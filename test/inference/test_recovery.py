@@ -158,16 +158,28 @@ def test_two_cameras_catch_a_depth_error_one_camera_catches_only_a_gross_one(see
         RecoveryConfig(feet_row_height_ratio=(1.1, 0.85))
 
 
-def test_one_camera_far_and_low_holds_the_depth_only_to_its_feet_rows_resolution():
+def _far_and_low_view(contact_shift: tuple[float, float] = (0.0, 0.0)):
+    """A camera 10 m away at 0.5 m high (one map row of the feet row spans ~1.3 m of depth), the last frame's
+    features of a stance phase at x = 0.4 m with its contact point moved by ``contact_shift`` (m), and that
+    frame's pelvis."""
+    far = Camera.look_at("far", 320, 240, 300.0, np.array([0.3, -10.0, 0.5]), np.array([0.3, 0.0, 0.9]))
+    poses = walking_poses(3, x0=0.4)
+    poses[-1].kin.contact_point = poses[-1].kin.contact_point + np.asarray(contact_shift)
+    features = features_of(far, poses, 2)[0][-1]
+    return far, features, pose_body(BODY, PARAMS, poses[-1].walker, poses[-1].kin).markers[0, PELVIS]
+
+
+@pytest.fixture(scope="module")
+def far_and_low():
+    return _far_and_low_view()
+
+
+def test_one_camera_far_and_low_holds_the_depth_only_to_its_feet_rows_resolution(far_and_low):
     """From 10 m at 0.5 m high one map row of the feet row spans ~1.3 m of depth (a hand start is right to
     ~0.1 m): a pelvis 1.2 m off along the view, lost from 4 m, is not lost there (the median gap must pass
     ``lost_rows_one_camera`` rows as well as 0.6 m), 4 m off still is; the depth band is a row wide, not
     ``depth_band_m``. With the rows set to 0 the fixed distances hold again."""
-    far = Camera.look_at("far", 320, 240, 300.0, np.array([0.3, -10.0, 0.5]), np.array([0.3, 0.0, 0.9]))
-    poses = walking_poses(3, x0=0.4)
-    features = features_of(far, poses, 2)[0][-1]
-    markers = pose_body(BODY, PARAMS, poses[-1].walker, poses[-1].kin).markers[0]
-    pelvis = markers[PELVIS]
+    far, features, pelvis = far_and_low
     for rows, offset, lost in ((2.0, 1.2, False), (2.0, 4.0, True), (0.0, 1.2, True)):
         config = RecoveryConfig(lost_after_s=0.0, lost_rows_one_camera=rows, depth_band_rows=rows / 2)
         monitor = LostTrackMonitor([far], config, dt=1 / 30, body_height_m=BODY.height)
@@ -178,17 +190,14 @@ def test_one_camera_far_and_low_holds_the_depth_only_to_its_feet_rows_resolution
         assert 1.0 < band[1] < 1.8 if rows else band[1] == config.depth_band_m   # one row's depth, or 0.3 m
 
 
-def test_one_camera_far_and_low_counts_a_feet_row_that_moves_by_one_map_row():
+def test_one_camera_far_and_low_counts_a_feet_row_that_moves_by_one_map_row(far_and_low):
     """From 10 m at 0.5 m high a map row spans ~1.3 m of depth, so a person walking along the view moves the
     feet row in steps of ~1.3 m, more than ``reach_m``: within ``reach_rows`` rows of its depth such a step
     still counts (the band and the lost test keep the depth), where a fixed 0.5 m dropped every feet row
     after it for ``reach_reset_s``."""
-    far = Camera.look_at("far", 320, 240, 300.0, np.array([0.3, -10.0, 0.5]), np.array([0.3, 0.0, 0.9]))
-    there = walking_poses(3, x0=0.4)
-    nearer = walking_poses(3, x0=0.4)
-    nearer[-1].kin.contact_point = nearer[-1].kin.contact_point + np.array([0.0, -1.0])   # 1 m nearer the camera
-    frames = [features_of(far, poses, 2)[0][-1] for poses in (there, nearer)]
-    pelvis = [pose_body(BODY, PARAMS, p[-1].walker, p[-1].kin).markers[0, PELVIS] for p in (there, nearer)]
+    far, there, pelvis_there = far_and_low
+    _, nearer, pelvis_nearer = _far_and_low_view((0.0, -1.0))       # 1 m nearer the camera
+    frames, pelvis = (there, nearer), (pelvis_there, pelvis_nearer)
     for rows, counts in ((RecoveryConfig.reach_rows, True), (0.0, False)):
         monitor = LostTrackMonitor([far], RecoveryConfig(reach_rows=rows), dt=1 / 30, body_height_m=BODY.height)
         for f in range(20):
