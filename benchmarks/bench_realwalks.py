@@ -25,7 +25,9 @@ walk, the runs whose start named the wrong stance leg.
     .venv/bin/python benchmarks/bench_realwalks.py --set tuning --trials 91_10 --seeds 0 --settings mono
 
 Sequences and runs are kept in --out and reused (a run with an eval.json is not tracked again; delete it to
-re-run). Prints ONE JSON document on stdout; progress on stderr.
+re-run; a run folder without one, left by a run stopped before its evaluation, is tracked afresh). They take
+disk: each run keeps its result.bag (60-550 MB), and the tuning set over two seeds and one setting about 4 GB.
+Prints ONE JSON document on stdout; progress on stderr.
 """
 from __future__ import annotations
 
@@ -33,6 +35,7 @@ import argparse
 import contextlib
 import json
 import os
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -254,6 +257,8 @@ def main(argv: list[str] | None = None) -> int:
                 variant = variant_of(setting, mode)
                 run_dir = args.out / "runs" / f"{trial}_s{seed}_{variant}{suffix}"
                 if not (run_dir / "eval.json").exists() and not (run_dir / FAILED).exists():
+                    if run_dir.exists():    # left by a run stopped before its evaluation (Ctrl-C, a full disk)
+                        shutil.rmtree(run_dir)
                     try:
                         with contextlib.redirect_stdout(sys.stderr):
                             run_tracking(TrackOptions(bag=bags[variant], out=run_dir, particles=args.particles,
