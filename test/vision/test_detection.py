@@ -205,7 +205,8 @@ def _drawn(like, rectangles):
 def _map_box(blob, d):
     """A blob's box in map pixels: first row, row after the last, first column, column after the last."""
     u0, v0, u1, v1 = blob.box
-    return int(round((v0 + 0.5) / d)), int(round((v1 + 0.5) / d)), int(round((u0 + 0.5) / d)), int(round((u1 + 0.5) / d))
+    row0, row1, col0, col1 = ((c + 0.5) / d for c in (v0, v1, u0, u1))
+    return int(round(row0)), int(round(row1)), int(round(col0)), int(round(col1))
 
 
 def test_a_skirt_of_the_floors_colour_does_not_cut_the_legs_off(scene):
