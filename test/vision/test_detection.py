@@ -166,6 +166,13 @@ def test_the_column_is_the_upper_bodys_and_a_ghost_at_the_feet_does_not_move_it(
     assert ghosted.feet_uv[0] == pytest.approx(pelvis_u, abs=6.0)
 
 
+def _map_box(blob, d):
+    """A blob's box in map pixels: first row, row after the last, first column, column after the last."""
+    u0, v0, u1, v1 = blob.box
+    row0, row1, col0, col1 = ((c + 0.5) / d for c in (v0, v1, u0, u1))
+    return int(round(row0)), int(round(row1)), int(round(col0)), int(round(col1))
+
+
 def test_a_row_lost_across_the_waist_does_not_cut_the_person_in_two(scene):
     """A belt or a waist whose colours are near the background's leaves a map row of the body below the
     threshold: the pieces above and below are still one blob, with the box, column and area of the whole,
@@ -178,7 +185,7 @@ def test_a_row_lost_across_the_waist_does_not_cut_the_person_in_two(scene):
     side = features[0]
     clean = person_blob(side, "side")
     d = side.downsample
-    u0, v0, u1, v1 = (int(round((c + 0.5) / d)) for c in clean.box)
+    v0, v1, u0, u1 = _map_box(clean, d)
     waist = (v0 + v1) // 2
     llr = side.llr.copy()
     llr[:, waist, :] = -5.0                                   # a row across the body: background
@@ -200,13 +207,6 @@ def _drawn(like, rectangles):
     for r0, r1, c0, c1 in rectangles:
         llr[0, r0:r1, c0:c1] = 10.0
     return replace(like, llr=llr)
-
-
-def _map_box(blob, d):
-    """A blob's box in map pixels: first row, row after the last, first column, column after the last."""
-    u0, v0, u1, v1 = blob.box
-    row0, row1, col0, col1 = ((c + 0.5) / d for c in (v0, v1, u0, u1))
-    return int(round(row0)), int(round(row1)), int(round(col0)), int(round(col1))
 
 
 def test_a_skirt_of_the_floors_colour_does_not_cut_the_legs_off(scene):
