@@ -80,10 +80,10 @@ def _join_stacked(labels: np.ndarray, stats: np.ndarray, min_pixels: float) -> N
     are near the background's leaves rows of the body below the threshold and would cut the person in two,
     and the feet row of the trunk alone puts them metres away. Measured on the broad development set's tuning
     recordings, one camera (``benchmarks/bench_detection.py --set tuning --seeds 0 1``: 44 recordings, the blob
-    nearest the true pelvis): positions more than 0.5 m off in 1603 of 8325 frames against 1806 of 8319 when
-    only pieces one row apart joined (07_01 seed 0, a grey skirt on a grey floor: median 3.41 -> 0.21 m), the
-    median error of no recording worse by more than 0.03 m; a ghost under a walk's first frames was joined in
-    one (07_01 seed 1, hands off: 21 -> 30 frames). Pieces side by side, far apart, small, or flat (a contact
+    nearest the true pelvis, every background learned from the walk): positions more than 0.5 m off in 1603 of
+    8325 frames against 1806 of 8319 when only pieces one row apart joined (07_01 seed 0, a grey skirt on a grey
+    floor: median 3.41 -> 0.21 m), the median error of no recording worse by more than 0.03 m; a ghost under a
+    walk's first frames was joined in one (07_01 seed 1, hands off: 21 -> 30 frames). Pieces side by side, far apart, small, or flat (a contact
     shadow) stay apart."""
     count = stats.shape[0]
     area = stats[:, cv2.CC_STAT_AREA]
