@@ -2,12 +2,12 @@
 
 For each recording of the set (``awalker_tools/devset.py``, drawn and rendered as ``bench_realwalks`` does, into
 the same ``--out``, so the two benchmarks share their sequences) and each one-camera variant (hand-started and
-hands off), every frame's features are computed as `awalker track` computes them (the one-camera map; a hand-started
-recording's frames before its start description's frame are the empty room, a hands-off one learns the
-background from the walk itself), the person's blob nearest the true
-pelvis is placed on the ground (``vision.detection.locate_person``), and where the person is wholly in view
-its ground position is compared with the true pelvis's. This is what the automatic start and the recovery of a
-lost track are given (``inference.autostart``, ``inference.recovery``), without the tracker.
+hands off), every frame's features are computed as `awalker track` computes them (the one-camera map; a
+hand-started recording's frames before its start description's frame are the empty room, a hands-off one
+learns the background from the walk itself), the person's blob nearest the true pelvis is placed on the
+ground (``vision.detection.locate_person``), and where the person is wholly in view its ground position is
+compared with the true pelvis's. This is what the automatic start and the recovery of a lost track are
+given (``inference.autostart``, ``inference.recovery``), without the tracker.
 
 Report, per recording and over all: frames scored, the median error (m) and the frames more than 0.3 m and
 0.5 m off (a feet row a map row or more off; the trunk's own lowest row when a skirt cuts the legs off); the
@@ -15,8 +15,8 @@ median signed error along the camera's ray (m, > 0: placed too far), over all fr
 walks (``away`` from the camera, ``towards`` it, ``across``: the cosine of the walk's direction and the ray
 above 0.5, below -0.5, between). For the hands-off recordings also the automatic start
 (``inference.autostart.StartFinder`` fed each frame, as the tracker feeds it): its frame and its position's
-error along the ray and across it (m) against the true pelvis at that frame. With one camera the depth of the
-start is the tracker's depth for the whole walk (the body is scaled to the height seen from there).
+error along the ray and across it (m) against the true pelvis at that frame (``evaluation.split_along_ray``,
+as ``awalker eval``'s depth bias).
 Prints ONE JSON document on stdout; progress on stderr.
 
     .venv/bin/python benchmarks/bench_detection.py --set tuning --seeds 0 1 --out bench_realwalks
@@ -37,7 +37,7 @@ VARIANTS = ("mono", "mono_handsoff")
 
 
 def _walk_class(cosine: float) -> str:
-    """Where the person walks relative to the camera's ray: away, towards or across."""
+    """Where the person walks relative to the camera's ray (``cosine`` of the two): away, towards or across."""
     return "away" if cosine > 0.5 else "towards" if cosine < -0.5 else "across"
 
 
@@ -59,7 +59,7 @@ def score_sequence(bag: Path, find_start: bool = False) -> dict:
     ahead = pelvis[np.minimum(np.arange(len(pelvis)) + reach, len(pelvis) - 1)]
     behind = pelvis[np.maximum(np.arange(len(pelvis)) - reach, 0)]
     walk = ahead - behind
-    errors, along, classes, row_depths = [], [], [], []
+    scored, offsets, row_depths = [], [], []      # truth rows of the frames scored, detection - truth (m), row depths
     start = None
     with SequenceReader(bag) as reader:
         cameras = reader.cameras
@@ -69,11 +69,6 @@ def score_sequence(bag: Path, find_start: bool = False) -> dict:
         extractors = [FeatureExtractor(FeatureConfig(downsample=map_downsample(c.width, len(cameras)),
                                                      background_frames=empty)) for c in cameras]
         finder = StartFinder(cameras, dt) if find_start else None
-        eye = cameras[0].position[:2]
-
-        def ray_of(xy: np.ndarray) -> np.ndarray:
-            return (xy - eye) / max(float(np.linalg.norm(xy - eye)), 1e-9)
-
         for frame, (stamp, images) in enumerate(reader.frames()):
             features = [e.process(images[c.name], stamp_ns=stamp) for e, c in zip(extractors, cameras)]
             if finder is not None and start is None:
@@ -85,22 +80,24 @@ def score_sequence(bag: Path, find_start: bool = False) -> dict:
             seen = [person_blobs(f, c.name) for f, c in zip(features, cameras)]
             detection = locate_person(seen, cameras, near=np.array([x, y, 0.9]))
             if detection is not None and wholly_in_view(detection, cameras):
-                offset = detection.position - (x, y)
-                ray = ray_of(np.array([x, y]))
-                errors.append(float(np.hypot(*offset)))
-                along.append(float(offset @ ray))
+                scored.append(rows[0])
+                offsets.append(detection.position - (x, y))
                 row_depths.append(detection.row_depth_m)
-                step = walk[rows[0]]
-                moving = np.linalg.norm(step) > 0.3 * 2 * reach * dt        # faster than 0.3 m/s
-                classes.append(_walk_class(float(step @ ray) / np.linalg.norm(step)) if moving else "standing")
         if finder is not None and start is None:
             start = finder.finish()
-    found = np.asarray(errors)
-    along_ray, classes = np.asarray(along), np.asarray(classes)
-    result = {"frames": int(found.size), "median_m": float(np.median(found)) if found.size else None,
-              "over_0.3_m": int(np.sum(found > 0.3)), "over_0.5_m": int(np.sum(found > 0.5)),
-              "along_ray_median_m": float(np.median(along_ray)) if found.size else None,
-              "row_depth_median_m": float(np.median(row_depths)) if found.size else None,
+    eye = cameras[0].position
+    scored, offsets = np.asarray(scored, int), np.reshape(offsets, (-1, 2))
+    errors = np.linalg.norm(offsets, axis=1)
+    along_ray = evaluation.split_along_ray(offsets, pelvis[scored], eye)[0]
+    steps = walk[scored]
+    lengths = np.linalg.norm(steps, axis=1)
+    cosines = evaluation.split_along_ray(steps, pelvis[scored], eye)[0] / np.maximum(lengths, 1e-9)
+    moving = lengths > 0.3 * 2 * reach * dt                                  # faster than 0.3 m/s
+    classes = np.array([_walk_class(c) if m else "standing" for c, m in zip(cosines, moving)])
+    result = {"frames": int(errors.size), "median_m": float(np.median(errors)) if errors.size else None,
+              "over_0.3_m": int(np.sum(errors > 0.3)), "over_0.5_m": int(np.sum(errors > 0.5)),
+              "along_ray_median_m": float(np.median(along_ray)) if errors.size else None,
+              "row_depth_median_m": float(np.median(row_depths)) if errors.size else None,
               "along_ray_by_walk": {k: {"frames": int(np.sum(classes == k)),
                                         "median_m": float(np.median(along_ray[classes == k]))}
                                     for k in ("away", "towards", "across") if np.any(classes == k)}}
@@ -108,12 +105,11 @@ def score_sequence(bag: Path, find_start: bool = False) -> dict:
         result["start"] = None
         rows = np.flatnonzero(truth.frames == start.frame) if start is not None else np.array([], int)
         if rows.size:
-            true_xy = pelvis[rows[0]]
-            offset, ray = np.asarray(start.position) - true_xy, ray_of(true_xy)
-            step = walk[rows[0]]
-            result["start"] = {"frame": int(start.frame), "along_ray_m": float(offset @ ray),
-                               "across_ray_m": float(offset @ np.array([-ray[1], ray[0]])),
-                               "walk": _walk_class(float(step @ ray) / max(float(np.linalg.norm(step)), 1e-9))}
+            true_xy, step = pelvis[rows[0]], walk[rows[0]]
+            along, across = evaluation.split_along_ray(np.asarray(start.position) - true_xy, true_xy, eye)
+            cosine = evaluation.split_along_ray(step, true_xy, eye)[0] / max(float(np.linalg.norm(step)), 1e-9)
+            result["start"] = {"frame": int(start.frame), "along_ray_m": float(along), "across_ray_m": float(across),
+                               "walk": _walk_class(float(cosine))}
     return result
 
 

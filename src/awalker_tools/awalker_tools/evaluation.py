@@ -228,6 +228,17 @@ def marker_bias(estimate: PoseTrack, truth: PoseTrack, markers: Sequence[str] = 
             "absolute_median_without_offsets_mm": float(without)}
 
 
+def split_along_ray(offset_xy: np.ndarray, true_xy: np.ndarray, eye_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Ground vectors ``offset_xy`` (..., 2) (m) split along the horizontal line of sight from ``eye_xy`` (2,) (a
+    camera's position) to ``true_xy`` (..., 2) (+ = away from the camera) and across it (+ = to the left seen from
+    the camera)."""
+    ray = np.asarray(true_xy, float) - np.asarray(eye_xy, float)[:2]
+    ray = ray / np.linalg.norm(ray, axis=-1, keepdims=True)
+    offset = np.asarray(offset_xy, float)
+    return (np.einsum("...k,...k->...", offset, ray),
+            offset[..., 0] * -ray[..., 1] + offset[..., 1] * ray[..., 0])
+
+
 def view_bias(estimate: PoseTrack, truth: PoseTrack, cameras: Sequence[object]) -> dict[str, dict[str, float]]:
     """Per camera (``vision.camera.Camera``, by name) the pelvis error (mm) over the ground split along the camera's
     horizontal line of sight to the true pelvis (``depth``, + = the estimate farther from the camera) and across
@@ -238,10 +249,7 @@ def view_bias(estimate: PoseTrack, truth: PoseTrack, cameras: Sequence[object]) 
     error = _select(estimate, ["pelvis"], est_rows, "estimate")[:, 0] - true_pelvis
     out = {}
     for camera in cameras:
-        ray = true_pelvis[:, :2] - np.asarray(camera.position, float)[None, :2]
-        ray /= np.linalg.norm(ray, axis=1, keepdims=True)
-        depth = np.einsum("fk,fk->f", error[:, :2], ray)
-        across = error[:, 0] * -ray[:, 1] + error[:, 1] * ray[:, 0]
+        depth, across = split_along_ray(error[:, :2], true_pelvis[:, :2], camera.position)
         out[camera.name] = {"depth_mm": round(1000.0 * float(np.nanmean(depth)), 1),
                             "across_mm": round(1000.0 * float(np.nanmean(across)), 1),
                             "depth_median_abs_mm": round(1000.0 * float(np.nanmedian(np.abs(depth))), 1),

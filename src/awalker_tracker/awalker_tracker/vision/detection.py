@@ -83,8 +83,8 @@ def _join_stacked(labels: np.ndarray, stats: np.ndarray, min_pixels: float) -> N
     nearest the true pelvis, every background learned from the walk): positions more than 0.5 m off in 1603 of
     8325 frames against 1806 of 8319 when only pieces one row apart joined (07_01 seed 0, a grey skirt on a grey
     floor: median 3.41 -> 0.21 m), the median error of no recording worse by more than 0.03 m; a ghost under a
-    walk's first frames was joined in one (07_01 seed 1, hands off: 21 -> 30 frames). Pieces side by side, far apart, small, or flat (a contact
-    shadow) stay apart."""
+    walk's first frames was joined in one (07_01 seed 1, hands off: 21 -> 30 frames). Pieces side by side, far
+    apart, small, or flat (a contact shadow) stay apart."""
     count = stats.shape[0]
     area = stats[:, cv2.CC_STAT_AREA]
     pieces = 1 + np.flatnonzero(area[1:] >= STACK_LOWER_AREA * min_pixels)      # labels of the candidates
