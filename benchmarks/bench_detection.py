@@ -1,13 +1,13 @@
 """Where does one camera's detection put the person? The broad development set's recordings, frame by frame.
 
-For each recording of the set (``awalker_tools/devset.py``, drawn and rendered as ``bench_realwalks`` does, into
-the same ``--out``, so the two benchmarks share their sequences) and each one-camera variant (hand-started and
-hands off), every frame's features are computed as `awalker track` computes them (the one-camera map; a
-hand-started recording's frames before its start description's frame are the empty room, a hands-off one
-learns the background from the walk itself), the person's blob nearest the true pelvis is placed on the
-ground (``vision.detection.locate_person``), and where the person is wholly in view its ground position is
-compared with the true pelvis's. This is what the automatic start and the recovery of a lost track are
-given (``inference.autostart``, ``inference.recovery``), without the tracker.
+For each recording of the set (``awalker_tools/devset.py``, drawn and rendered as ``bench_realwalks`` does, into the
+same ``--out``, so the two benchmarks share their sequences) and each one-camera variant (hand-started and hands off),
+every frame's features are computed as `awalker track` computes them (the one-camera map; a hand-started recording's
+frames before its start description's frame are the empty room, a hands-off one learns it from frames spread over the
+walk, ``pipeline.recording_backgrounds``), the person's blob nearest the true pelvis is placed on the ground
+(``vision.detection.locate_person``), and where the person is wholly in view its ground position is compared with the
+true pelvis's. This is what the automatic start and the recovery of a lost track are given (``inference.autostart``,
+``inference.recovery``), without the tracker.
 
 Report, per recording and over all: frames scored, the median error (m) and the frames more than 0.3 m and
 0.5 m off (a feet row a map row or more off; the trunk's own lowest row when a skirt cuts the legs off); the
@@ -46,6 +46,7 @@ def score_sequence(bag: Path, find_start: bool = False) -> dict:
     with ``find_start``, the automatic start's error (module docstring)."""
     from awalker_tools import evaluation
     from awalker_tools.bagio import SequenceReader
+    from awalker_tools.pipeline import recording_backgrounds
     from awalker_tracker.inference.autostart import StartFinder
     from awalker_tracker.inference.filter_model import StartDescription
     from awalker_tracker.vision.detection import locate_person, person_blobs, wholly_in_view
@@ -66,8 +67,13 @@ def score_sequence(bag: Path, find_start: bool = False) -> dict:
         # a hand-started recording's frames before its start are the empty room, as `awalker track` learns them
         described = bag.parent / "start.yaml"
         empty = StartDescription.from_yaml(described).frame if described.exists() else 0
-        extractors = [FeatureExtractor(FeatureConfig(downsample=map_downsample(c.width, len(cameras)),
-                                                     background_frames=empty)) for c in cameras]
+        downsample = {c.name: map_downsample(c.width, len(cameras)) for c in cameras}
+        extractors = [FeatureExtractor(FeatureConfig(downsample=downsample[c.name], background_frames=empty))
+                      for c in cameras]
+        if not empty:       # hands off, as `awalker track`: the background from frames spread over the recording
+            backgrounds = recording_backgrounds(reader, downsample)
+            for extractor, camera in zip(extractors, cameras):
+                extractor.use_background(backgrounds[camera.name])
         finder = StartFinder(cameras, dt) if find_start else None
         for frame, (stamp, images) in enumerate(reader.frames()):
             features = [e.process(images[c.name], stamp_ns=stamp) for e, c in zip(extractors, cameras)]

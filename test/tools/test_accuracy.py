@@ -224,8 +224,10 @@ def test_stance_leg_posterior(tracked, name: str):
 
 def test_the_automatic_start_finds_the_person(tracked):
     """No start, no body and no empty frames: the automatic start puts the track near the person at its frame,
-    walking the way they walk."""
+    walking the way they walk; the background came from the whole recording (`pipeline.recording_backgrounds`)."""
     result = tracked_ok(tracked("mono_hands_off"), "mono_hands_off")
+    run = yaml.safe_load((Path(result["run_dir"]) / "run.yaml").read_text())
+    assert "frames spread over the recording" in run["features"]["cam0"]["background"], run["features"]
     found = yaml.safe_load((Path(result["run_dir"]) / "start.yaml").read_text())["start"]
     truth = truth_of(result)
     row = int(np.flatnonzero(truth.frames == found["frame"])[0])

@@ -638,3 +638,69 @@ def test_rgba8_and_unnamed_jpeg_bags_track_with_overlays(synth_bag: Path, tmp_pa
         assert reader.topics["/cam0/image_raw"] == IMAGE
     with SequenceReader(tmp_path / "jpeg" / "walk.bag") as reader:
         assert next(m for _, _, _, m in reader.messages(["/cam0/image_raw/compressed"])).format == "rgb8"
+
+
+def test_a_run_without_empty_frames_learns_each_background_from_the_whole_recording(tmp_path: Path):
+    """Without frames known to be empty, `awalker track` learns each camera's background from frames spread over
+    the whole recording (``pipeline.recording_backgrounds``): where the person stood for the first half second,
+    a background fitted causally to the first 20 frames keeps them (a ghost the feet's row would join), the
+    recording's does not; an image that cannot be decoded is left out, not fatal. The extractor given it keeps it
+    and learns the foreground mixtures when it would with a robust background: after `median_frames` and on the refit
+    schedule."""
+    from awalker_tools.bagio import IMAGE, SequenceReader, SequenceWriter
+    from awalker_tools.pipeline import recording_backgrounds
+    from awalker_tools.typestore import typestore
+    from awalker_tracker.vision.background import measurements
+    from awalker_tracker.vision.camera import Camera
+    from awalker_tracker.vision.features import FeatureConfig, FeatureExtractor
+
+    rng = np.random.default_rng(5)
+    cam = Camera.look_at("cam0", 64, 48, 30.0, np.array([0.0, -5.0, 1.0]), np.array([0.0, 0.0, 1.0]))
+    floor = rng.integers(40, 200, (48, 64, 3)).astype(np.uint8)
+
+    def frame(k: int) -> np.ndarray:
+        image = np.clip(floor + rng.normal(0, 2, floor.shape), 0, 255).astype(np.uint8)
+        x = 8 if k < 15 else 24 + (k - 15)          # stands in 15 of the first 20 frames, then walks off
+        image[10:40, x : x + 12] = (210, 40, 40)
+        return image
+
+    frames = [frame(k) for k in range(40)]
+    clean = tmp_path / "walk.bag"
+    with SequenceWriter(clean, [cam]) as writer:
+        for k, image in enumerate(frames):
+            writer.write_frame(1_000_000_000 + k * 33_333_333, {"cam0": image})
+    damaged = tmp_path / "damaged" / "walk.bag"
+    damaged.parent.mkdir()
+    types = typestore().types
+    first = 1_000_000_000
+
+    def cut_first(rgb: np.ndarray, old: Any) -> tuple[str, str, Any]:
+        h, w = rgb.shape[:2]
+        stamp = int(old.header.stamp.sec) * 1_000_000_000 + int(old.header.stamp.nanosec)
+        data = rgb.reshape(-1)[:10] if stamp == first else rgb.reshape(-1)
+        return "", IMAGE, types[IMAGE](old.header, h, w, "rgb8", 0, 3 * w, data.copy())
+
+    rewrite_images(clean, damaged, cut_first)
+    with SequenceReader(damaged) as reader:
+        background = recording_backgrounds(reader, {"cam0": 2})["cam0"]
+    stood = (slice(7, 18), slice(5, 9))             # map pixels (2 x 2 image px) where the person stood
+    floor_m = measurements(floor, 2)
+    assert background.foreground_mask(floor_m)[stood].mean() < 0.01
+    causal = FeatureExtractor(FeatureConfig(downsample=2, median_frames=20))
+    for image in frames[:20]:
+        causal.process(image)
+    assert causal.background.foreground_mask(floor_m)[stood].mean() > 0.9        # the ghost it avoids
+
+    given = FeatureExtractor(FeatureConfig(downsample=2, refit_frames=(25,)))
+    given.use_background(background)
+    learned, foreground = [], None
+    for k, image in enumerate(frames):
+        features = given.process(image)
+        assert given.background is background
+        if given.foreground is not foreground:
+            learned.append(k + 1)
+            foreground = given.foreground
+    assert learned == [20, 25]
+    assert features.llr[:, stood[0], stood[1]].max() < 0 < features.llr[:, 7:18, 26:30].max()
+    with pytest.raises(ValueError, match="already processed"):
+        given.use_background(background)

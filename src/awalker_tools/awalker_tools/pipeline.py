@@ -79,6 +79,9 @@ RECORD_WAIT_S = 10.0
 #: found without waiting for the end of the bag); fewer, later or scattered ones are tracked without (run.yaml's
 #: ``undecodable_images``).
 UNDECODABLE_STOP = 10
+#: Frames of each camera, spread evenly over the recording, that a run without known empty frames learns the
+#: camera's background from (``recording_backgrounds``).
+RECORDING_BACKGROUND_FRAMES = 40
 
 
 class Interrupted(KeyboardInterrupt):
@@ -392,6 +395,46 @@ def check_camera_sync(bag: Path, reader: Any, tolerance: float) -> None:
                              f"frame; pass --sync-tolerance above {apart / period:.2f} (below 1) to pair them")
 
 
+def recording_backgrounds(reader: Any, downsample: dict[str, int],
+                          count: int = RECORDING_BACKGROUND_FRAMES) -> dict[str, Any]:
+    """Camera name -> ``vision.background.BackgroundModel`` learned robustly (``fit_background_robust``) from
+    ``count`` of its images spread evenly over the whole recording in ``reader`` (a ``bagio.SequenceReader``), at
+    ``downsample[name]`` image px per map px, in the lighting of the first (``measurements``' reference).
+
+    Offline the whole walk is at hand: a person who stood or walked along the camera's view covered the same
+    pixels for the first second or two, and a background fitted to those frames alone keeps them (a "ghost" that
+    joins the person's blob below the feet: one camera's automatic start up to 0.9 m too near on walks away from
+    it, docs/tracking.md).
+    Spread over the recording, each pixel shows the person in few of the frames. Images that cannot be decoded
+    are left out here (the features node reports them); a camera with fewer than 2 decodable ones is left out of
+    the result (its node learns as it would live)."""
+    from awalker_tracker.vision.background import fit_background_robust, measurements
+    from awalker_tracker.vision.decode import decode_image
+
+    backgrounds = {}
+    for name, d in downsample.items():
+        found = reader.image_topic_of(name)
+        if found is None:
+            continue
+        topic = found[0]
+        total = sum(int(c.msgcount) for c in reader.connections(topic))
+        chosen = set(np.linspace(0, total - 1, min(count, total)).round().astype(int).tolist()) if total else set()
+        stack: list[np.ndarray] = []
+        for index, (_, _, _, msg) in enumerate(reader.messages([topic])):
+            if index not in chosen:
+                continue
+            try:
+                rgb = decode_image(msg, topic)
+            except InputError:
+                continue
+            if stack and (rgb.shape[0] // d, rgb.shape[1] // d) != stack[0].shape[:2]:
+                continue                    # a frame of another size: the features node reports it
+            stack.append(measurements(rgb, d, stack[0] if stack else None))
+        if len(stack) >= 2:
+            backgrounds[name] = fit_background_robust(np.stack(stack))
+    return backgrounds
+
+
 def _undecodable_camera(features: Sequence[Any], at_end: bool) -> str | None:
     """Why the run cannot go on: a features node none of whose images decoded (its first ``UNDECODABLE_STOP``,
     or with ``at_end`` all it got); None while each camera has decoded images."""
@@ -438,8 +481,10 @@ def _run_passes(options: TrackOptions, reader: Any, stop: StopRequest) -> TrackR
     # measured on them. On the finer maps of two cameras at 320x240 the seen height came out 2 % taller and the
     # fit chose longer legs still (real walks hands off, 07_01 straight, seed 0: 0.917 m against 0.873, the
     # person's 0.807), the pelvis 86 mm high against 41 over 7 runs; the second pass tracks on the finer maps.
+    learned: dict[tuple[str, int], Any] = {}          # the recording's backgrounds, learned once for both passes
     _track_once(replace(options, out=first_dir, overlays=False, stop_after_frames=fit_frames,
-                        particles=FIRST_PASS_PARTICLES, map_downsample=FeatureConfig.downsample), reader, stop)
+                        particles=FIRST_PASS_PARTICLES, map_downsample=FeatureConfig.downsample), reader, stop,
+                backgrounds=learned)
     stop.check("after the first pass")
     _progress(options, f"awalker track: fitting {fitting} to the images of {first_dir}")
     # the fit's own particle count (BodyFitConfig: 5000; fewer pick less reliably), whatever the run's
@@ -453,14 +498,17 @@ def _run_passes(options: TrackOptions, reader: Any, stop: StopRequest) -> TrackR
     second = replace(options, body=Path(fitted["written"]) if fit_legs else options.body,
                      fitted_start=Path(fitted["start_written"]) if "start_written" in fitted else None)
     stop.check("after the first pass's fit")
-    return _track_once(second, reader, stop, body_fit=fitted)
+    return _track_once(second, reader, stop, body_fit=fitted, backgrounds=learned)
 
 
-def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit: dict | None = None) -> TrackResult:
+def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit: dict | None = None,
+                backgrounds: dict[tuple[str, int], Any] | None = None) -> TrackResult:
     """One pass of the pipeline (``run_tracking``) on the bag open in ``reader`` (a ``bagio.SequenceReader``: its
     descriptions are read through it, and the replay reads the messages through it); ``body_fit``: the fit that
-    gave its body, for run.yaml; ``stop``: once a signal set it, the pass ends after the frame in work, writes
-    its outputs (no pictures) and raises ``Interrupted``."""
+    gave its body, for run.yaml; ``backgrounds``: (camera, map downsampling) -> the recording's background
+    (``recording_backgrounds``) learned by an earlier pass, filled with those this one learns; ``stop``: once a
+    signal set it, the pass ends after the frame in work, writes its outputs (no pictures) and raises
+    ``Interrupted``."""
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
@@ -522,7 +570,6 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
         driver = AwalkerNode("awalker_track_replay", context=context, **node_options())
         nodes.append(driver)
         # the features nodes get the same start and body as the tracker (files or bag topics alike)
-        # (automatic start: none, the features nodes learn the background robustly from the walk)
         features = [FeatureNode(context=context, **node_options([
             Parameter("camera_name", value=c.name),
             Parameter("downsample", value=downsample[c.name]),
@@ -530,6 +577,18 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
             Parameter("use_start_description", value=start is not None),
             Parameter("body_description", value=str(out / BODY_FILE) if body is not None else "")])) for c in cameras]
         nodes += features
+        if start is None or start.frame < 1:
+            # no frames known to be empty: each camera's background from frames spread over the whole recording
+            backgrounds = {} if backgrounds is None else backgrounds
+            if missing := {n: d for n, d in downsample.items() if (n, d) not in backgrounds}:
+                _progress(options, f"awalker track: learning each camera's background from "
+                                   f"{RECORDING_BACKGROUND_FRAMES} frames spread over the recording")
+                found = recording_backgrounds(reader, missing)
+                backgrounds.update({(n, missing[n]): found.get(n) for n in missing})
+            for node in features:
+                if (learned := backgrounds[(node.camera_name, downsample[node.camera_name])]) is not None:
+                    node.use_background(learned, "robust fit (densest colour per pixel) of "
+                                        f"{RECORDING_BACKGROUND_FRAMES} frames spread over the recording")
         band = options.depth_band_m if options.recovery else 0.0      # None: the tracker node's default
         tracker = TrackerNode(context=context, **node_options([
             Parameter("cameras", value=names), Parameter("calibration", value=str(out / CALIBRATION_FILE)),

@@ -267,6 +267,12 @@ class FeatureNode(AwalkerNode):
         if self.background_param < 0:
             self.extractor.set_background_frames(start.frame)
 
+    def use_background(self, background: Any, source: str) -> None:
+        """A background model learned beforehand (``FeatureExtractor.use_background``), ``source`` saying from
+        what (``stats.background_from``); before the first image."""
+        self.extractor.use_background(background)
+        self.stats.background_from = source
+
     def _on_info(self, msg: CameraInfo) -> None:
         self._info = msg
 
