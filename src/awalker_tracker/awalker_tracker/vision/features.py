@@ -408,19 +408,19 @@ class FeatureExtractor:
                         self._buffer = []
             if self.background is not None:
                 self._log(f"background learned at frame {self.frame_index}")
-        elif self._refits and counts and self._given_background:
-            if self._schedule_frame >= self._refits[0]:
-                self._refits.pop(0)
-                self.foreground = None          # learned again below, with the person further in view
         elif self._refits and counts:
-            self._buffer.append(m)
+            if not self._given_background:      # a given background is kept: only the foreground is relearned
+                self._buffer.append(m)
             if self._schedule_frame >= self._refits[0]:
                 self._refits.pop(0)
-                keep = np.linspace(0, len(self._buffer) - 1, min(len(self._buffer), cfg.refit_keep)).round().astype(int)
-                self.background = fit_background_robust(np.stack([self._buffer[k] for k in keep]))
-                self.foreground = None          # learned again below, against the new background
-                self._log(f"background learned again at frame {self.frame_index} from {len(keep)} of its "
-                          f"{len(self._buffer)} frames")
+                if not self._given_background:
+                    keep = np.linspace(0, len(self._buffer) - 1,
+                                       min(len(self._buffer), cfg.refit_keep)).round().astype(int)
+                    self.background = fit_background_robust(np.stack([self._buffer[k] for k in keep]))
+                    self._log(f"background learned again at frame {self.frame_index} from {len(keep)} of its "
+                              f"{len(self._buffer)} frames")
+                self.foreground = None          # learned again below, against the new background or with the
+                                                # person further in view
                 if not self._refits:
                     self._buffer = []
         if self.background is not None and self.foreground is None and (
