@@ -63,11 +63,12 @@ def variant_of(setting: str, mode: str) -> str:
 
 def start_leg_right(run_dir: Path, truth_csv: Path) -> bool | None:
     """Whether the stance leg the run started on (its start.yaml, the leg weighed in the first pass) is the
-    person's at that frame (``synth.stance_foot``); None if the run has no start or the truth no such frame."""
+    person's at that frame (``evaluation.start_stance_left``: the planted foot, or for a person standing still the
+    other foot than the first step's); None if the run has no start or the truth no clear stance leg there (a
+    double support)."""
     import yaml
 
     from awalker_tools import evaluation
-    from awalker_tools.synth import stance_foot
 
     start_file = run_dir / "start.yaml"
     if not start_file.is_file():
@@ -78,11 +79,8 @@ def start_leg_right(run_dir: Path, truth_csv: Path) -> bool | None:
     rows = np.flatnonzero(truth.frames == int(start.get("frame", -1)))
     if leg not in ("left", "right") or not rows.size:
         return None
-    names = list(truth.marker_names)
-    from awalker_tracker.model.body import MARKER_NAMES
-
-    markers = truth.markers[rows[0]][[names.index(n) for n in MARKER_NAMES]]
-    return ("left", "right")[stance_foot(markers, float(start["heading"]))] == leg
+    left = evaluation.start_stance_left(truth, int(rows[0]))
+    return None if left is None else (leg == "left") == left
 
 
 def score(result: dict, run_dir: Path, truth_csv: Path) -> dict:

@@ -310,3 +310,43 @@ def test_view_bias_splits_the_pelvis_error_along_and_across_each_cameras_line_of
     assert re.search(r"pelvis seen from ahead: depth [+-]0 mm mean \(\+ farther\), 100 median size",
                      evaluation.format_table(result))
     assert evaluation.evaluate(swing, truth)["view_bias"] == {}
+
+
+def stepping_off_truth(first_foot: str) -> PoseTrack:
+    """A person standing still for 20 frames (30 fps), then stepping off with ``first_foot``: it lifts 0.1 m,
+    moves 0.6 m forward over 15 frames and comes down at frame 35; the other foot stays where it stood."""
+    frames = 50
+    markers = np.zeros((frames, len(NAMES), 3))
+    markers[:, NAMES.index("pelvis")] = (0.0, 0.0, 0.95)
+    for side, y in (("left", 0.1), ("right", -0.1)):
+        for part, dx in (("heel", -0.05), ("toe", 0.15)):
+            m = NAMES.index(f"{side}_{part}")
+            markers[:, m] = (dx, y, 0.0)
+            if side == first_foot:
+                swing = np.clip((np.arange(frames) - 20) / 15.0, 0.0, 1.0)      # 0 standing .. 1 landed
+                markers[:, m, 0] = dx + 0.6 * swing
+                markers[:, m, 2] = 0.1 * np.sin(np.pi * swing)
+    return PoseTrack(np.arange(frames), 1_000_000_000 + np.arange(frames) * 33_333_333, NAMES, markers)
+
+
+@pytest.mark.parametrize("first_foot", ["left", "right"])
+def test_a_start_names_the_leg_the_person_stands_on_for_the_first_step(first_foot: str):
+    """Standing still, neither foot is planted rather than the other: the start's stance leg is the one the
+    person stands on while the first step swings; while that step swings, the planted foot; at the double
+    support after it, not clear (None), nor while the feet move with neither planted. Marker heights do not
+    decide: the standing foot's markers may rest higher than the stepping one's."""
+    truth = stepping_off_truth(first_foot)
+    standing_left = first_foot == "right"
+    assert [evaluation.start_stance_left(truth, row) for row in (0, 10, 19)] == [standing_left] * 3
+    assert evaluation.start_stance_left(truth, 27) is standing_left        # mid-swing: the planted foot
+    assert evaluation.start_stance_left(truth, 45) is None                 # both down after the first strike
+    both_moving = truth.markers.copy()
+    both_moving[:, [NAMES.index(f"{side}_{part}") for side in ("left", "right") for part in ("heel", "toe")], 0] += (
+        0.02 * np.arange(len(truth.frames)))[:, None]                     # 0.6 m/s: neither planted nor still
+    assert evaluation.start_stance_left(PoseTrack(truth.frames, truth.stamps_ns, NAMES, both_moving), 5) is None
+    raised = truth.markers.copy()
+    for part in ("heel", "toe"):
+        raised[:, NAMES.index(f"{'left' if standing_left else 'right'}_{part}"), 2] += 0.04
+    lifted = PoseTrack(truth.frames, truth.stamps_ns, NAMES, raised)
+    assert evaluation.start_stance_left(lifted, 0) is standing_left
+    assert evaluation.start_stance_left(truth, len(truth.frames)) is None  # no such row

@@ -589,6 +589,32 @@ def planted_stance_left(truth: PoseTrack, planted_m_s: float = 0.25, swinging_m_
     return out
 
 
+def start_stance_left(truth: PoseTrack, row: int, still_m_s: float = 0.25) -> bool | None:
+    """The person's stance leg at row ``row`` of ``truth`` (True = left), as a start there should name it: the
+    planted foot (``planted_stance_left``); for a person standing still before the walk's first heel strike (both
+    feet slower than ``still_m_s``), the other foot than that strike's (``gait_events.heel_strikes``): the walker
+    stands on it while the first step swings. None where it is not clear (a double support, where the start
+    description's convention names the trailing foot), with no strike to come, or without foot markers. Foot
+    motion, not marker height: mocap feet rest a few centimetres apart in height, which would pick the lower
+    foot of a person standing still."""
+    from awalker_tracker.inference import gait_events
+    from awalker_tracker.model.body import MARKER_NAMES
+    from awalker_tracker.model.walker import RIGHT
+
+    planted = planted_stance_left(truth)
+    if planted is None or not 0 <= row < len(truth.frames):
+        return None
+    if planted[row] is not None:
+        return bool(planted[row])
+    if max(foot_speed(truth, "left")[row], foot_speed(truth, "right")[row]) >= still_m_s:
+        return None
+    markers = _select(truth, list(MARKER_NAMES), np.arange(len(truth.frames)), "ground truth")
+    strikes = gait_events.heel_strikes(markers, (truth.stamps_ns - truth.stamps_ns[0]) * 1e-9)
+    if not strikes or strikes[0][1] <= row:
+        return None
+    return strikes[0][2] == RIGHT
+
+
 def format_table(result: dict[str, object], label: str = "") -> str:
     """Paper Table 2 style: median and mean +- std of absolute and relative errors (mm)."""
     a, r = result["absolute_mm"], result["relative_mm"]
