@@ -210,3 +210,52 @@ def test_a_renaming_of_the_whole_posterior_names_anew_only_the_frames_since_its_
     np.testing.assert_allclose(out[:6], markers[:6], atol=1e-9)
     np.testing.assert_allclose(out[6:9], mirror_poses(lineage, lineage_angles, since)[0][6:9], atol=1e-9)
     np.testing.assert_allclose(out[9:], lineage[9:])
+
+
+class _OrderingMonitor:
+    """A lost-track monitor that orders a re-acquisition at ``position`` (m) every frame."""
+
+    def __init__(self, position: tuple[float, float]) -> None:
+        self.position = np.asarray(position, float)
+
+    def update(self, frame, features, pelvis):
+        from awalker_tracker.inference.recovery import Reacquisition
+
+        return Reacquisition(self.position.copy(), None, None)
+
+    def depth_band(self, frame):
+        return None
+
+    def still(self, frame):
+        return False
+
+
+def test_a_reacquired_copy_of_a_walker_reseeded_after_a_fall_records_both_jumps():
+    """A fall and a re-acquisition in the same frame: the re-acquisition copies walkers that were themselves just
+    re-seeded after their fall. Every particle's recorded jump is then how far it lies from the walk it continues
+    (``continues``), the fall's re-seeding and the re-acquisition's move together; with one of them dropped the
+    MAP trajectory kept a 0.6 m step in one frame (a slow tuning walk, one camera)."""
+    from dataclasses import replace
+
+    from awalker_tracker.inference.filter_model import ImageObservation
+
+    model, walk = _walking_particles(40, 5)
+    states = replace(walk[-1], fallen=np.arange(40) % 2 == 0)      # every other walker fell
+    config = model.config
+    model.config = replace(config, recovery=replace(config.recovery, reseed_fallen=False))
+    walked_on, _ = model.transition(states, np.random.default_rng(1))
+    model.config = config
+    reseeded, _ = model.transition(states, np.random.default_rng(1))
+    fell = reseeded.reseeded == 1
+    assert fell.sum() == 20 and np.all(np.linalg.norm(reseeded.jump[fell, :2], axis=1) > 0)
+    model.monitor = _OrderingMonitor((3.0, 2.0))                   # the person is 3-4 m away
+    log_weights = np.where(fell, 0.0, -50.0)                       # the copies come from re-seeded walkers
+    w = np.exp(log_weights) / np.exp(log_weights).sum()
+    out = model._recovered(5, log_weights, w, walk[-1], reseeded, ImageObservation(features=()),
+                           np.random.default_rng(2))
+    copies = out.continues != np.arange(40)
+    assert copies.sum() == 10 and np.all(fell[out.continues[copies]])
+    # from the walk each particle continues (the frame's walker as the prior moved it, before any re-seeding)
+    moved = out.pose.markers[:, PELVIS, :2] - walked_on.pose.markers[out.continues, PELVIS, :2]
+    np.testing.assert_allclose(out.jump[:, :2], moved, atol=1e-9)
+    assert np.all(np.linalg.norm(out.jump[out.reseeded == 2, :2], axis=1) > 2.0)

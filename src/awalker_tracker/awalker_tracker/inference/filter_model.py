@@ -695,7 +695,9 @@ class TrackerModel:
         moved = replace(copies, kin=kin, pose=self._kin.pose_body(self.body, self.params, copies.walker, kin,
                                                                    self.kin_config),
                         reseeded=np.full(half, REACQUIRED, np.int8))
-        moved.jump[:] = pose_jump(copies, moved)
+        # the jump from the walk each continues: a copy of a walker re-seeded after a fall this very frame adds
+        # to that re-seeding's jump (dropped, the MAP path kept a 0.6 m step where both came at once)
+        moved.jump[:] = copies.jump + pose_jump(copies, moved)
         k = rows.size - half
         # without a ground track long enough: the particles' heading, the start's speed, both spread wide
         heading = order.heading if order.heading is not None else float(np.angle(np.sum(w * np.exp(1j * states.kin.heading))))
@@ -707,7 +709,7 @@ class TrackerModel:
                             self._cyclic_gaits.preferred_step_length(self.params, np.full(k, speed)),
                             np.where(rng.random(k) < left, LEFT, RIGHT).astype(np.int8), rng, spread)
         fresh.reseeded[:] = REACQUIRED
-        fresh.jump[:] = pose_jump(states.take(rows[half:]), fresh)
+        fresh.jump[:] = states.jump[rows[half:]] + pose_jump(states.take(rows[half:]), fresh)
         states = put_rows(states, rows[:half], moved)
         states = put_rows(states, rows[half:], fresh)
         # a moved copy continues the walk of the particle it copies (its lineage), a fresh walker its row's
