@@ -25,8 +25,9 @@ walk, the runs whose start named the wrong stance leg.
     .venv/bin/python benchmarks/bench_realwalks.py --set tuning --trials 91_10 --seeds 0 --settings mono
 
 Sequences and runs are kept in --out and reused (a run with an eval.json is not tracked again; delete it to
-re-run; a run folder without one, left by a run stopped before its evaluation, is tracked afresh). They take
-disk: each run keeps its result.bag (60-550 MB), and the tuning set over two seeds and one setting about 4 GB.
+re-run; a run folder without one, left by a run stopped before its evaluation, is tracked afresh). A run's
+result bags (60-550 MB each; the reporting set over ten seeds would fill ~50 GB) are deleted once it is
+evaluated; --keep-bags keeps them, for benchmarks/depth_profile.py and likelihood_gap.py, which read the features.
 Prints ONE JSON document on stdout; progress on stderr.
 """
 from __future__ import annotations
@@ -211,6 +212,16 @@ def markdown(report: dict) -> str:
     return "\n".join(rows) + "\n"
 
 
+def drop_result_bags(run_dir: Path) -> list[Path]:
+    """Delete the result bags of an evaluated run (its own and its first pass's); returns those deleted."""
+    from awalker_tools.pipeline import FIRST_PASS_DIR, RESULT_BAG
+
+    bags = [bag for bag in (run_dir / RESULT_BAG, run_dir / FIRST_PASS_DIR / RESULT_BAG) if bag.exists()]
+    for bag in bags:
+        shutil.rmtree(bag)
+    return bags
+
+
 def main(argv: list[str] | None = None) -> int:
     from awalker_tools import devset
     from awalker_tools.pipeline import TrackOptions, run_tracking
@@ -229,6 +240,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("bench_realwalks"),
                         help="sequences and runs are kept (and reused) here (default ./bench_realwalks)")
     parser.add_argument("--markdown", type=Path, help="also write the summary table (markdown) here")
+    parser.add_argument("--keep-bags", action="store_true",
+                        help="keep each run's result bags (by default deleted once the run is evaluated)")
     args = parser.parse_args(argv)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
     trials = devset.trials_of(args.set)
@@ -263,6 +276,8 @@ def main(argv: list[str] | None = None) -> int:
                                                       seed=seed, auto_start=mode == "handsoff", overlays=False,
                                                       quiet=True))
                         evaluate_run(run_dir)
+                        if not args.keep_bags:
+                            drop_result_bags(run_dir)
                     except InputError as exc:       # e.g. no walking person found: the run failed, say so
                         run_dir.mkdir(parents=True, exist_ok=True)
                         (run_dir / FAILED).write_text(str(exc))

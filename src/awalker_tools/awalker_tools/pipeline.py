@@ -52,9 +52,10 @@ from awalker_tools.outdir import INCOMPLETE_KEY, files_under, prepare_output_dir
 
 DEFAULTS = PROFILES[DEFAULT_PROFILE]
 START_FILE, BODY_FILE, CALIBRATION_FILE, RUN_FILE = "start.yaml", "body.yaml", "calibration.yaml", "run.yaml"
+RESULT_BAG = "result.bag"
 PROGRESS_PERIOD_S = 2.0
 #: What a run writes at the top of its output folder (a file of the user's there stops a --force run).
-TRACK_OUTPUTS = ("result.bag", RUN_FILE, CALIBRATION_FILE, START_FILE, BODY_FILE, "poses.csv", "summary.csv",
+TRACK_OUTPUTS = (RESULT_BAG, RUN_FILE, CALIBRATION_FILE, START_FILE, BODY_FILE, "poses.csv", "summary.csv",
                  "gait.csv", "gait.json", "gait.png", "overlay", "overlay.mp4", "first_pass")
 #: Lockstep replay lets this many frames out beyond the oldest the tracker has not acknowledged, so the
 #: feature thread works on the next frames while the tracker filters this one, and a frame that takes the
@@ -312,7 +313,7 @@ FIRST_PASS_PARTICLES = 100
 
 def _new_result_bag(out: Path) -> Path:
     """``out/result.bag``, refused if a run already wrote it."""
-    result_bag = out / "result.bag"
+    result_bag = out / RESULT_BAG
     if result_bag.exists():
         raise InputError(f"{result_bag}: exists already; choose a new --out directory or remove it")
     return result_bag
