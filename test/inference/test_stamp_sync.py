@@ -117,3 +117,24 @@ def test_expire_gives_up_waiting_for_a_camera():
     assert issues[0].kind == "incomplete" and issues[0].cameras == ("b",) and "timed out" in issues[0].message
     assert sync.expire() == ([], []) and sync.pending_stamps == []
     assert sync.add("b", 1, "b1")[1][0].kind == "out_of_order"      # too late now
+
+
+
+@pytest.mark.parametrize("tolerance", [0.25, 0.0])
+def test_real_clock_stamps_before_the_period_is_known(tolerance):
+    """Stamps as clocks give them (~1.7e18 ns: as floats rounded to 256 ns, this one 128 ns down), the period
+    not yet known: one camera's first item passes through at once, and two cameras' first frame, given up on by
+    the tracker's timer (a slow start or a loaded machine), is emitted with what it has; neither is a frame that
+    leaves out its own earliest stamp (which stopped the pipeline with a StopIteration)."""
+    stamp = 1_700_000_000_250_000_000
+    assert int(float(stamp)) != stamp
+    alone = StampSynchronizer(["a"], tolerance=tolerance)
+    frames, issues = alone.add("a", stamp, "a1")
+    assert [f.stamp_ns for f in frames] == [stamp] and issues == [] and alone.pending_stamps == []
+    pair = StampSynchronizer(["a", "b"], tolerance=tolerance)
+    assert pair.add("a", stamp, "a1") == ([], [])
+    frames, issues = pair.expire("waited 0.5 s")
+    assert [f.items for f in frames] == [("a1", None)] and frames[0].stamp_ns == stamp
+    assert issues[0].cameras == ("b",) and pair.pending_stamps == []
+    assert pair.add("b", stamp, "b1")[1][0].kind == "out_of_order"        # its frame is gone: too late, to the ns
+    assert pair.add("b", stamp + 16_666_667, "b2")[1] == []

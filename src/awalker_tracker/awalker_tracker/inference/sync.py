@@ -82,6 +82,11 @@ class StampSynchronizer:
             return 0.0
         return None if self.period_ns is None else self.tolerance * self.period_ns
 
+    def _tolerance_whole_ns(self) -> int:
+        """The tolerance in whole ns (0 until it is known), to add to stamps in integers: a stamp of ~1.7e18 ns
+        as a float is rounded to 256 ns, and a frame's own earliest stamp then fell outside its frame."""
+        return int(round(self.tolerance_ns() or 0.0))
+
     def add(self, camera: str, stamp_ns: int, item: Any) -> tuple[list[SyncedFrame], list[SyncIssue]]:
         """Add one camera's item; returns the frames it completes and any issues."""
         stamp_ns = int(stamp_ns)
@@ -121,7 +126,7 @@ class StampSynchronizer:
             return None
         t0 = min(s for s, _ in heads.values())
         tol = self.tolerance_ns()
-        members = {c: h for c, h in heads.items() if h[0] <= t0 + (tol or 0.0)}
+        members = {c: h for c, h in heads.items() if h[0] <= t0 + self._tolerance_whole_ns()}
         decided = len(heads) == len(self.cameras) and (tol is not None or len(members) == len(self.cameras))
         return (t0, members) if decided or force else None
 
@@ -129,7 +134,7 @@ class StampSynchronizer:
               ) -> tuple[SyncedFrame, list[SyncIssue]]:
         for c in members:
             self._queues[c].popleft()
-        self._last_emitted = int(t0 + (self.tolerance_ns() or 0.0))
+        self._last_emitted = t0 + self._tolerance_whole_ns()
         stamps = tuple(members[c][0] if c in members else None for c in self.cameras)
         frame = SyncedFrame(next(s for s in stamps if s is not None),
                             tuple(members[c][1] if c in members else None for c in self.cameras), stamps)
