@@ -194,7 +194,7 @@ PLANS: dict[str, Plan] = {
     "awalker gaits solve --out t.json --speeds 2:7:11 --step-lengths 0.3:1.2:19 [--family symmetric|stable]":
         slow("awalker gaits solve --out t.json --speeds 2:7:11 --step-lengths 0.3:1.2:19", creates=("t.json",)),
     "awalker gaits plot --out plots/": quick(),
-    ".venv/bin/python benchmarks/bench_realwalks.py --set reporting --seeds 0 1 2 3 --markdown table.md":
+    ".venv/bin/python benchmarks/bench_realwalks.py --set reporting --seeds 0 1 2 3 4 5 6 7 8 9 --markdown table.md":
         parse("tracks the reporting set: hours on 2 cores"),
     "source /opt/ros/jazzy/setup.bash": parse(ROS_INSTALL),
     "pip install rosbags opencv-python-headless scipy matplotlib": parse(ROS_INSTALL),
