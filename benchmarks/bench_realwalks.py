@@ -214,7 +214,8 @@ def markdown(report: dict) -> str:
 
 def drop_result_bags(run_dir: Path) -> list[Path]:
     """Delete the result bags of an evaluated run (its own and its first pass's); returns those deleted."""
-    from awalker_tools.pipeline import FIRST_PASS_DIR, RESULT_BAG
+    from awalker_tools.outdir import RESULT_BAG
+    from awalker_tools.pipeline import FIRST_PASS_DIR
 
     bags = [bag for bag in (run_dir / RESULT_BAG, run_dir / FIRST_PASS_DIR / RESULT_BAG) if bag.exists()]
     for bag in bags:

@@ -31,11 +31,12 @@ def recorded_features(run: Path) -> dict[str, dict[int, object]]:
     from rclpy.serialization import deserialize_message
     from rosbags.rosbag2 import Reader
 
+    from awalker_tools.outdir import RESULT_BAG
     from awalker_tracker.errors import InputError
     from awalker_tracker.nodes.features_node import features_from_msg
     from awalker_tracker.nodes.messages import stamp_to_ns
 
-    bag = run / "result.bag"
+    bag = run / RESULT_BAG
     if not bag.exists():
         raise InputError(f"{bag}: no such bag (RUN must be an `awalker track` output directory)")
     out: dict[str, dict[int, object]] = {}

@@ -119,7 +119,6 @@ def test_expire_gives_up_waiting_for_a_camera():
     assert sync.add("b", 1, "b1")[1][0].kind == "out_of_order"      # too late now
 
 
-
 @pytest.mark.parametrize("tolerance", [0.25, 0.0])
 def test_real_clock_stamps_before_the_period_is_known(tolerance):
     """Stamps as clocks give them (~1.7e18 ns: as floats rounded to 256 ns, this one 128 ns down), the period

@@ -24,7 +24,7 @@ import numpy as np
 from awalker_tracker.errors import InputError, parse_yaml
 from awalker_tracker.inference.sync import DEFAULT_TOLERANCE
 
-from awalker_tools.outdir import add_written, check_may_write
+from awalker_tools.outdir import RESULT_BAG, add_written, check_may_write
 
 FITTED_FILE = "body_fitted.yaml"
 FITTED_START_FILE = "start_fitted.yaml"
@@ -47,7 +47,7 @@ def _features(run_dir: Path, cameras: list[Any], tolerance: float) -> tuple[list
     from awalker_tracker.nodes.features_node import features_from_msg
     from awalker_tracker.vision.features import blank_features
 
-    bag = run_dir / "result.bag"
+    bag = run_dir / RESULT_BAG
     camera_names = [c.name for c in cameras]
     topics = {f"/{name}/features": name for name in camera_names}
     store = typestore()

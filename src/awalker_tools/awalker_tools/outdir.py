@@ -20,6 +20,8 @@ import yaml
 from awalker_tracker.errors import InputError, parse_yaml, read_text_file
 
 RUN_FILE = "run.yaml"
+#: The bag a tracking run writes: image features, posteriors and poses (`awalker track`).
+RESULT_BAG = "result.bag"
 #: The key of ``run.yaml`` listing the files the run wrote, relative to its folder.
 WRITTEN_KEY = "written"
 #: The key of ``run.yaml`` saying why a run stopped before its end (absent when it ran to the end).

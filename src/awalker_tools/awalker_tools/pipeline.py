@@ -48,11 +48,10 @@ from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEG_NAMES
 
 from awalker_tools import evaluation
-from awalker_tools.outdir import INCOMPLETE_KEY, files_under, prepare_output_dir, record_written
+from awalker_tools.outdir import INCOMPLETE_KEY, RESULT_BAG, files_under, prepare_output_dir, record_written
 
 DEFAULTS = PROFILES[DEFAULT_PROFILE]
 START_FILE, BODY_FILE, CALIBRATION_FILE, RUN_FILE = "start.yaml", "body.yaml", "calibration.yaml", "run.yaml"
-RESULT_BAG = "result.bag"
 PROGRESS_PERIOD_S = 2.0
 #: What a run writes at the top of its output folder (a file of the user's there stops a --force run).
 TRACK_OUTPUTS = (RESULT_BAG, RUN_FILE, CALIBRATION_FILE, START_FILE, BODY_FILE, "poses.csv", "summary.csv",

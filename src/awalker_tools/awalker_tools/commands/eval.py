@@ -13,7 +13,7 @@ from awalker_tracker.errors import InputError
 from awalker_tracker.vision.camera import load_calibration
 
 from awalker_tools import evaluation, plots
-from awalker_tools.outdir import add_written, check_may_write, check_new_path, incomplete_reason
+from awalker_tools.outdir import RESULT_BAG, add_written, check_may_write, check_new_path, incomplete_reason
 
 RUN_FILE = "run.yaml"   # written by `awalker track`: {input: bag path, ...}
 #: What eval writes into the run's folder (besides --json's file, DIR/eval.json by default).
@@ -67,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     truth = load_truth(truth_path)
     summary_path = run_dir / "summary.csv"
     summary = evaluation.read_summary_csv(summary_path) if summary_path.is_file() else None
-    result_bag = run_dir / "result.bag"
+    result_bag = run_dir / RESULT_BAG
     live = evaluation.live_track_from_bag(result_bag) if result_bag.exists() else None
     calibration = run_dir / "calibration.yaml"      # written by `awalker track`: the run's cameras
     cameras = load_calibration(calibration) if calibration.is_file() else []
