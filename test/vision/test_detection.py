@@ -247,6 +247,37 @@ def test_a_skirt_of_the_floors_colour_does_not_cut_the_legs_off(scene):
     assert _map_box(person_blobs(_drawn(side, [trunk, speck]), "side")[0], d) == (10, 40, 20, 33)
 
 
+def test_legs_in_fragments_under_the_trunk_join_it(scene):
+    """Trousers near the floor's colour leave the legs as strips a row apart, each too flat to join as a stacked
+    piece: the chain joins the trunk (whose own lowest row, the waist, puts the person metres farther away).
+    A chain reaching less than 30 % of the trunk's height lower (a contact shadow), one beyond a gap of 15 % of it
+    and someone larger standing under it stay apart (``vision.detection.TRAIL_*``)."""
+    from awalker_tracker.vision.detection import STACK_LOWER_ASPECT, TRAIL_MAX_GAP, TRAIL_MIN_DROP, person_blobs
+
+    _, features, _ = scene
+    side = features[0]
+    d = side.downsample
+    trunk = (10, 40, 20, 33)                                   # 30 rows x 13 columns
+    strips = [(41 + 4 * k, 44 + 4 * k, 21 + 2 * (k % 2), 27 + 2 * (k % 2)) for k in range(6)]   # 3 x 6 each
+    assert all(3 < STACK_LOWER_ASPECT * 6 for _ in strips)     # none upright: no stacked piece
+    legs = person_blobs(_drawn(side, [trunk] + strips), "side")
+    assert len(legs) == 1 and _map_box(legs[0], d) == (10, 64, 20, 33)
+    assert legs[0].feet_uv[1] == pytest.approx(d * 63 + 0.5 * (d - 1))          # the lowest strip's row
+    assert legs[0].area_px >= d * d * (30 * 13 + 6 * 18)      # (and the one-row notches filled)
+
+    shadow = strips[:2]                                        # down to row 48: 8 rows, under 30 % of 30
+    assert 48 - 40 < TRAIL_MIN_DROP * 30
+    assert _map_box(person_blobs(_drawn(side, [trunk] + shadow), "side")[0], d) == (10, 40, 20, 33)
+
+    apart = [(r0 + 5, r1 + 5, c0, c1) for r0, r1, c0, c1 in strips]   # the first 6 rows under the trunk
+    assert 6 > TRAIL_MAX_GAP * 30
+    assert _map_box(person_blobs(_drawn(side, [trunk] + apart), "side")[0], d) == (10, 40, 20, 33)
+
+    larger = (54, 94, 12, 36)                                  # 40 x 24 two rows under the third strip: someone
+    parted = person_blobs(_drawn(side, [trunk] + strips[:3] + [larger]), "side")   # nearer, 2.5 x the trunk
+    assert sorted(_map_box(b, d) for b in parted) == [(10, 52, 20, 33), (54, 94, 12, 36)]
+
+
 def test_ground_track_fit_drops_a_misplaced_detection():
     """A blob broken in two puts one frame's person metres away: the line fit drops it."""
     from awalker_tracker.vision.detection import GroundTrack

@@ -124,6 +124,67 @@ def _join_stacked(labels: np.ndarray, stats: np.ndarray, min_pixels: float) -> N
         stats[k, cv2.CC_STAT_AREA] = 0
 
 
+#: Legs broken into fragments under a person-sized piece (``_join_trailing``), as fractions of that piece's height in
+#: map rows (and width, and area): trousers near the floor's colour leave the legs as specks and strips a row or
+#: three apart, each too small or too far up beside the trunk to join as a stacked piece.
+TRAIL_MAX_GAP = 0.15         # empty rows from the lowest row reached so far to the next fragment (at least 2)
+TRAIL_MARGIN = 0.5           # fragments may lie this far beside the piece's columns, on either side (a stride)
+TRAIL_MIN_DROP = 0.3         # the fragments carry the lowest row down by at least this much (a contact shadow: less)
+TRAIL_MIN_AREA = 0.1         # ... and hold at least this much of the piece's area (not a trail of specks)
+TRAIL_MAX_AREA = 1.5         # a fragment larger than this is someone else (a nearer person is larger)
+
+
+def _join_trailing(labels: np.ndarray, stats: np.ndarray, min_pixels: float) -> None:
+    """Relabel (in place) the pieces trailing under each person-sized piece (at least ``min_pixels`` map pixels,
+    topmost first) as that piece: starting in its lowest 40 % of rows, within its columns widened by
+    ``TRAIL_MARGIN`` of its width, each the next one down at most ``TRAIL_MAX_GAP`` of its height (at least 2
+    rows) below the lowest row reached so far, none larger than ``TRAIL_MAX_AREA`` x its area. They join only
+    together, when they reach at least ``TRAIL_MIN_DROP`` of its height lower, hold ``TRAIL_MIN_AREA`` of its area
+    and stand upright (``STACK_LOWER_ASPECT``): legs in fragments, whose piece's own lowest row is the waist and
+    puts a person a few metres farther along the camera's ray (a reporting-set recording, light trousers on a
+    light floor: 3-4 m in most frames of the walk's first second). A contact shadow (a few rows), a speck
+    and a piece farther below than the gap stay apart."""
+    area, top, left = stats[:, cv2.CC_STAT_AREA], stats[:, cv2.CC_STAT_TOP], stats[:, cv2.CC_STAT_LEFT]  # views
+    live = 1 + np.flatnonzero(area[1:] > 0)
+    if live.size < 2:
+        return
+    below = top + stats[:, cv2.CC_STAT_HEIGHT]             # first row under each piece
+    right = left + stats[:, cv2.CC_STAT_WIDTH]             # first column right of each piece
+    by_top = live[np.argsort(top[live], kind="stable")]
+    joined = np.zeros(stats.shape[0], bool)
+    for upper in by_top[area[by_top] >= min_pixels]:
+        if joined[upper]:
+            continue
+        height, width = float(stats[upper, cv2.CC_STAT_HEIGHT]), float(stats[upper, cv2.CC_STAT_WIDTH])
+        band = (left[upper] - TRAIL_MARGIN * width, right[upper] + TRAIL_MARGIN * width)
+        gap = max(2, int(TRAIL_MAX_GAP * height))
+        reach, chain = int(below[upper]), []
+        for piece in by_top:
+            if (piece == upper or joined[piece] or top[piece] < top[upper] + 0.6 * height
+                    or right[piece] <= band[0] or left[piece] >= band[1] or below[piece] <= reach
+                    or area[piece] > TRAIL_MAX_AREA * area[upper]):
+                continue
+            if top[piece] - reach > gap:
+                break
+            chain.append(piece)
+            reach = int(below[piece])
+        if not chain:
+            continue
+        chain_width = right[chain].max() - left[chain].min()
+        if (reach - below[upper] < TRAIL_MIN_DROP * height or area[chain].sum() < TRAIL_MIN_AREA * area[upper]
+                or reach - top[chain].min() < STACK_LOWER_ASPECT * chain_width):
+            continue
+        for piece in chain:
+            labels[labels == piece] = upper
+            joined[piece] = True
+        x0, y0 = min(left[upper], left[chain].min()), min(top[upper], top[chain].min())
+        x1 = max(right[upper], right[chain].max())
+        stats[upper, :4] = (x0, y0, x1 - x0, reach - y0)
+        stats[upper, cv2.CC_STAT_AREA] += area[chain].sum()
+        stats[chain, cv2.CC_STAT_AREA] = 0
+        right, below = left + stats[:, cv2.CC_STAT_WIDTH], top + stats[:, cv2.CC_STAT_HEIGHT]
+
+
 def _fill_row_gaps(labels: np.ndarray, stats: np.ndarray) -> None:
     """Give (in place) each background map pixel with one blob's pixels right above and below it to that
     blob: a notch a row high across a limb or the waist, as a vertical closing would fill, but without
@@ -148,6 +209,7 @@ def person_blobs(features: FrameFeatures, camera_name: str = "", threshold: floa
     d = float(features.downsample)
     min_area = min_area_fraction * features.image_width * features.image_height
     _join_stacked(labels, stats, min_area / (d * d))
+    _join_trailing(labels, stats, min_area / (d * d))
     _fill_row_gaps(labels, stats)
     order = 1 + np.argsort(-stats[1:, cv2.CC_STAT_AREA])
     blobs = []
