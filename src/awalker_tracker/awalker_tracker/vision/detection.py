@@ -69,6 +69,7 @@ STACK_MAX_GAP = 0.3
 STACK_MAX_OVERLAP = 0.15
 STACK_LOWER_AREA = 0.25
 STACK_LOWER_ASPECT = 0.7     # the lower piece is at least this tall for its width: legs, not a flat shadow
+LEGS_START = 0.6             # legs start this far down a person-sized piece: in its lowest 40 % of rows (the hips)
 
 
 def _join_stacked(labels: np.ndarray, stats: np.ndarray, min_pixels: float) -> None:
@@ -98,7 +99,7 @@ def _join_stacked(labels: np.ndarray, stats: np.ndarray, min_pixels: float) -> N
     gap = top[None, :] - bottom[:, None]
     stacked = ((area[pieces] >= min_pixels)[:, None] & (height >= STACK_LOWER_ASPECT * width)[None, :]
                & (shared >= 0.5 * np.minimum.outer(width, width))
-               & (top[None, :] >= (top + 0.6 * height)[:, None]) & (bottom[None, :] > bottom[:, None])
+               & (top[None, :] >= (top + LEGS_START * height)[:, None]) & (bottom[None, :] > bottom[:, None])
                & (gap >= -np.floor(STACK_MAX_OVERLAP * height)[:, None])
                & (gap <= np.maximum(1, np.floor(STACK_MAX_GAP * height))[:, None]))
     if not stacked.any():
@@ -160,7 +161,7 @@ def _join_trailing(labels: np.ndarray, stats: np.ndarray, min_pixels: float) -> 
         gap = max(2, int(TRAIL_MAX_GAP * height))
         reach, chain = int(below[upper]), []
         for piece in by_top:
-            if (piece == upper or joined[piece] or top[piece] < top[upper] + 0.6 * height
+            if (piece == upper or joined[piece] or top[piece] < top[upper] + LEGS_START * height
                     or right[piece] <= band[0] or left[piece] >= band[1] or below[piece] <= reach
                     or area[piece] > TRAIL_MAX_AREA * area[upper]):
                 continue
