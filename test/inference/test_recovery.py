@@ -187,7 +187,7 @@ def test_one_camera_far_and_low_holds_the_depth_only_to_its_feet_rows_resolution
         assert any(order is not None for order in orders) == lost, (rows, offset)
         band = monitor.depth_band(19)
         assert band is not None and np.linalg.norm(band[0] - pelvis[:2]) < 1.0
-        assert 1.0 < band[1] < 1.8 if rows else band[1] == config.depth_band_m   # one row's depth, or 0.3 m
+        assert 1.0 < band[1] < 1.8 if rows else band[1] == config.depth_band_m   # one row's depth, or 0.15 m
 
 
 def test_one_camera_far_and_low_counts_a_feet_row_that_moves_by_one_map_row(far_and_low):

@@ -116,11 +116,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="keep each particle's pelvis at most its own fraction of the walker's hip height, drawn "
                              "around F, over the stance, the stance knee bending as a person's does, with any number "
                              "of cameras (0.85-1; 1: off; default 0.97 with two or more cameras and off with one, "
-                             "README \"A pelvis ceiling\")")
+                             "docs/design.md, Pelvis ceiling)")
     parser.add_argument("--depth-band", type=float, default=None, metavar="M",
                         help="one camera: walkers whose pelvis lies more than M metres from where the person's feet row "
-                             "puts them lose weight, from half a second in (default: RecoveryConfig.depth_band_m, 0.3; "
-                             "0: off; README \"One camera's depth band on by default\")")
+                             "puts them lose weight, from half a second in (default: RecoveryConfig.depth_band_m, "
+                             "0.15; 0: off; docs/tracking.md, Recovery)")
     parser.add_argument("--no-recovery", action="store_true",
                         help="never re-seed fallen walkers, re-acquire a lost track, hold the walkers while the person "
                              "stands still or hold one camera's depth by the feet row (the exact filter of the paper)")

@@ -39,7 +39,7 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   fraction of the particles (the lowest weights) are re-seeded around the detected ground position,
   with the heading and speed of the detections' recent ground track (when it moves), then the image
   likelihood decides. At most once per ``cooldown_s``.
-- **One camera's depth (on: ``depth_band_m`` 0.3; ``awalker track --depth-band 0`` turns it off).** A
+- **One camera's depth (on: ``depth_band_m`` 0.15; ``awalker track --depth-band 0`` turns it off).** A
   single camera sees a step toward or away from it hardly at all, so the depth wanders like a random
   walk (the real walks' pelvis error along the view over the last second of a run: median 0.18 m, 90th
   percentile 0.56 m). With ``depth_band_m`` > 0, where this frame's feet row counts (above), from
@@ -53,7 +53,7 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   renders it jumps a row or two too far in some frames, where the feet's ratio falls under the blob's
   threshold), so it only holds the depth within a band, and not over the first half second, when the
   start is better than any one feet row (a hand start is right to 5 cm; the automatic start is made from
-  the feet rows themselves). Measured in the README ("One camera's depth band on by default").
+  the feet rows themselves). Measured in docs/tracking.md (Recovery, *One camera's depth band*).
 - **A person who stops.** The walker only walks (the paper's model has no standing still): with
   ``hold_still``, while the detections' ground track moves slower than ``still_m_s`` over
   ``still_window_s`` (and until it moves faster than ``moving_m_s`` again), each frame's particles
@@ -102,7 +102,7 @@ class RecoveryConfig:
     hold_still: bool = True            # hold the walkers while the person stands still
     still_m_s: float = 0.15            # a ground track slower than this over still_window_s: standing still
     still_window_s: float = 0.3
-    depth_band_m: float = 0.3          # one camera: the pelvis this far from the feet-row position is free ...
+    depth_band_m: float = 0.15         # one camera: the pelvis this far from the feet-row position is free ...
     depth_band_rows: float = 1.0       # ... or this many map rows of its depth (row_depth_m), if farther
     depth_band_sigma_m: float = 0.1    # ... beyond it each frame costs 0.5 (excess / sigma)^2 nats; band 0: off
     depth_band_outlier: float = 0.05   # ... up to ~-log(this): a feet row may be wrong (feet hidden)
