@@ -750,7 +750,7 @@ class TrackerModel:
         """(N,) nats taken from walkers whose pelvis strays over the ground beyond the band's half width
         (``depth_band_m``, or ``depth_band_rows`` map rows of the feet row's depth if wider) from the
         frame's one-camera feet-row position (``inference.recovery``, *One camera's depth*); zeros where
-        the frame has none (several cameras, a blob not as tall as the body, the first
+        the frame has none (several cameras that triangulate the person, a blob not as tall as the body, the first
         ``depth_band_delay_s`` of the track, recovery off). The feet row
         is an outlier with probability ``depth_band_outlier``: the penalty levels off at about
         -log(outlier) nats, so a feet row far from every walker (hidden feet) changes no weights."""
