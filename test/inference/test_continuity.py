@@ -49,6 +49,24 @@ def test_a_reseeding_jump_is_spread_over_the_frames_before_it():
                                0.5 * (1 - DT / spread), atol=1e-9)
 
 
+def test_overlapping_jumps_are_spread_no_faster_than_one():
+    """Two re-acquisitions 0.3 s apart, each 1 m to the left: the ramps of both overlap, but their sum moves the
+    path no faster than the walk plus the spreading speed (summed, it reached twice that)."""
+    markers = walk(120)
+    jumps = np.zeros((120, 3))
+    for frame in (90, 99):
+        markers[frame:, :, :2] += [0.0, 1.0]
+        jumps[frame] = [0.0, 1.0, 0.0]
+    angles = np.zeros((120, len(JOINT_NAMES)))
+    smoothed, _ = smooth_jumps(markers, angles, jumps, DT)
+    assert step_speeds(smoothed).max() <= np.hypot(1.2, JUMP_SPREAD_M_S) + 1e-6
+    np.testing.assert_array_equal(smoothed[99:], markers[99:])
+    # 2 m at 1 m/s: the path leaves its old walk about 2 s before the last jump, and not before
+    start = 99 - int(np.ceil(2.0 / JUMP_SPREAD_M_S / DT)) - 1
+    np.testing.assert_allclose(smoothed[:start], markers[:start])
+    assert np.linalg.norm(smoothed[start + 3, PELVIS, :2] - markers[start + 3, PELVIS, :2]) > 0.0
+
+
 def test_the_live_pose_follows_a_map_that_swaps_between_particles_without_jumping():
     """Two walkers 0.8 m apart walk side by side; the MAP swaps between them every 10 frames. The published pelvis
     never moves faster than the walk plus the settling speed, and it settles on the MAP between swaps."""

@@ -357,7 +357,8 @@ def smooth_jumps(markers: np.ndarray, joint_angles: np.ndarray, jumps: np.ndarra
     ``d`` m is moved by ``(1 - k / T) d`` and turned about its pelvis by as much of the turn, over T =
     max(``JUMP_SPREAD_MIN_S``, |d| / ``JUMP_SPREAD_M_S``). The walk the lineage had before a re-acquisition was
     not the person's; spread so, the trajectory reaches the person without teleporting (issue: the MAP path
-    stays physically possible)."""
+    stays physically possible). Where the spreads of several jumps overlap, their summed ground shift still
+    changes by at most ``JUMP_SPREAD_M_S`` from frame to frame (it reaches back further instead)."""
     frames = len(markers)
     shift = np.zeros((frames, 3))
     for j in np.flatnonzero(np.any(jumps != 0.0, axis=1)):
@@ -367,6 +368,17 @@ def smooth_jumps(markers: np.ndarray, joint_angles: np.ndarray, jumps: np.ndarra
         shift[before] += weight[:, None] * jumps[j]
     if not shift.any():
         return markers, joint_angles
+    # backwards from the last frame (shift 0): each frame's ground shift is the next frame's plus the jump
+    # made there, moved towards the summed ramps above by at most JUMP_SPREAD_M_S * dt
+    limit = JUMP_SPREAD_M_S * dt
+    ground = shift[:, :2].copy()
+    ground[-1] = 0.0
+    for f in range(frames - 2, -1, -1):
+        reached = ground[f + 1] + jumps[f + 1, :2]
+        step = shift[f, :2] - reached
+        size = float(np.hypot(*step))
+        ground[f] = reached + (step if size <= limit else step * (limit / size))
+    shift[:, :2] = ground
     pelvis = markers[:, MARKER_NAMES.index("pelvis"), None, :2]
     c, s = np.cos(shift[:, 2])[:, None], np.sin(shift[:, 2])[:, None]
     d = markers[..., :2] - pelvis
