@@ -309,6 +309,42 @@ def test_the_walkers_are_held_while_the_person_stands_still(walk_stop_walk):
     assert 20 < spread < 180, spread
 
 
+@pytest.mark.parametrize("target", ["seen_gait", "usual_gait"])
+def test_eq5_aims_at_the_speed_the_images_move_not_the_walkers(walk_stop_walk, target: str):
+    """stiffness_target "seen_gait": eq. (5)'s target speed is the speed of the images' ground track over
+    ``seen_speed_window_s`` (1.3 m/s walking, ~0 standing), whatever the walkers do (started at 0.7 m/s, their
+    speed would pull them towards their own gait); "usual_gait": the walkers' (posterior's) speed."""
+    from awalker_tracker.inference.filter_model import ImageObservation, image_likelihood
+
+    camera, features, pelvis = walk_stop_walk
+    body = BodyDescription.default()
+    config = TrackerConfig(dt=1 / 30, recovery=RecoveryConfig(reacquire=False), stiffness_target=target,
+                           seen_speed_window_s=0.5)
+    start = StartDescription(0, (float(pelvis[0, 0]), float(pelvis[0, 1])), 0.0, 0.7, 0.5, LEFT)
+    model = TrackerModel(body, start, image_likelihood(body, [camera]), config, cameras=[camera])
+    rng = np.random.default_rng(0)
+    states = model.initial(16, rng)
+    targets, walkers = [], []
+    for f, feats in enumerate(features):
+        parent = states
+        moved, _ = model.transition(parent, rng)
+        states = model.rejuvenate(f, np.zeros(16), parent, moved, ImageObservation(features=(feats,)), rng)
+        targets.append(model.target_speed)
+        walkers.append(float(np.mean(moved.speed)))
+    if target == "usual_gait":
+        np.testing.assert_allclose(targets, walkers)
+        return
+    assert abs(targets[19] - 1.3) < 0.15 and targets[40] < 0.15        # walking, then standing (frames 20-44)
+    assert abs(walkers[19] - 1.3) > 0.3                                 # the walkers' own speed is elsewhere
+    assert model.prior.stiffness_target == "usual_gait"
+    # more cameras than seen_gait_max_cameras, or no detections to see (recovery off): eq. (5)'s constant
+    for cameras, recovery in (([camera, camera], RecoveryConfig()), ([camera], RecoveryConfig(reacquire=False,
+                                                                                             hold_still=False))):
+        other = TrackerModel(body, start, image_likelihood(body, cameras), replace(config, recovery=recovery),
+                             cameras=cameras)
+        assert other.stiffness_target == other.prior.stiffness_target == "constant"
+
+
 def test_one_camera_places_the_person_by_the_feet_row_only_where_the_blob_is_as_tall_as_the_body(seen):
     """``feet_row_position``: one camera, a blob as tall as the body: the person's ground position (within
     the feet row's ~0.2 m); a body 1.5 times as tall (the blob lost the legs or the head): none; two cameras

@@ -167,8 +167,17 @@ class TrackerConfig:
     # filter (fallen_log_penalty). At 0.05 the filter lost a 600-particle marker track
     # (test_filter_model.py), so 0.02.
     kappa_bar_variance: float = 0.02
-    # what eq. (5) pulls each stride's mean stiffness towards (control.ControlPrior.stiffness_target)
-    stiffness_target: str = "constant"
+    # What eq. (5) pulls each stride's mean stiffness towards: "constant" mu_kappa (the paper; a slow walker is
+    # then held at a 5 km/h cadence, in short quick steps); "usual_gait" (control.ControlPrior.stiffness_target):
+    # the cyclic gait's stiffness at the posterior's walking speed and a person's usual step length there (the
+    # walker's speed feeds back: a walker fallen behind pulls itself slower); "seen_gait": the same at the speed
+    # the images' ground track moves over seen_speed_window_s (s; RecoveryConfig's detections, which the walker
+    # does not move), the posterior's speed where the images give none yet; with no lost-track monitor (no
+    # cameras, recovery off) or more than seen_gait_max_cameras cameras, the constant (docs/tracking.md,
+    # *The gait's pull*)
+    stiffness_target: str = "seen_gait"
+    seen_speed_window_s: float = 1.0
+    seen_gait_max_cameras: int = 1
     # Exponent on the likelihood (tempering). The per-part image log-likelihoods are sums over
     # strongly correlated pixels, so differences between particles of tens of log units are not
     # independent evidence; at 1.0 the weights collapse onto a few particles every frame (ESS 4-9
@@ -250,6 +259,13 @@ class TrackerConfig:
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"TrackerConfig.dt must be > 0 s, got {self.dt}")
+        if self.stiffness_target not in ("constant", "usual_gait", "seen_gait"):
+            raise ValueError(f"TrackerConfig.stiffness_target must be 'constant', 'usual_gait' or 'seen_gait', got "
+                             f"{self.stiffness_target!r}")
+        if not (np.isfinite(self.seen_speed_window_s) and self.seen_speed_window_s > 0
+                and self.seen_gait_max_cameras >= 0):
+            raise ValueError(f"TrackerConfig: seen_speed_window_s must be > 0 s and seen_gait_max_cameras >= 0, got "
+                             f"{self.seen_speed_window_s}, {self.seen_gait_max_cameras}")
         if not (np.isfinite(self.kappa_bar_variance) and self.kappa_bar_variance > 0):
             raise ValueError(f"TrackerConfig.kappa_bar_variance must be > 0, got {self.kappa_bar_variance}")
         if not (np.isfinite(self.likelihood_scale) and self.likelihood_scale >= 0):
@@ -399,7 +415,8 @@ class TrackerModel:
                  gait_table: Any = None, prior: Any = None, kinematics: Any = None,
                  cameras: list[Any] | None = None) -> None:
         """``cameras``: the image likelihood's cameras, for re-acquiring a lost track (None: no re-acquisition),
-        for the postures (``TrackerConfig.posture_min_cameras``) and the pelvis ceiling (``pelvis_ceiling_for``)."""
+        for the postures (``TrackerConfig.posture_min_cameras``), the pelvis ceiling (``pelvis_ceiling_for``) and
+        eq. (5)'s seen gait (``TrackerConfig.seen_gait_max_cameras``)."""
         from awalker_tracker.model import control, cyclic_gaits, kinematics as kin_mod
 
         self.body = body
@@ -409,8 +426,6 @@ class TrackerModel:
         self.params = params or body.walker_params()
         # the packaged table is solved for L = 0.9 m: rescaled (exactly) to this body's leg length
         self.gaits = (gait_table if gait_table is not None else cyclic_gaits.GaitTable.load()).scaled_to(self.params)
-        self.prior = prior if prior is not None else control.ControlPrior.from_gait_table(
-            self.gaits, kappa_bar_variance=config.kappa_bar_variance, stiffness_target=config.stiffness_target)
         # rad: the spread of the particles' postures, 0 (upright) with fewer cameras than posture_min_cameras
         self.posture_spread = config.posture_spread if len(cameras or ()) >= config.posture_min_cameras else 0.0
         ceiling, self.pelvis_ceiling_spread, ceiling_drift = config.pelvis_ceiling_for(len(cameras or ()))
@@ -425,11 +440,19 @@ class TrackerModel:
         self._kin = kin_mod
         self.monitor = (LostTrackMonitor(cameras, config.recovery, config.dt, body_height_m=self.body.height)
                         if cameras and (config.recovery.reacquire or config.recovery.hold_still) else None)
+        # eq. (5)'s target as used (TrackerConfig.stiffness_target: "seen_gait" needs the monitor's detections)
+        self.stiffness_target = config.stiffness_target
+        if config.stiffness_target == "seen_gait" and (
+                self.monitor is None or len(self.cameras) > config.seen_gait_max_cameras):
+            self.stiffness_target = "constant"
+        self.prior = prior if prior is not None else control.ControlPrior.from_gait_table(
+            self.gaits, kappa_bar_variance=config.kappa_bar_variance,
+            stiffness_target="constant" if self.stiffness_target == "constant" else "usual_gait")
         self.reseeded_fallen = 0     # particles re-seeded after a fall, over the run
         # frame periods the next transition spans (``Tracker.push``: from the stamps; > 1 over frames no image came for)
         self.frames_per_step = 1
         self._depth_band: tuple[np.ndarray, float] | None = None   # this frame's centre and half width, one camera
-        self._target_speed = float(start.speed)      # m/s, the posterior's walking speed (rejuvenate)
+        self._target_speed = float(start.speed)      # m/s, eq. (5)'s target speed (rejuvenate)
         # the naming test (TrackerConfig.naming_test_particles): log odds of the other naming, each frame's evidence
         # (filter frame index -> nats), the decision taken at each frame (True: every particle renamed its legs
         # there), and what this frame's likelihood call needs (rejuvenate -> log_likelihood)
@@ -611,13 +634,22 @@ class TrackerModel:
                    obs: Any, rng: np.random.Generator) -> TrackerStates:
         """Called by the filter with the particles' current log weights, the states before the transition
         (``parent``, None at the first frame) and after it, before the likelihood of ``obs`` is computed: the
-        recovery (``_recovered``), then the naming test's renaming (``_named``). Also keeps the posterior's walking
-        speed, eq. (5)'s target with ``TrackerConfig.stiffness_target`` "usual_gait"."""
+        recovery (``_recovered``), then the naming test's renaming (``_named``). Also keeps eq. (5)'s target speed
+        (``TrackerConfig.stiffness_target``): the posterior's walking speed, or the images' ground track's."""
         w = np.exp(log_weights - np.max(log_weights))
         w /= w.sum()
         self._target_speed = float(w @ states.speed)
         states = self._recovered(frame, log_weights, w, parent, states, obs, rng)
+        if self.stiffness_target == "seen_gait" and frame in self.monitor.track.positions:   # it saw this frame
+            seen = self.monitor.track.velocity(frame, self.config.seen_speed_window_s)
+            if seen is not None:
+                self._target_speed = float(np.linalg.norm(seen))
         return self._named(frame, log_weights, parent, states, obs)
+
+    @property
+    def target_speed(self) -> float:
+        """Eq. (5)'s target speed (m/s) for the next transition's strides (``TrackerConfig.stiffness_target``)."""
+        return self._target_speed
 
     @property
     def renamed_frames(self) -> list[int]:
