@@ -343,6 +343,10 @@ def test_eq5_aims_at_the_speed_the_images_move_not_the_walkers(walk_stop_walk, t
         other = TrackerModel(body, start, image_likelihood(body, cameras), replace(config, recovery=recovery),
                              cameras=cameras)
         assert other.stiffness_target == other.prior.stiffness_target == "constant"
+    with pytest.raises(ValueError, match="stiffness_target must be one of .*'seen_gait'.*got 'seen'"):
+        TrackerConfig(stiffness_target="seen")
+    with pytest.raises(ValueError, match="seen_speed_window_s must be > 0 s"):
+        TrackerConfig(seen_speed_window_s=0.0)
 
 
 def test_one_camera_places_the_person_by_the_feet_row_only_where_the_blob_is_as_tall_as_the_body(seen):

@@ -34,6 +34,7 @@ from awalker_tracker.inference.smc import AncestryHistory, FilterStep, ParticleF
 from awalker_tracker.inference.speed import SPEED_TIME_CONSTANT_S, update_speed
 from awalker_tracker.inference.visibility import TrackEnd, ViewConfig, ViewMonitor, camera_views
 from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription, BodyPoseBatch
+from awalker_tracker.model.control import STIFFNESS_TARGETS
 from awalker_tracker.model.walker import LEFT, LEG_NAMES, RIGHT, WalkerParams, WalkerState
 
 if TYPE_CHECKING:
@@ -259,9 +260,9 @@ class TrackerConfig:
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise ValueError(f"TrackerConfig.dt must be > 0 s, got {self.dt}")
-        if self.stiffness_target not in ("constant", "usual_gait", "seen_gait"):
-            raise ValueError(f"TrackerConfig.stiffness_target must be 'constant', 'usual_gait' or 'seen_gait', got "
-                             f"{self.stiffness_target!r}")
+        if self.stiffness_target not in (*STIFFNESS_TARGETS, "seen_gait"):
+            raise ValueError(f"TrackerConfig.stiffness_target must be one of {(*STIFFNESS_TARGETS, 'seen_gait')}, "
+                             f"got {self.stiffness_target!r}")
         if not (np.isfinite(self.seen_speed_window_s) and self.seen_speed_window_s > 0
                 and self.seen_gait_max_cameras >= 0):
             raise ValueError(f"TrackerConfig: seen_speed_window_s must be > 0 s and seen_gait_max_cameras >= 0, got "
@@ -384,11 +385,10 @@ def smooth_jumps(markers: np.ndarray, joint_angles: np.ndarray, jumps: np.ndarra
         shift[before] += weight[:, None] * jumps[j]
     if not shift.any():
         return markers, joint_angles
-    # backwards from the last frame (shift 0): each frame's ground shift is the next frame's plus the jump
-    # made there, moved towards the summed ramps above by at most JUMP_SPREAD_M_S * dt
+    # backwards from the last frame (no jump after it: shift 0): each frame's ground shift is the next frame's
+    # plus the jump made there, moved towards the summed ramps above by at most JUMP_SPREAD_M_S * dt
     limit = JUMP_SPREAD_M_S * dt
     ground = shift[:, :2].copy()
-    ground[-1] = 0.0
     for f in range(frames - 2, -1, -1):
         reached = ground[f + 1] + jumps[f + 1, :2]
         step = shift[f, :2] - reached
