@@ -240,3 +240,72 @@ def test_ancestry_follows_the_rows_a_rejuvenation_copies():
     final = steps[-1]
     for index in range(0, 200, 7):
         assert np.array_equal(history.trajectory(index)["x"], final.states.path[index])
+
+
+def test_kld_particle_count_is_fox_bound():
+    """n = chi^2_{k-1, 1-delta} / (2 eps), the Wilson-Hilferty approximation within 1 % for k >= 10; one bin 1."""
+    from scipy.stats import chi2
+
+    from awalker_tracker.inference.smc import kld_particle_count
+
+    assert kld_particle_count(1, 0.05, 0.99) == 1
+    for bins in (10, 50, 300, 3000):
+        exact = chi2.ppf(0.99, bins - 1) / (2 * 0.05)
+        assert kld_particle_count(bins, 0.05, 0.99) == pytest.approx(exact, rel=0.01)
+    assert kld_particle_count(300, 0.02, 0.99) > kld_particle_count(300, 0.05, 0.99)   # tighter: more particles
+
+
+@dataclass
+class BinnedLinearGaussian(LinearGaussian):
+    """``LinearGaussian`` with histogram bins of ``width`` over x, for the adaptive particle count."""
+
+    width: float = 0.05
+
+    def bin_keys(self, states):
+        return np.floor(states.x / self.width).astype(np.int64)
+
+
+def test_adaptive_count_follows_the_predicted_spread_and_stays_exact():
+    """KLD-sampling: a walk whose moves are small (q) is followed with fewer particles than one whose moves are
+    large, never fewer than min_particles nor more than num_particles, and the filter still matches the Kalman
+    filter in mean, variance and evidence."""
+    counts = {}
+    for q, r in ((0.003, 0.002), (0.3, 0.2)):
+        model = BinnedLinearGaussian(q=q, r=r)
+        zs = model.simulate(30, np.random.default_rng(2))
+        pf = ParticleFilter(model, SMCConfig(num_particles=20000, min_particles=500, seed=5))
+        steps = pf.run(zs)
+        sizes = [len(s.states.x) for s in steps]
+        assert pf.num_resamples > 0 and min(sizes) >= 500 and max(sizes) <= 20000
+        assert all(len(s.log_weights) == len(s.ancestors) == n for s, n in zip(steps, sizes))
+        counts[q] = np.median(sizes[5:])
+        kal_mean, kal_var = model.kalman(zs)
+        for step, m, v in zip(steps, kal_mean, kal_var):
+            mean, var = _weighted_moments(step)
+            assert abs(mean - m) < 5.0 * np.sqrt(v / step.effective_sample_size) + 1e-3, (q, step.frame)
+            assert abs(var - v) < (5.0 * np.sqrt(2.0 / step.effective_sample_size) + 0.05) * v, (q, step.frame)
+        # 500-1300 particles: measured within 2.3 nats over the 30 frames at filter seeds 0-3
+        assert sum(s.log_evidence for s in steps) == pytest.approx(model.kalman_log_evidence(zs), abs=4.0)
+    # measured: a median of 500 particles (the floor) against 1277
+    assert counts[0.003] < 0.5 * counts[0.3]
+
+
+def test_adaptive_count_at_its_ceiling_changes_nothing():
+    """min_particles = num_particles: the same filter, bit for bit, as a fixed count (no second draw)."""
+    model = BinnedLinearGaussian(width=1e-6)
+    zs = model.simulate(20, np.random.default_rng(3))
+    fixed = ParticleFilter(model, SMCConfig(num_particles=3000, seed=1)).run(zs)
+    capped = ParticleFilter(model, SMCConfig(num_particles=3000, min_particles=3000, seed=1)).run(zs)
+    assert all(np.array_equal(a.log_weights, b.log_weights) and np.array_equal(a.states.x, b.states.x)
+               for a, b in zip(fixed, capped))
+
+
+def test_adaptive_count_needs_bins_and_a_valid_floor():
+    with pytest.raises(ValueError, match="bin_keys"):
+        ParticleFilter(LinearGaussian(), SMCConfig(num_particles=1000, min_particles=100))
+    with pytest.raises(ValueError, match="min_particles must lie in 0-num_particles"):
+        SMCConfig(num_particles=1000, min_particles=2000)
+    with pytest.raises(ValueError, match="kld_error"):
+        SMCConfig(kld_error=0.0)
+    with pytest.raises(ValueError, match="kld_quantile"):
+        SMCConfig(kld_quantile=1.0)

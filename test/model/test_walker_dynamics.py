@@ -375,3 +375,20 @@ def test_a_stance_leg_leaning_beyond_any_step_counts_as_fallen() -> None:
                                     [0.0, 0.0, 0.0, -1.0], [0.0, 0.0, 0.0, 1.0])
     assert dynamics.fallen_mask(PARAMS, state).tolist() == [True, True, False, False]
     assert float(double_support_angle(PARAMS, 1.2)) < lean - 0.1
+
+
+def test_step_events_take_rows_of_every_field():
+    """``StepEvents.take``: the events of the walkers asked for, every field cut alike (the adaptive particle
+    count keeps a subset of a frame's particles with their events)."""
+    from dataclasses import fields
+
+    n = 5
+    events = dynamics.StepEvents(
+        heel_strike=np.array([True, False, True, False, False]), strike_fraction=np.arange(n) / 10,
+        strike_position=np.arange(n) + 0.5, fallen=np.array([False, False, False, True, False]),
+        time_since_strike=np.arange(n) * 0.1, toe_off_impulse=np.arange(n) * 0.01,
+        pre_strike_rates=np.arange(2 * n, dtype=float).reshape(n, 2))
+    rows = np.array([3, 0, 3])
+    taken = events.take(rows)
+    for f in fields(events):
+        assert np.array_equal(getattr(taken, f.name), getattr(events, f.name)[rows]), f.name

@@ -400,7 +400,8 @@ def test_track_option_errors(tmp_path: Path, capsys):
                                 ("--likelihood-scale", "-1", "--likelihood-scale"),
                                 ("--leg-scale-spread", "0.5", "--leg-scale-spread"),
                                 ("--pelvis-ceiling", "1.2", "--pelvis-ceiling"),
-                                ("--depth-band", "-0.1", "--depth-band")):
+                                ("--depth-band", "-0.1", "--depth-band"),
+                                ("--min-particles", "-1", "--min-particles must lie in 0-15000")):
         assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), option, value]) == 2
         assert text in capsys.readouterr().err
     assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--follow-near", "nan", "0"]) == 2
@@ -439,13 +440,15 @@ def test_node_and_command_line_read_one_set_of_defaults(tmp_path: Path, monkeypa
     from awalker_tracker.nodes.tracker_node import TrackerNode
 
     def of_options(options: pipeline.TrackOptions) -> dict:
-        return {"num_particles": options.particles, "lookahead": options.lookahead, "trust": options.trust,
+        return {"num_particles": options.particles, "min_particles": pipeline.fewest_particles(options),
+                "lookahead": options.lookahead, "trust": options.trust,
                 "seed": options.seed, "likelihood_scale": options.likelihood_scale,
                 "leg_scale_spread": options.leg_scale_spread, "recovery": options.recovery}
 
     def of_node(node: TrackerNode) -> dict:
         smc, recovery = node.smc_config, node.recovery
-        return {"num_particles": smc.num_particles, "lookahead": smc.lookahead, "trust": smc.trust,
+        return {"num_particles": smc.num_particles, "min_particles": smc.min_particles, "lookahead": smc.lookahead,
+                "trust": smc.trust,
                 "resample_fraction": smc.resample_fraction, "resampling": smc.resampling, "seed": smc.seed,
                 "likelihood_scale": node.likelihood_scale, "leg_scale_spread": node.leg_scale_spread,
                 "reseed_fallen": recovery.reseed_fallen, "reacquire": recovery.reacquire,
@@ -478,7 +481,19 @@ def test_node_and_command_line_read_one_set_of_defaults(tmp_path: Path, monkeypa
     node = TrackerNode(context=ros_context, parameter_overrides=[
         Parameter("cameras", value=["cam0"]), Parameter("profile", value="realtime"), Parameter("num_particles", value=700)])
     try:
+        # a profile's fewest never exceeds a smaller count given
         assert node.smc_config.num_particles == 700
+        assert node.smc_config.min_particles == min(PROFILES["realtime"].min_particles, 700)
+    finally:
+        node.destroy_node()
+    assert main(["track", str(tmp_path / "x.bag"), "--out", str(tmp_path / "o"), "--particles", "9000",
+                 "--min-particles", "3000"]) == 0
+    assert seen[-1].min_particles == 3000 and pipeline.fewest_particles(seen[-1]) == 3000
+    node = TrackerNode(context=ros_context, parameter_overrides=[
+        Parameter("cameras", value=["cam0"]), Parameter("num_particles", value=9000),
+        Parameter("min_particles", value=3000)])
+    try:
+        assert (node.smc_config.num_particles, node.smc_config.min_particles) == (9000, 3000)
     finally:
         node.destroy_node()
     # an unknown profile is refused, naming it and the choices

@@ -4,11 +4,12 @@ Files (one row per frame and marker, metres, world frame z up):
     poses.csv / ground_truth.csv: ``frame,stamp_ns,marker,x,y,z``
     summary.csv: ``frame,stamp_ns,speed,speed_std,stance_left_probability,effective_sample_size,
                   resampled,heel_strike,stance_leg,reseeded_fallen,reacquired,person_still,strike_fraction,
-                  track,in_view,cameras_in_view``
+                  track,in_view,cameras_in_view,particles``
                   (particles re-seeded at that frame after a fall / at the detected person, 1 where the
                   person stood still and the walkers were held, when in the period before the frame
                   the MAP walker struck, 0-1, NaN where it did not; which track of the run, from 1; 1 where
-                  the person was in view of some camera, and the cameras that saw them, space-separated)
+                  the person was in view of some camera, and the cameras that saw them, space-separated; the
+                  particles the filter held, fewer than N where the adaptive count chose so)
 Metrics:
 - absolute error: per frame, mean 3D distance (mm) over pelvis, thorax, hips, knees, ankles;
 - relative error: the same after translating the estimated pelvis onto the true one;
@@ -42,11 +43,11 @@ FOOT_MARKERS = {"left": ("left_heel", "left_toe"), "right": ("right_heel", "righ
 POSE_COLUMNS = ("frame", "stamp_ns", "marker", "x", "y", "z")
 SUMMARY_COLUMNS = ("frame", "stamp_ns", "speed", "speed_std", "stance_left_probability",
                    "effective_sample_size", "resampled", "heel_strike", "stance_leg", "reseeded_fallen", "reacquired",
-                   "person_still", "strike_fraction", "track", "in_view", "cameras_in_view")
-# columns later versions added, read as 0 (strike_fraction: NaN, a strike at the frame; track 1, in view) from
-# older files
+                   "person_still", "strike_fraction", "track", "in_view", "cameras_in_view", "particles")
+# columns later versions added, read as 0 (strike_fraction: NaN, a strike at the frame; track 1, in view;
+# particles 0: not recorded) from older files
 OPTIONAL_SUMMARY_COLUMNS = {"reseeded_fallen": "0", "reacquired": "0", "person_still": "0", "strike_fraction": "nan",
-                            "track": "1", "in_view": "1", "cameras_in_view": ""}
+                            "track": "1", "in_view": "1", "cameras_in_view": "", "particles": "0"}
 
 
 @dataclass(frozen=True)
@@ -140,7 +141,8 @@ def read_summary_csv(path: Path) -> dict[str, np.ndarray]:
             col = [r.get(key) or OPTIONAL_SUMMARY_COLUMNS.get(key, "") for r in rows]
             if key in ("heel_strike", "stance_leg", "cameras_in_view"):
                 out[key] = np.array(col, dtype=object)
-            elif key in ("frame", "stamp_ns", "reseeded_fallen", "reacquired", "person_still", "track", "in_view"):
+            elif key in ("frame", "stamp_ns", "reseeded_fallen", "reacquired", "person_still", "track", "in_view",
+                         "particles"):
                 out[key] = np.array(col, np.int64)
             elif key == "resampled":
                 out[key] = np.array([c.strip().lower() in ("1", "true") for c in col])

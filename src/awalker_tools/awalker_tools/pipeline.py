@@ -42,7 +42,7 @@ import yaml
 
 from awalker_tracker.errors import InputError
 from awalker_tracker.inference.filter_model import StartDescription, TrackerConfig
-from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES
+from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES, particle_count_text, tracking_profile
 from awalker_tracker.inference.sync import DEFAULT_TOLERANCE
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEG_NAMES
@@ -171,6 +171,7 @@ class TrackOptions:
     # tracker node takes for what is left unset here: depth_band_m None)
     profile: str = DEFAULT_PROFILE
     particles: int = DEFAULTS.num_particles
+    min_particles: int | None = None   # the adaptive count's fewest (SMCConfig); None: the profile's
     lookahead: int = DEFAULTS.lookahead
     trust: float = DEFAULTS.trust
     seed: int = DEFAULTS.seed
@@ -316,6 +317,15 @@ def _new_result_bag(out: Path) -> Path:
     if result_bag.exists():
         raise InputError(f"{result_bag}: exists already; choose a new --out directory or remove it")
     return result_bag
+
+
+def fewest_particles(options: TrackOptions) -> int:
+    """The adaptive count's fewest particles of a run (``SMCConfig.min_particles``; 0: ``particles`` throughout):
+    ``options.min_particles``, else its profile's, at most ``options.particles`` (as the tracker node takes it)."""
+    fewest = options.min_particles
+    if fewest is None:
+        fewest = tracking_profile(options.profile).min_particles
+    return min(int(fewest), int(options.particles))
 
 
 def run_tracking(options: TrackOptions) -> TrackResult:
@@ -547,7 +557,7 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
     _progress(options, f"awalker track: {bag} ({num_frames} frames, cameras {', '.join(names)}), "
                        + (f"start frame {start.frame} from {start_src}" if start is not None else
                           f"start description: {start_src}; finding the walking person automatically")
-                       + f", body from {body_src}, {options.particles} particles")
+                       + f", body from {body_src}, {particle_count_text(options.particles, fewest_particles(options))}")
 
     # Read by the rmw when the context starts.
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST" if options.share_topics else "OFF"
@@ -600,6 +610,8 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
             Parameter("estimate_body", value=body is None), Parameter("body_output", value=str(out / BODY_FILE)),
             Parameter("profile", value=options.profile),
             Parameter("num_particles", value=int(options.particles)), Parameter("lookahead", value=int(options.lookahead)),
+            *([Parameter("min_particles", value=int(options.min_particles))]
+              if options.min_particles is not None else []),
             Parameter("trust", value=float(options.trust)), Parameter("seed", value=int(options.seed)),
             Parameter("likelihood_scale", value=float(options.likelihood_scale)),
             Parameter("leg_scale_spread", value=float(options.leg_scale_spread)),
@@ -747,7 +759,8 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
     result.seconds_pictures = time.monotonic() - started - result.seconds
     (out / RUN_FILE).write_text(yaml.safe_dump({
         "input": str(bag.resolve()), "start_source": start_src, "body_source": body_src,
-        "profile": options.profile, "particles": options.particles, "lookahead": options.lookahead,
+        "profile": options.profile, "particles": options.particles, "min_particles": fewest_particles(options),
+        "lookahead": options.lookahead,
         "trust": options.trust, "seed": options.seed,
         "likelihood_scale": options.likelihood_scale, "leg_scale_spread": options.leg_scale_spread,
         "pelvis_ceiling": (options.pelvis_ceiling if options.pelvis_ceiling is not None
@@ -828,7 +841,8 @@ def write_outputs(out: Path, trajectories: Sequence[Any], summaries: list[Any],
              "stance_leg": "left" if map_leg.get(s.stamp_ns, s.map_stance_leg) == 0 else "right",
              "reseeded_fallen": s.reseeded_fallen, "reacquired": s.reacquired, "person_still": int(s.person_still),
              "strike_fraction": f"{map_strike.get(s.stamp_ns, float('nan')):.4f}", "track": s.track_id,
-             "in_view": int(s.person_in_view), "cameras_in_view": " ".join(s.cameras_in_view)}
+             "in_view": int(s.person_in_view), "cameras_in_view": " ".join(s.cameras_in_view),
+             "particles": s.num_particles}
             for s in summaries]
     evaluation.write_summary_csv(out / "summary.csv", rows)
     return track, evaluation.write_gait(out, walks, sides_known)

@@ -32,6 +32,8 @@ def run(args: argparse.Namespace) -> int:
     leg_scale_spread = given(args.leg_scale_spread, profile.leg_scale_spread)
     if not 1 <= particles <= MAX_PARTICLES:
         raise InputError(f"--particles must lie in 1-{MAX_PARTICLES} (the most a filter takes), got {particles}")
+    if args.min_particles is not None and not 0 <= args.min_particles <= particles:
+        raise InputError(f"--min-particles must lie in 0-{particles} (--particles), got {args.min_particles}")
     if seed < 0:
         raise InputError(f"--seed must be an integer >= 0, got {seed}")
     if not 0 <= likelihood_scale < math.inf:
@@ -61,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
     run_tracking(TrackOptions(
         bag=Path(args.bag), out=output_path(args.out, "--out"), start=Path(args.start) if args.start else None,
         body=Path(args.body) if args.body else None, profile=args.profile, particles=particles,
+        min_particles=args.min_particles,
         lookahead=lookahead, trust=trust, seed=seed, likelihood_scale=likelihood_scale,
         leg_scale_spread=leg_scale_spread, pelvis_ceiling=args.pelvis_ceiling,
         recovery=profile.recovery and not args.no_recovery, depth_band_m=args.depth_band,
@@ -99,6 +102,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              + f" (default {DEFAULT_PROFILE}; realtime runs about 3 times faster)")
     parser.add_argument("--particles", type=whole_number, default=None,
                         help=f"number of particles (default: the profile's, {DEFAULTS.num_particles})")
+    parser.add_argument("--min-particles", type=int, default=None,
+                        help="adaptive particle count (KLD-sampling, docs/tracking.md): the fewest a resampling may "
+                             f"keep, --particles the most; 0: --particles throughout (default: the profile's, "
+                             f"{DEFAULTS.min_particles})")
     parser.add_argument("--lookahead", type=int, default=None,
                         help=f"look-ahead tau in frames (default {DEFAULTS.lookahead})")
     parser.add_argument("--trust", type=float, default=None,

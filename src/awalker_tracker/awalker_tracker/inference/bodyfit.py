@@ -137,7 +137,8 @@ def _log_evidence(candidates: dict[object, tuple[BodyDescription, StartDescripti
 
     def evidence(key: object) -> tuple[float, int]:
         body, start, seed = candidates[key]
-        smc = replace(tracker_config.smc, num_particles=config.particles, seed=seed)
+        # (a fixed count: the candidates' evidences are compared with each other)
+        smc = replace(tracker_config.smc, num_particles=config.particles, seed=seed, min_particles=0)
         # (no naming test: the stance-leg candidates are the two namings, each kept by its own filter)
         run_config = replace(tracker_config, smc=smc, naming_test_particles=0)
         model = TrackerModel(body, start, likelihood_for(body), run_config,

@@ -178,6 +178,9 @@ class TrackerConfig:
     # *The gait's pull*)
     stiffness_target: str = "seen_gait"
     seen_speed_window_s: float = 1.0
+    # the histogram bins of the adaptive particle count (SMCConfig.min_particles; ``TrackerModel.bin_keys``): the
+    # pelvis's ground position (m), the heading (rad) and the walker's stance angle (rad), per stance leg
+    count_bins: tuple[float, float, float] = (0.02, 0.05, 0.02)
     seen_gait_max_cameras: int = 1
     # Exponent on the likelihood (tempering). The per-part image log-likelihoods are sums over
     # strongly correlated pixels, so differences between particles of tens of log units are not
@@ -267,6 +270,8 @@ class TrackerConfig:
                 and self.seen_gait_max_cameras >= 0):
             raise ValueError(f"TrackerConfig: seen_speed_window_s must be > 0 s and seen_gait_max_cameras >= 0, got "
                              f"{self.seen_speed_window_s}, {self.seen_gait_max_cameras}")
+        if len(self.count_bins) != 3 or not all(np.isfinite(b) and b > 0 for b in self.count_bins):
+            raise ValueError(f"TrackerConfig.count_bins must be three sizes > 0 (m, rad, rad), got {self.count_bins}")
         if not (np.isfinite(self.kappa_bar_variance) and self.kappa_bar_variance > 0):
             raise ValueError(f"TrackerConfig.kappa_bar_variance must be > 0, got {self.kappa_bar_variance}")
         if not (np.isfinite(self.likelihood_scale) and self.likelihood_scale >= 0):
@@ -629,6 +634,15 @@ class TrackerModel:
         fresh.jump[:] = pose_jump(states.take(rows), fresh)
         self.reseeded_fallen += rows.size
         return put_rows(states, rows, fresh)
+
+    def bin_keys(self, states: TrackerStates) -> np.ndarray:
+        """(N, 5) int: each particle's histogram bin for the adaptive particle count (``smc`` module doc): its
+        pelvis's ground position, heading and stance angle in ``TrackerConfig.count_bins``, and its stance leg."""
+        position_m, heading_rad, phase_rad = self.config.count_bins
+        pelvis = states.pose.markers[:, MARKER_NAMES.index("pelvis"), :2]
+        return np.column_stack([np.floor(pelvis / position_m), np.floor(states.kin.heading / heading_rad),
+                                np.floor(states.walker.stance_angle / phase_rad),
+                                states.walker.stance_leg]).astype(np.int64)
 
     def rejuvenate(self, frame: int, log_weights: np.ndarray, parent: TrackerStates | None, states: TrackerStates,
                    obs: Any, rng: np.random.Generator) -> TrackerStates:

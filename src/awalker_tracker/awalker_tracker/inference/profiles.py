@@ -23,11 +23,12 @@ from awalker_tracker.inference.smc import SMCConfig
 
 @dataclass(frozen=True)
 class TrackingProfile:
-    """Defaults of a tracking run: particles N, look-ahead tau (frames), trust gamma, resampling, seed, the
-    image likelihood's exponent, the particles' leg-length spread (log), recovery switches and one camera's
-    depth band (m)."""
+    """Defaults of a tracking run: particles N (at most, with the adaptive count's fewest), look-ahead tau
+    (frames), trust gamma, resampling, seed, the image likelihood's exponent, the particles' leg-length spread
+    (log), recovery switches and one camera's depth band (m)."""
 
     num_particles: int
+    min_particles: int = SMCConfig.min_particles     # the adaptive count's fewest (SMCConfig; 0: N throughout)
     lookahead: int = SMCConfig.lookahead
     trust: float = SMCConfig.trust
     resample_fraction: float = SMCConfig.resample_fraction
@@ -51,6 +52,14 @@ PROFILES: dict[str, TrackingProfile] = {
     "realtime": TrackingProfile(num_particles=5000),
 }
 DEFAULT_PROFILE = "accurate"
+
+
+def particle_count_text(particles: int, fewest: int) -> str:
+    """How a run's particle count reads in its log: "15000 particles", or with the adaptive count (``fewest`` > 0)
+    "5000-15000 particles (adaptive)"."""
+    if 0 < fewest < particles:
+        return f"{fewest}-{particles} particles (adaptive)"
+    return f"{particles} particles"
 
 
 def tracking_profile(name: str, where: str = "profile") -> TrackingProfile:

@@ -7,6 +7,8 @@ A model provides, for N particles held as arrays (a "states" object with ``take(
   ``info`` is anything the model wants reported with the new states (e.g. heel strikes);
 - ``log_likelihood(prev_states, states, obs) -> (N,)``: log p(z_t | s_t) (``prev_states`` is
   None at the first frame; models with optical flow use it);
+- optionally ``bin_keys(states) -> (N, D) int``: the histogram bin of each particle's state, for the adaptive
+  particle count (``SMCConfig.min_particles``; below);
 - optionally ``rejuvenate(frame, log_weights, parent, states, obs, rng) -> states``: a data-driven
   move made after the transition (``parent`` -> ``states``; ``parent`` None at the first frame) and
   before the likelihood of frame ``frame`` (e.g. re-seeding particles at a person detected in
@@ -24,6 +26,17 @@ w_hat = (1 - gamma) w_{t-1} + gamma w_{t:t+tau} and re-weights the copies by w_{
 (steps 1-2 of Sec. 5.2); the futures are then simulated afresh from the resampled set.
 Frame t's weights are w_t = c w_{t-1} p(z_t | s_t). All weights are kept as logarithms.
 
+With ``SMCConfig.min_particles`` set, each resampling also chooses how many particles to keep, KLD-sampling
+style (Fox 2003): enough that the histogram of the predicted particles s_t, over the k bins they occupy
+(``bin_keys``), lies within ``kld_error`` of the true one's in Kullback-Leibler divergence with probability
+``kld_quantile``: n = (k - 1) / (2 eps) (1 - 2 / (9 (k - 1)) + sqrt(2 / (9 (k - 1))) z)^3, clipped to
+[``min_particles``, ``num_particles``]. The resampling draws ``num_particles``, the first frame of the new
+window moves them all (the bins of the prediction, as Fox counts them: a posterior narrower than the motion's
+spread is not mistaken for a small one), and a uniformly random n of them are kept, with their weights, before
+that frame's ``rejuvenate`` and likelihood; the window's later frames and the frames up to the next resampling
+run with n. A concentrated posterior is then followed with fewer particles. ``transition``'s ``info`` should
+have ``take(indices)`` to be cut with them (else it is reported whole).
+
 Because frame t needs the observations of frames t..t+tau, results lag the input by tau
 frames; ``finish()`` flushes the last frames with a shortened window. Ancestry (which particle
 of frame t-1 each particle of frame t descends from) is reported per frame; ``AncestryHistory``
@@ -31,9 +44,11 @@ turns it into the MAP trajectory without copying whole histories.
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from statistics import NormalDist
 from typing import Any, Generic, Protocol, TypeVar
 
 import numpy as np
@@ -69,6 +84,11 @@ class SMCConfig:
     resample_fraction: float = 0.1    # resample when N_eff < resample_fraction * N
     resampling: str = "systematic"    # systematic | stratified | multinomial
     seed: int | None = 0
+    # adaptive particle count (module doc): 0 keeps num_particles throughout; else the fewest a resampling
+    # may draw, num_particles being the most
+    min_particles: int = 0
+    kld_error: float = 0.05           # epsilon: the histogram's allowed KL divergence (nats)
+    kld_quantile: float = 0.99        # 1 - delta: the probability of staying within it
 
     def __post_init__(self) -> None:
         if not 1 <= self.num_particles <= MAX_PARTICLES:
@@ -84,6 +104,13 @@ class SMCConfig:
             raise ValueError(f"SMCConfig.resample_fraction must lie in [0, 1], got {self.resample_fraction}")
         if self.resampling not in RESAMPLING_SCHEMES:
             raise ValueError(f"SMCConfig.resampling must be one of {RESAMPLING_SCHEMES}, got {self.resampling!r}")
+        if not 0 <= self.min_particles <= self.num_particles:
+            raise ValueError(f"SMCConfig.min_particles must lie in 0-num_particles ({self.num_particles}), "
+                             f"got {self.min_particles}")
+        if not self.kld_error > 0.0:
+            raise ValueError(f"SMCConfig.kld_error (epsilon) must be > 0, got {self.kld_error}")
+        if not 0.5 <= self.kld_quantile < 1.0:
+            raise ValueError(f"SMCConfig.kld_quantile (1 - delta) must lie in [0.5, 1), got {self.kld_quantile}")
 
 
 # ----------------------------------------------------------------------------- weights
@@ -134,6 +161,17 @@ def resample(weights: np.ndarray, rng: np.random.Generator, scheme: str = "syste
     return np.minimum(indices, weights.size - 1)
 
 
+def kld_particle_count(bins: int, error: float, quantile: float) -> int:
+    """Particles needed so that a sample's histogram over ``bins`` occupied bins lies within ``error`` (nats) of
+    the true distribution's in KL divergence with probability ``quantile`` (Fox 2003, KLD-sampling; the
+    Wilson-Hilferty approximation of the chi-square quantile). One bin: 1."""
+    if bins <= 1:
+        return 1
+    z = float(NormalDist().inv_cdf(quantile))
+    a = 2.0 / (9.0 * (bins - 1))
+    return int(math.ceil((bins - 1) / (2.0 * error) * (1.0 - a + math.sqrt(a) * z) ** 3))
+
+
 # ----------------------------------------------------------------------------- filter
 
 @dataclass
@@ -182,6 +220,9 @@ class ParticleFilter(Generic[States]):
 
     def __init__(self, model: SMCModel[States], config: SMCConfig = SMCConfig(),
                  rng: np.random.Generator | None = None) -> None:
+        if config.min_particles > 0 and not callable(getattr(model, "bin_keys", None)):
+            raise ValueError(f"SMCConfig.min_particles ({config.min_particles}) needs a model with bin_keys(states) "
+                             f"(the adaptive count's histogram bins); {type(model).__name__} has none")
         self.model = model
         self.config = config
         self.rng = rng if rng is not None else np.random.default_rng(config.seed)
@@ -190,11 +231,14 @@ class ParticleFilter(Generic[States]):
         self._window: deque[_Future] = deque()      # futures for frames t .. t+k
         self._next_frame = 0                         # frame index of window[0]
         self._initial: States | None = None          # frame-0 samples when S_{-1} does not exist
+        self._count_due = False                      # the next simulated frame decides the adaptive count
+        self._kept_rows: np.ndarray | None = None    # the rows of the resampled set that count kept
         self.num_resamples = 0
 
     @property
     def num_particles(self) -> int:
-        return self.config.num_particles
+        """The particles held now: ``SMCConfig.num_particles``, or fewer after an adaptive resampling."""
+        return self._prev_log_weights.size
 
     def _simulate_next(self, obs: Any) -> None:
         """Append the futures of the next frame, from the window's last entry or S_{t-1}."""
@@ -208,6 +252,18 @@ class ParticleFilter(Generic[States]):
             states, info = self._initial, None
         else:
             states, info = self.model.transition(parent, self.rng)
+        if self._count_due:             # the first frame after a resampling: the adaptive count (module doc)
+            self._count_due = False
+            rows = self._counted_rows(states)
+            if rows is not None:
+                self._kept_rows = rows
+                states = states.take(rows)
+                info = info.take(rows) if callable(getattr(info, "take", None)) else info
+                if parent is None:
+                    self._initial = states
+                else:
+                    parent = self._prev_states = parent.take(rows)
+                self._prev_log_weights = normalize_log_weights(self._prev_log_weights[rows])
         rejuvenate = getattr(self.model, "rejuvenate", None)
         continues = None
         if rejuvenate is not None:
@@ -256,7 +312,7 @@ class ParticleFilter(Generic[States]):
                 log_hat = np.logaddexp(np.log1p(-cfg.trust) + self._prev_log_weights,
                                        np.log(cfg.trust) + lookahead_log_w)
             log_hat = normalize_log_weights(log_hat)
-            ancestors = resample(np.exp(log_hat), self.rng, cfg.resampling)
+            ancestors = resample(np.exp(log_hat), self.rng, cfg.resampling, n=cfg.num_particles)
             self._prev_log_weights = normalize_log_weights(
                 self._prev_log_weights[ancestors] - log_hat[ancestors])
             observations = [f.obs for f in self._window]
@@ -265,8 +321,11 @@ class ParticleFilter(Generic[States]):
             else:
                 self._prev_states = self._prev_states.take(ancestors)
             self._window.clear()
+            self._count_due = cfg.min_particles > 0
             for obs in observations:
                 self._simulate_next(obs)
+            if self._kept_rows is not None:            # the adaptive count kept these of the resampled rows
+                ancestors, self._kept_rows = ancestors[self._kept_rows], None
             resampled = True
             self.num_resamples += 1
         current = self._window.popleft()
@@ -283,6 +342,18 @@ class ParticleFilter(Generic[States]):
         self._initial = None
         self._next_frame += 1
         return step
+
+    def _counted_rows(self, predicted: States) -> np.ndarray | None:
+        """The rows of the ``predicted`` particles the adaptive count keeps (sorted, a uniformly random n of
+        them; module doc), or None to keep them all."""
+        cfg = self.config
+        size = self.num_particles
+        keys = np.asarray(self.model.bin_keys(predicted)).reshape(size, -1)
+        bins = np.unique(keys, axis=0).shape[0]
+        n = min(max(kld_particle_count(bins, cfg.kld_error, cfg.kld_quantile), cfg.min_particles), cfg.num_particles)
+        if n >= size:
+            return None
+        return np.sort(self.rng.choice(size, n, replace=False))
 
     def run(self, observations) -> list[FilterStep[States]]:
         """Filter a whole sequence (convenience for offline use and tests)."""

@@ -50,7 +50,7 @@ walkers; the Python functions below prepare arrays and call them. Kernels are ca
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numba
 import numpy as np
@@ -409,6 +409,10 @@ class StepEvents:
     time_since_strike: np.ndarray  # (N,) s since the last heel strike, at the end of the frame
     toe_off_impulse: np.ndarray    # (N,) iota (m/s) applied at the strike (NaN if none)
     pre_strike_rates: np.ndarray   # (N, 2) (phi1', phi2') just before the strike (NaN if none)
+
+    def take(self, indices: np.ndarray) -> "StepEvents":
+        """The events of the walkers ``indices``."""
+        return StepEvents(*(getattr(self, f.name)[indices] for f in fields(self)))
 
 
 #: iota given as a function of (walker indices, pre-impact states of those walkers) -> iota (m/s)

@@ -38,7 +38,7 @@ from awalker_tracker.inference.autostart import AUTO_SPREAD, AutoStartConfig
 from awalker_tracker.inference.filter_model import (
     ImageObservation, StartDescription, Tracker, TrackerConfig, TrackerModel, image_likelihood)
 from awalker_tracker.inference.posterior import PosteriorSummary as CoreSummary
-from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES, tracking_profile
+from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES, particle_count_text, tracking_profile
 from awalker_tracker.inference.recovery import RecoveryConfig
 from awalker_tracker.inference.visibility import ViewConfig
 from awalker_tracker.inference.smc import SMCConfig
@@ -91,6 +91,9 @@ PARAMETERS = (
     NodeParameter("profile", DEFAULT_PROFILE, "defaults of the settings below, as `awalker track --profile` "
                   f"(inference/profiles.py): {', '.join(PROFILES)}"),
     NodeParameter("num_particles", _profile("num_particles"), "number of particles N (default: the profile's)"),
+    NodeParameter("min_particles", _profile("min_particles"),
+                  "adaptive particle count (KLD-sampling): the fewest a resampling may keep, at most num_particles; "
+                  "0: num_particles throughout"),
     NodeParameter("lookahead", _profile("lookahead"), "look-ahead tau (frames)"),
     NodeParameter("trust", _profile("trust"), "gamma: trust in look-ahead weights when resampling"),
     NodeParameter("resample_fraction", _profile("resample_fraction"), "resample when N_eff < fraction * N"),
@@ -154,6 +157,7 @@ class TrackerNode(AwalkerNode):
         self.profile_name = str(v["profile"])
         n, tau, gamma, fraction = v["num_particles"], v["lookahead"], v["trust"], v["resample_fraction"]
         scheme, seed = v["resampling"], v["seed"]
+        fewest = min(int(v["min_particles"]), int(n))    # a profile's fewest never exceeds a smaller N given
         self.likelihood_scale = float(v["likelihood_scale"])
         self.leg_scale_spread = float(v["leg_scale_spread"])
         self.pelvis_ceiling = float(v["pelvis_ceiling"])
@@ -194,7 +198,8 @@ class TrackerNode(AwalkerNode):
         self.camera_names = tuple(cameras)
         try:
             self.smc_config = SMCConfig(num_particles=int(n), lookahead=int(tau), trust=float(gamma),
-                                        resample_fraction=float(fraction), resampling=str(scheme), seed=int(seed))
+                                        resample_fraction=float(fraction), resampling=str(scheme), seed=int(seed),
+                                        min_particles=fewest)
         except ValueError as exc:
             raise InputError(f"awalker_tracker: {exc}") from None
         try:
@@ -490,8 +495,9 @@ class TrackerNode(AwalkerNode):
         model = TrackerModel(body, self.start, image_likelihood(body, cameras),
                              config, cameras=cameras)
         self.tracker = Tracker(model, track_id=self.tracks_ended + 1)
-        self.get_logger().info(f"track {self.tracker.track_id}: tracking with {self.smc_config.num_particles} "
-                               f"particles, dt {dt * 1e3:.1f} ms, cameras {', '.join(self.camera_names)}, start frame "
+        count = particle_count_text(self.smc_config.num_particles, self.smc_config.min_particles)
+        self.get_logger().info(f"track {self.tracker.track_id}: tracking with {count}, dt {dt * 1e3:.1f} ms, cameras "
+                               f"{', '.join(self.camera_names)}, start frame "
                                f"{self.start.frame}")
         return True
 
