@@ -105,7 +105,22 @@ def score(result: dict, run_dir: Path, truth_csv: Path) -> dict:
             "cadence_ratio": round(estimate / truth, 3) if estimate and truth else None,
             "depth_bias_mm": None if first_camera is None else first_camera["depth_mm"],
             "start_leg_right": start_leg_right(run_dir, truth_csv),
-            "reacquisitions": result.get("recovery", {}).get("reacquisitions", 0)}
+            "reacquisitions": result.get("recovery", {}).get("reacquisitions", 0),
+            **filter_load(run_dir)}
+
+
+def filter_load(run_dir: Path) -> dict:
+    """A run's filter frames/s (its posteriors over the seconds spent filtering, run.yaml; several benchmark
+    processes at once share the cores) and its mean particle count (summary.csv; None where not recorded)."""
+    import yaml
+
+    from awalker_tools import evaluation
+
+    run = yaml.safe_load((run_dir / "run.yaml").read_text()) or {}
+    seconds = float(run.get("seconds_in_filter") or 0.0)
+    counts = evaluation.read_summary_csv(run_dir / "summary.csv")["particles"]
+    return {"filter_frames_per_s": round(run.get("posteriors", 0) / seconds, 2) if seconds > 0 else None,
+            "mean_particles": round(float(np.mean(counts))) if counts.size and np.all(counts > 0) else None}
 
 
 def failed_run(why: str) -> dict:
@@ -116,7 +131,8 @@ def failed_run(why: str) -> dict:
             "heading_median_deg": inf, "ended_on_person": False, "off_person_frames": None,
             "map_max_step_m_s": float("nan"), "live_max_step_m_s": float("nan"), "heel_strike_error_s": None,
             "heel_strike_bias_s": None, "step_length_error_m": None, "cadence_ratio": None,
-            "depth_bias_mm": None, "start_leg_right": None, "reacquisitions": 0}
+            "depth_bias_mm": None, "start_leg_right": None, "reacquisitions": 0, "filter_frames_per_s": None,
+            "mean_particles": None}
 
 
 def summarise(runs: dict[tuple[str, int], dict], trials: dict) -> dict:
@@ -143,6 +159,8 @@ def summarise(runs: dict[tuple[str, int], dict], trials: dict) -> dict:
            "largest_live_step_m_s": float(np.nanmax([r["live_max_step_m_s"] for r in runs.values()])),
            "runs_ended_on_person": int(sum(r["ended_on_person"] for r in runs.values())),
            "runs_failed": int(sum("failed" in r for r in runs.values())),
+           "median_filter_frames_per_s": _median_of(runs, "filter_frames_per_s"),
+           "median_mean_particles": _median_of(runs, "mean_particles"),
            "walk_medians_mm": {t: round(m, 1) for t, m in sorted(walk_medians.items())}}
     legs: dict[str, list[bool]] = {}
     for (trial, _), run in runs.items():
@@ -157,6 +175,12 @@ def summarise(runs: dict[tuple[str, int], dict], trials: dict) -> dict:
     out["gait_by_subject"] = {s: {k: round(float(np.median(v)), 3) for k, v in figures.items()}
                               for s, figures in sorted(subjects.items())}
     return out
+
+
+def _median_of(runs: dict[tuple[str, int], dict], key: str) -> float | None:
+    """The median of a run figure over the runs that have it (None if none has)."""
+    values = [r.get(key) for r in runs.values() if r.get(key) is not None]
+    return float(np.median(values)) if values else None
 
 
 def markdown(report: dict) -> str:
@@ -238,6 +262,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--modes", nargs="+", choices=MODES, default=list(MODES))
     parser.add_argument("--particles", type=int, default=TrackOptions.particles,
                         help="particles per run (default: awalker track's own default, what a user gets)")
+    parser.add_argument("--min-particles", type=int, default=None,
+                        help="the adaptive count's fewest particles (awalker track --min-particles; default: the "
+                             "profile's, what a user gets)")
     parser.add_argument("--out", type=Path, default=Path("bench_realwalks"),
                         help="sequences and runs are kept (and reused) here (default ./bench_realwalks)")
     parser.add_argument("--markdown", type=Path, help="also write the summary table (markdown) here")
@@ -252,9 +279,11 @@ def main(argv: list[str] | None = None) -> int:
             parser.error(f"not in the {args.set} set: {', '.join(unknown)} (it has {', '.join(trials)})")
         trials = [t for t in trials if t in args.trials]
     seeds = args.seeds if args.seeds is not None else (list(range(3)) if args.set == "quick" else list(range(10)))
-    suffix = "" if args.particles == TrackOptions.particles else f"_p{args.particles}"
+    suffix = ("" if args.particles == TrackOptions.particles else f"_p{args.particles}") + (
+        "" if args.min_particles is None else f"_m{args.min_particles}")
     report: dict = {"benchmark": "realwalks", "set": args.set, "trials": trials, "seeds": seeds,
-                    "settings": {"particles": args.particles, "cpus": os.cpu_count(),
+                    "settings": {"particles": args.particles, "min_particles": args.min_particles,
+                                 "cpus": os.cpu_count(),
                                  "tuning_subjects": list(devset.TUNING_SUBJECTS),
                                  "reporting_subjects": list(devset.REPORTING_SUBJECTS)},
                     "runs": {}, "summary": {}}
@@ -274,6 +303,7 @@ def main(argv: list[str] | None = None) -> int:
                     try:
                         with contextlib.redirect_stdout(sys.stderr):
                             run_tracking(TrackOptions(bag=bags[variant], out=run_dir, particles=args.particles,
+                                                      min_particles=args.min_particles,
                                                       seed=seed, auto_start=mode == "handsoff", overlays=False,
                                                       quiet=True))
                         evaluate_run(run_dir)
