@@ -178,10 +178,10 @@ class TrackerConfig:
     # *The gait's pull*)
     stiffness_target: str = "seen_gait"
     seen_speed_window_s: float = 1.0
+    seen_gait_max_cameras: int = 1
     # the histogram bins of the adaptive particle count (SMCConfig.min_particles; ``TrackerModel.bin_keys``): the
     # pelvis's ground position (m), the heading (rad) and the walker's stance angle (rad), per stance leg
     count_bins: tuple[float, float, float] = (0.02, 0.05, 0.02)
-    seen_gait_max_cameras: int = 1
     # Exponent on the likelihood (tempering). The per-part image log-likelihoods are sums over
     # strongly correlated pixels, so differences between particles of tens of log units are not
     # independent evidence; at 1.0 the weights collapse onto a few particles every frame (ESS 4-9

@@ -496,9 +496,8 @@ class TrackerNode(AwalkerNode):
                              config, cameras=cameras)
         self.tracker = Tracker(model, track_id=self.tracks_ended + 1)
         count = particle_count_text(self.smc_config.num_particles, self.smc_config.min_particles)
-        self.get_logger().info(f"track {self.tracker.track_id}: tracking with {count}, dt {dt * 1e3:.1f} ms, cameras "
-                               f"{', '.join(self.camera_names)}, start frame "
-                               f"{self.start.frame}")
+        self.get_logger().info(f"track {self.tracker.track_id}: tracking with {count}, dt {dt * 1e3:.1f} ms, "
+                               f"cameras {', '.join(self.camera_names)}, start frame {self.start.frame}")
         return True
 
     def _process_pending(self, final: bool = False) -> None:
