@@ -163,3 +163,44 @@ def test_cut_batches_give_the_same_particles_bit_for_bit(monkeypatch):
     assert len(results["1"]) == len(results["2"])
     for one, two in zip(results["1"], results["2"]):
         np.testing.assert_array_equal(one, two)
+
+
+_BLAS_REPORT = """
+import json, sys
+{first}
+import awalker_tracker
+import cv2, scipy.linalg                      # BLAS libraries loaded after the package
+from threadpoolctl import threadpool_info
+print(json.dumps([(i["filepath"], i["num_threads"]) for i in threadpool_info() if i["user_api"] == "blas"]))
+"""
+
+
+def _blas_threads(first: str, **env: str) -> list:
+    """(library, threads) of every BLAS library loaded in a fresh interpreter that runs ``first``, then imports
+    awalker_tracker, then OpenCV and scipy.linalg."""
+    import json
+    import subprocess
+    import sys
+
+    clean = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
+                                                              "MKL_NUM_THREADS")}
+    out = subprocess.run([sys.executable, "-c", _BLAS_REPORT.format(first=first)], env={**clean, **env},
+                         capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one core: BLAS runs on one thread anyway")
+@pytest.mark.parametrize("first", ["", "import numpy"])
+def test_blas_libraries_run_on_one_thread(first: str):
+    """Every BLAS library runs on one thread once awalker_tracker is imported, whether numpy was loaded before it
+    (threadpoolctl) or the libraries load after it (the environment): spinning BLAS threads held the second core
+    the particle blocks need (docs/speed.md)."""
+    libraries = _blas_threads(first)
+    assert len(libraries) >= 2, libraries                     # numpy's and at least one more (OpenCV's, scipy's)
+    assert all(threads == 1 for _, threads in libraries), libraries
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one core: BLAS runs on one thread anyway")
+def test_a_blas_thread_count_the_user_sets_is_kept():
+    libraries = _blas_threads("import numpy", OPENBLAS_NUM_THREADS="2")
+    assert libraries and all(threads == 2 for _, threads in libraries), libraries

@@ -11,7 +11,7 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
     ],
-    install_requires=['setuptools', 'numpy', 'scipy', 'numba', 'opencv-python-headless', 'PyYAML'],
+    install_requires=['setuptools', 'numpy', 'scipy', 'numba', 'threadpoolctl', 'opencv-python-headless', 'PyYAML'],
     zip_safe=False,
     maintainer='awalker developers',
     maintainer_email='dev@awalker.invalid',

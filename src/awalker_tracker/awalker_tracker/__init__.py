@@ -2,3 +2,6 @@
 
 The core (``model``, ``vision``, ``inference``) is ROS-free; ``nodes`` holds thin rclpy nodes.
 """
+from awalker_tracker.blocks import limit_blas_threads
+
+limit_blas_threads()

@@ -10,6 +10,11 @@ numbers are drawn before the kernels run).
 Batches smaller than ``MIN_BLOCK`` particles per thread run in the calling thread (a thread hand-off
 costs ~20-50 us). The number of threads is the number of cores this process may use, or the
 environment variable ``AWALKER_THREADS`` (1: everything in the calling thread).
+
+BLAS libraries (numpy's, scipy's and OpenCV's OpenBLAS) run on one thread (``limit_blas_threads``, called when
+``awalker_tracker`` is imported): the tracker's products are small (weights times 15000 particles' values), and
+OpenBLAS, which splits a long one over the cores, keeps its threads spinning for a while after each call, so
+that a product every frame held the second core the kernels' blocks need (docs/speed.md, *Threads*).
 """
 from __future__ import annotations
 
@@ -56,6 +61,18 @@ def thread_count() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:      # not on Linux
         return os.cpu_count() or 1
+
+
+def limit_blas_threads() -> None:
+    """Keep the BLAS libraries on one thread: those loaded later through ``OPENBLAS_NUM_THREADS`` (read when a
+    library loads), those loaded already through threadpoolctl. Left alone if the environment names a BLAS
+    thread count (``OPENBLAS_NUM_THREADS``, ``OMP_NUM_THREADS``, ``MKL_NUM_THREADS``): the user's choice."""
+    if any(name in os.environ for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")):
+        return
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1, user_api="blas")
 
 
 def block_bounds(n: int, threads: int | None = None, per_thread: int = 1) -> list[tuple[int, int]]:
