@@ -496,6 +496,11 @@ def test_node_and_command_line_read_one_set_of_defaults(tmp_path: Path, monkeypa
         assert (node.smc_config.num_particles, node.smc_config.min_particles) == (9000, 3000)
     finally:
         node.destroy_node()
+    # a fewest given above the count is refused, as awalker track refuses it, not clipped
+    with pytest.raises(InputError, match=r"parameter 'min_particles' must lie in 0-num_particles \(700\), got 3000"):
+        TrackerNode(context=ros_context, parameter_overrides=[
+            Parameter("cameras", value=["cam0"]), Parameter("num_particles", value=700),
+            Parameter("min_particles", value=3000)])
     # an unknown profile is refused, naming it and the choices
     with pytest.raises(InputError, match=r"parameter 'profile': unknown profile 'fast'; expected one of accurate, realtime"):
         TrackerNode(context=ros_context, parameter_overrides=[Parameter("cameras", value=["cam0"]),
