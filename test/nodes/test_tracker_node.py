@@ -257,7 +257,7 @@ def _stream_features(ros_context, tracker_files, max_lag_s: float, frames: int =
         Parameter("cameras", value=["cam0"]), Parameter("calibration", value=str(tracker_files / "calibration.yaml")),
         Parameter("start_description", value=str(tracker_files / "start0.yaml")),
         Parameter("body_description", value=str(tracker_files / "body.yaml")),
-        Parameter("num_particles", value=8000), Parameter("lookahead", value=0),
+        Parameter("num_particles", value=20000), Parameter("lookahead", value=0),
         Parameter("idle_flush_s", value=60.0), Parameter("max_lag_s", value=max_lag_s)])
     probe = Node("camera", context=ros_context)
     qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
@@ -298,7 +298,7 @@ def _stream_features(ros_context, tracker_files, max_lag_s: float, frames: int =
 
 
 def test_a_tracker_slower_than_the_camera_skips_frames_by_stamp_and_keeps_up(ros_context, tracker_files):
-    """Features at 60 Hz into a filter that needs longer than a frame period per frame (8000 particles): with
+    """Features at 60 Hz into a filter that needs longer than a frame period per frame (20000 particles): with
     max_lag_s 0.1 frames that waited longer are skipped and acknowledged, the filter steps over them by their
     stamps, and no frame it filters had waited longer; with max_lag_s 0 (never skip) every frame is filtered and
     the tracker falls behind by seconds."""
