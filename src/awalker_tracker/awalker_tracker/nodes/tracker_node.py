@@ -161,7 +161,8 @@ class TrackerNode(AwalkerNode):
         if fewest == tracking_profile(self.profile_name, PROFILE_WHERE).min_particles:
             fewest = min(fewest, int(n))    # a profile's fewest never exceeds a smaller N given
         elif not 0 <= fewest <= int(n):     # as awalker track --min-particles refuses it
-            raise InputError(f"awalker_tracker: parameter 'min_particles' must lie in 0-num_particles ({n}), got {fewest}")
+            raise InputError(f"awalker_tracker: parameter 'min_particles' must lie in 0-num_particles ({n}), "
+                             f"got {fewest}")
         self.likelihood_scale = float(v["likelihood_scale"])
         self.leg_scale_spread = float(v["leg_scale_spread"])
         self.pelvis_ceiling = float(v["pelvis_ceiling"])
