@@ -18,6 +18,15 @@
     with the new stride's stiffness and the step length just taken (:meth:`GaitTable.gait_for_stiffness`,
     :func:`dynamics.impulse_for_stance_rate`): a one-step (deadbeat) correction towards the gait family.
 
+*Step length.* From a cyclic gait's heel strike, no stride of one stiffness and one push steps longer than
+the gait's own step: the toe-off rule keeps the step it is given, and any other push or stiffness shortens it.
+So iota's noise only ever shortens steps (5 km/h, 0.7 m: a median 0.635 m after 15 steps, none longer than
+0.7 m), and a walker whose step is too short for the person can only quicken its cadence. A stride whose spring
+is stiffer before mid-stance and softer after steps longer, the reverse shorter; so each stride may draw a tilt
+tau ~ N(0, sigma_tau^2) (``ControlPrior.stiffness_tilt_variance``, 0 by default; the tracker's with two cameras
+or more: ``TrackerConfig``), and the walker feels kappa_t + tau while the stance leg is ahead of the vertical and
+kappa_t - tau after. The belief over kappa_bar is conditioned on kappa_t, not on the tilt.
+
 Units (checked against the solved cyclic gaits, see test_control.py): kappa in N m/rad per kg, so
 mu_kappa = 0.7 sits inside the solved range (0.74 at 5 km/h, 0.7 m with L = 0.9 m); iota in m/s.
 
@@ -65,6 +74,9 @@ class ControlPrior:
     kappa_bar_variance: float = 0.01          # sigma_kappa_bar^2, per stride (paper: 0.5)
     kappa_noise_variance: float = 1.0e-4      # sigma_kappa^2, per frame around kappa_bar (paper: 1.0)
     impulse_variance: float = 0.05**2         # sigma_iota^2 (m/s)^2
+    # sigma_tau^2 per stride: each stride's stiffness is tilted by tau, +tau while the stance leg is ahead of the
+    # vertical and -tau after (module docstring, *Step length*); 0: no tilt
+    stiffness_tilt_variance: float = 0.0
     # mu_iota(q'-) = c0 + c1 phi1'- + c2 phi2'- + c3 phi1'- phi2'- (m/s, rates in rad/s); "bilinear" rule
     impulse_mean_coefficients: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     toe_off_rule: str = "cyclic_gait"
@@ -80,6 +92,8 @@ class ControlPrior:
         for name in ("kappa_bar_variance", "kappa_noise_variance", "impulse_variance"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"ControlPrior.{name} must be > 0")
+        if not (np.isfinite(self.stiffness_tilt_variance) and self.stiffness_tilt_variance >= 0):
+            raise ValueError("ControlPrior.stiffness_tilt_variance must be >= 0")
         if len(self.impulse_mean_coefficients) != 4:
             raise ValueError("ControlPrior.impulse_mean_coefficients needs 4 values (bilinear fit)")
         if self.toe_off_rule not in TOE_OFF_RULES:
@@ -155,6 +169,7 @@ class ControlState:
     stiffness_mean_variance: np.ndarray  # its variance
     toe_off_impulse: np.ndarray          # iota of the last heel strike (m/s)
     time_since_strike: np.ndarray        # s since the last heel strike
+    stiffness_tilt: np.ndarray           # tau of the current stride (N m/rad per kg; ControlPrior.stiffness_tilt_variance)
 
     def __len__(self) -> int:
         return int(self.stiffness.shape[0])
@@ -186,7 +201,7 @@ def initial_control(prior: ControlPrior, n: int, rng: np.random.Generator,
     iota = np.full(n, np.nan) if toe_off_impulse is None else np.broadcast_to(
         np.asarray(toe_off_impulse, float), (n,)).copy()
     return ControlState(stiffness=mean.copy(), stiffness_mean_mean=mean, stiffness_mean_variance=variance,
-                        toe_off_impulse=iota, time_since_strike=np.zeros(n))
+                        toe_off_impulse=iota, time_since_strike=np.zeros(n), stiffness_tilt=np.zeros(n))
 
 
 def sample_transition(
@@ -215,6 +230,7 @@ def sample_transition(
     m_next = prior.beta * prior.mu_kappa + keep * m_post
     v_next = keep * keep * v_post + prior.kappa_bar_variance
     stride_kappa = np.full(m.shape, np.nan)
+    tilt = control.stiffness_tilt.copy()
 
     def impulse_at_strike(indices: np.ndarray, pre_state: WalkerState) -> np.ndarray:
         if prior.stiffness_target != "constant":
@@ -224,9 +240,13 @@ def sample_transition(
         # the new stride's first kappa_t, from the predictive law of its kappa_bar; the toe-off aims at it
         drawn = m_next[indices] + np.sqrt(v_next[indices] + noise) * rng.standard_normal(indices.size)
         stride_kappa[indices] = drawn
+        if prior.stiffness_tilt_variance > 0:
+            tilt[indices] = np.sqrt(prior.stiffness_tilt_variance) * rng.standard_normal(indices.size)
         return prior.sample_impulse(rng, prior.impulse_mean(params, pre_state, drawn))
 
-    new_walker, events = advance(params, walker, kappa, impulse_at_strike, dt, substeps=substeps,
+    # the spring the walker feels: kappa_t tilted by the stride's tau, stiffer before mid-stance, softer after
+    felt = kappa + control.stiffness_tilt * np.sign(walker.stance_angle) if prior.stiffness_tilt_variance > 0 else kappa
+    new_walker, events = advance(params, walker, felt, impulse_at_strike, dt, substeps=substeps,
                                  time_since_strike=control.time_since_strike)
     strike = events.heel_strike
     with np.errstate(invalid="ignore"):
@@ -243,6 +263,7 @@ def sample_transition(
         stiffness_mean_variance=np.where(fallen, v, v_new),
         toe_off_impulse=iota,
         time_since_strike=events.time_since_strike,
+        stiffness_tilt=np.where(fallen, control.stiffness_tilt, tilt),
     )
     return new_walker, new_control, events
 
