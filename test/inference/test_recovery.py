@@ -337,12 +337,18 @@ def test_eq5_aims_at_the_speed_the_images_move_not_the_walkers(walk_stop_walk, t
     assert abs(targets[19] - 1.3) < 0.15 and targets[40] < 0.15        # walking, then standing (frames 20-44)
     assert abs(walkers[19] - 1.3) > 0.3                                 # the walkers' own speed is elsewhere
     assert model.prior.stiffness_target == "usual_gait"
-    # more cameras than seen_gait_max_cameras, or no detections to see (recovery off): eq. (5)'s constant
-    for cameras, recovery in (([camera, camera], RecoveryConfig()), ([camera], RecoveryConfig(reacquire=False,
-                                                                                             hold_still=False))):
+    # two cameras see the ground track too; no detections to see (recovery off): eq. (5)'s constant
+    for cameras, recovery, used in (([camera, camera], RecoveryConfig(), "seen_gait"),
+                                    ([camera], RecoveryConfig(reacquire=False, hold_still=False), "constant")):
         other = TrackerModel(body, start, image_likelihood(body, cameras), replace(config, recovery=recovery),
                              cameras=cameras)
-        assert other.stiffness_target == other.prior.stiffness_target == "constant"
+        assert other.stiffness_target == used
+        assert other.prior.stiffness_target == ("constant" if used == "constant" else "usual_gait")
+        # the stride's stiffness tilt: with two cameras, not with one
+        assert other.prior.stiffness_tilt_variance == (config.stiffness_tilt_variance if len(cameras) > 1 else 0.0)
+    assert config.stiffness_tilt_variance > 0 and model.prior.stiffness_tilt_variance == 0.0
+    with pytest.raises(ValueError, match="stiffness_tilt_variance must be >= 0"):
+        TrackerConfig(stiffness_tilt_variance=-0.1)
     with pytest.raises(ValueError, match="stiffness_target must be one of .*'seen_gait'.*got 'seen'"):
         TrackerConfig(stiffness_target="seen")
     with pytest.raises(ValueError, match="seen_speed_window_s must be > 0 s"):

@@ -168,17 +168,21 @@ class TrackerConfig:
     # filter (fallen_log_penalty). At 0.05 the filter lost a 600-particle marker track
     # (test_filter_model.py), so 0.02.
     kappa_bar_variance: float = 0.02
+    # sigma_tau^2 of each stride's stiffness tilt while tracking (control.ControlPrior.stiffness_tilt_variance),
+    # with stiffness_tilt_min_cameras cameras or more; without it the toe-off rule only ever shortens the walker's
+    # step (docs/design.md, *Step length*). Not with one camera: a step free to lengthen frees the speed along the
+    # view, which one camera hardly sees (docs/tracking.md, *The step's length*)
+    stiffness_tilt_variance: float = 0.001
+    stiffness_tilt_min_cameras: int = 2
     # What eq. (5) pulls each stride's mean stiffness towards: "constant" mu_kappa (the paper; a slow walker is
     # then held at a 5 km/h cadence, in short quick steps); "usual_gait" (control.ControlPrior.stiffness_target):
     # the cyclic gait's stiffness at the posterior's walking speed and a person's usual step length there (the
     # walker's speed feeds back: a walker fallen behind pulls itself slower); "seen_gait": the same at the speed
     # the images' ground track moves over seen_speed_window_s (s; RecoveryConfig's detections, which the walker
     # does not move), the posterior's speed where the images give none yet; with no lost-track monitor (no
-    # cameras, recovery off) or more than seen_gait_max_cameras cameras, the constant (docs/tracking.md,
-    # *The gait's pull*)
+    # cameras, recovery off), the constant (docs/tracking.md, *The gait's pull*)
     stiffness_target: str = "seen_gait"
     seen_speed_window_s: float = 1.0
-    seen_gait_max_cameras: int = 1
     # the histogram bins of the adaptive particle count (SMCConfig.min_particles; ``TrackerModel.bin_keys``): the
     # pelvis's ground position (m), the heading (rad) and the walker's stance angle (rad), per stance leg
     count_bins: tuple[float, float, float] = (0.02, 0.05, 0.02)
@@ -266,12 +270,14 @@ class TrackerConfig:
         if self.stiffness_target not in (*STIFFNESS_TARGETS, "seen_gait"):
             raise ValueError(f"TrackerConfig.stiffness_target must be one of {(*STIFFNESS_TARGETS, 'seen_gait')}, "
                              f"got {self.stiffness_target!r}")
-        if not (np.isfinite(self.seen_speed_window_s) and self.seen_speed_window_s > 0
-                and self.seen_gait_max_cameras >= 0):
-            raise ValueError(f"TrackerConfig: seen_speed_window_s must be > 0 s and seen_gait_max_cameras >= 0, got "
-                             f"{self.seen_speed_window_s}, {self.seen_gait_max_cameras}")
+        if not (np.isfinite(self.seen_speed_window_s) and self.seen_speed_window_s > 0):
+            raise ValueError(f"TrackerConfig.seen_speed_window_s must be > 0 s, got {self.seen_speed_window_s}")
         if len(self.count_bins) != 3 or not all(np.isfinite(b) and b > 0 for b in self.count_bins):
             raise ValueError(f"TrackerConfig.count_bins must be three sizes > 0 (m, rad, rad), got {self.count_bins}")
+        if not (np.isfinite(self.stiffness_tilt_variance) and self.stiffness_tilt_variance >= 0
+                and self.stiffness_tilt_min_cameras >= 1):
+            raise ValueError(f"TrackerConfig: stiffness_tilt_variance must be >= 0 and stiffness_tilt_min_cameras >= 1, "
+                             f"got {self.stiffness_tilt_variance}, {self.stiffness_tilt_min_cameras}")
         if not (np.isfinite(self.kappa_bar_variance) and self.kappa_bar_variance > 0):
             raise ValueError(f"TrackerConfig.kappa_bar_variance must be > 0, got {self.kappa_bar_variance}")
         if not (np.isfinite(self.likelihood_scale) and self.likelihood_scale >= 0):
@@ -420,8 +426,8 @@ class TrackerModel:
                  gait_table: Any = None, prior: Any = None, kinematics: Any = None,
                  cameras: list[Any] | None = None) -> None:
         """``cameras``: the image likelihood's cameras, for re-acquiring a lost track (None: no re-acquisition),
-        for the postures (``TrackerConfig.posture_min_cameras``), the pelvis ceiling (``pelvis_ceiling_for``) and
-        eq. (5)'s seen gait (``TrackerConfig.seen_gait_max_cameras``)."""
+        for the postures (``TrackerConfig.posture_min_cameras``), the pelvis ceiling (``pelvis_ceiling_for``),
+        eq. (5)'s seen gait (``TrackerConfig.stiffness_target``) and the stiffness tilt (``stiffness_tilt_min_cameras``)."""
         from awalker_tracker.model import control, cyclic_gaits, kinematics as kin_mod
 
         self.body = body
@@ -447,11 +453,12 @@ class TrackerModel:
                         if cameras and (config.recovery.reacquire or config.recovery.hold_still) else None)
         # eq. (5)'s target as used (TrackerConfig.stiffness_target: "seen_gait" needs the monitor's detections)
         self.stiffness_target = config.stiffness_target
-        if config.stiffness_target == "seen_gait" and (
-                self.monitor is None or len(self.cameras) > config.seen_gait_max_cameras):
+        if config.stiffness_target == "seen_gait" and self.monitor is None:
             self.stiffness_target = "constant"
         self.prior = prior if prior is not None else control.ControlPrior.from_gait_table(
             self.gaits, kappa_bar_variance=config.kappa_bar_variance,
+            stiffness_tilt_variance=(config.stiffness_tilt_variance
+                                     if len(self.cameras) >= config.stiffness_tilt_min_cameras else 0.0),
             stiffness_target="constant" if self.stiffness_target == "constant" else "usual_gait")
         self.reseeded_fallen = 0     # particles re-seeded after a fall, over the run
         # frame periods the next transition spans (``Tracker.push``: from the stamps; > 1 over frames no image came for)
