@@ -276,8 +276,8 @@ class TrackerConfig:
             raise ValueError(f"TrackerConfig.count_bins must be three sizes > 0 (m, rad, rad), got {self.count_bins}")
         if not (np.isfinite(self.stiffness_tilt_variance) and self.stiffness_tilt_variance >= 0
                 and self.stiffness_tilt_min_cameras >= 1):
-            raise ValueError(f"TrackerConfig: stiffness_tilt_variance must be >= 0 and stiffness_tilt_min_cameras >= 1, "
-                             f"got {self.stiffness_tilt_variance}, {self.stiffness_tilt_min_cameras}")
+            raise ValueError(f"TrackerConfig: stiffness_tilt_variance must be >= 0 and stiffness_tilt_min_cameras "
+                             f">= 1, got {self.stiffness_tilt_variance}, {self.stiffness_tilt_min_cameras}")
         if not (np.isfinite(self.kappa_bar_variance) and self.kappa_bar_variance > 0):
             raise ValueError(f"TrackerConfig.kappa_bar_variance must be > 0, got {self.kappa_bar_variance}")
         if not (np.isfinite(self.likelihood_scale) and self.likelihood_scale >= 0):
@@ -427,7 +427,8 @@ class TrackerModel:
                  cameras: list[Any] | None = None) -> None:
         """``cameras``: the image likelihood's cameras, for re-acquiring a lost track (None: no re-acquisition),
         for the postures (``TrackerConfig.posture_min_cameras``), the pelvis ceiling (``pelvis_ceiling_for``),
-        eq. (5)'s seen gait (``TrackerConfig.stiffness_target``) and the stiffness tilt (``stiffness_tilt_min_cameras``)."""
+        eq. (5)'s seen gait (``TrackerConfig.stiffness_target``) and the stiffness tilt
+        (``stiffness_tilt_min_cameras``)."""
         from awalker_tracker.model import control, cyclic_gaits, kinematics as kin_mod
 
         self.body = body

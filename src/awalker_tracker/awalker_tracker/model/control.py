@@ -169,7 +169,7 @@ class ControlState:
     stiffness_mean_variance: np.ndarray  # its variance
     toe_off_impulse: np.ndarray          # iota of the last heel strike (m/s)
     time_since_strike: np.ndarray        # s since the last heel strike
-    stiffness_tilt: np.ndarray           # tau of the current stride (N m/rad per kg; ControlPrior.stiffness_tilt_variance)
+    stiffness_tilt: np.ndarray           # tau of the current stride (N m/rad per kg; stiffness_tilt_variance)
 
     def __len__(self) -> int:
         return int(self.stiffness.shape[0])
