@@ -77,3 +77,27 @@ def test_a_camera_missing_every_5th_frame_is_tracked_with_the_other(two_cameras:
                                   "theirs came first)" for k in (4, 9)]
     # the leg fit pairs the recorded features the same way (a first pass reads them)
     assert main(["fitbody", str(out), "--particles", "50", "--frames", "6", "--factors", "0.95", "1.05"]) == 0
+
+
+def test_a_features_thread_slower_than_the_nodes_sync_timeout_loses_no_camera(two_cameras: Path, tmp_path: Path,
+                                                                              monkeypatch):
+    """Offline the replay waits for every frame: cam1's features 2.5 s late for one frame (the live node's
+    sync_timeout_s is 2 s) still make that frame's pair."""
+    import time
+
+    from awalker_tracker.nodes import features_node
+
+    process = features_node.FeatureNode._process
+    seen: list[int] = []
+
+    def slow(self, msg, topic):
+        if self.camera_name == "cam1":
+            seen.append(1)
+            if len(seen) == BACKGROUND + 3:        # the third frame with the person
+                time.sleep(2.5)
+        return process(self, msg, topic)
+
+    monkeypatch.setattr(features_node.FeatureNode, "_process", slow)
+    out = tmp_path / "run"
+    assert _track(two_cameras, out) == 0
+    assert len(seen) >= BACKGROUND + 3 and _check_tracked(two_cameras, out)["sync_issues"] == []

@@ -72,6 +72,11 @@ GIL_SWITCH_INTERVAL_S = 0.001
 #: run beside three other jobs took over the replay's default 60 s and stopped); a failure in
 #: a node's thread stops the run at once, whatever this says.
 ACK_TIMEOUT_S = 600.0
+#: Seconds the tracker waits for a camera's features before tracking a frame without it (the node's
+#: ``sync_timeout_s``, 2 s live). Offline the replay waits for every frame, so a features thread that falls
+#: behind only slows the run: with the node's 2 s, 10 of 80 two-camera benchmark runs on a machine running four
+#: trackers at once tracked a frame or two without their second camera.
+SYNC_TIMEOUT_S = 60.0
 #: Seconds the pipeline waits, after the last frame, for the pose publisher's outputs of every posterior to
 #: reach the recorder; if some never do, it says which and how many (they are then missing from result.bag).
 RECORD_WAIT_S = 10.0
@@ -621,6 +626,7 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
             Parameter("hold_still", value=bool(options.recovery)),
             *([Parameter("depth_band_m", value=float(band))] if band is not None else []),
             Parameter("sync_tolerance", value=float(options.sync_tolerance)),
+            Parameter("sync_timeout_s", value=SYNC_TIMEOUT_S),
             Parameter("idle_flush_s", value=1.0e9), Parameter("max_lag_s", value=0.0)]))
         tracker.keep_summaries = True
         nodes.append(tracker)
