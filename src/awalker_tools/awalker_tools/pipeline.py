@@ -327,10 +327,9 @@ def _new_result_bag(out: Path) -> Path:
 def fewest_particles(options: TrackOptions) -> int:
     """The adaptive count's fewest particles of a run (``SMCConfig.min_particles``; 0: ``particles`` throughout):
     ``options.min_particles``, else its profile's, at most ``options.particles`` (as the tracker node takes it)."""
-    fewest = options.min_particles
-    if fewest is None:
-        fewest = tracking_profile(options.profile).min_particles
-    return min(int(fewest), int(options.particles))
+    if options.min_particles is None:
+        return tracking_profile(options.profile).fewest_for(options.particles)
+    return min(int(options.min_particles), int(options.particles))
 
 
 def run_tracking(options: TrackOptions) -> TrackResult:

@@ -41,6 +41,11 @@ class TrackingProfile:
     hold_still: bool = RecoveryConfig.hold_still
     depth_band_m: float = RecoveryConfig.depth_band_m
 
+    def fewest_for(self, particles: int) -> int:
+        """The profile's fewest particles for a run of ``particles`` (N): never more than N, so an N given below
+        the profile's fewest tracks N throughout."""
+        return min(int(self.min_particles), int(particles))
+
     @property
     def recovery(self) -> bool:
         """Every recovery switch on (`awalker track` has one switch for the three: --no-recovery)."""

@@ -157,9 +157,9 @@ class TrackerNode(AwalkerNode):
         self.profile_name = str(v["profile"])
         n, tau, gamma, fraction = v["num_particles"], v["lookahead"], v["trust"], v["resample_fraction"]
         scheme, seed = v["resampling"], v["seed"]
-        fewest = int(v["min_particles"])
-        if fewest == tracking_profile(self.profile_name, PROFILE_WHERE).min_particles:
-            fewest = min(fewest, int(n))    # a profile's fewest never exceeds a smaller N given
+        fewest, profile = int(v["min_particles"]), tracking_profile(self.profile_name, PROFILE_WHERE)
+        if fewest == profile.min_particles:
+            fewest = profile.fewest_for(n)
         elif not 0 <= fewest <= int(n):     # as awalker track --min-particles refuses it
             raise InputError(f"awalker_tracker: parameter 'min_particles' must lie in 0-num_particles ({n}), "
                              f"got {fewest}")
