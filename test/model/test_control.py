@@ -40,6 +40,10 @@ def test_defaults_and_the_papers_values(prior: control.ControlPrior, table: cycl
         control.ControlPrior.from_gait_table(table, toe_off_rule="psychic")
     with pytest.raises(ValueError, match="gait_table"):
         control.ControlPrior()
+    assert prior.stiffness_tilt_variance == 0.0     # the sampling prior is not tilted (the tracker's is)
+    for bad in (-0.001, float("nan")):
+        with pytest.raises(ValueError, match="stiffness_tilt_variance must be >= 0"):
+            control.ControlPrior.from_gait_table(table, stiffness_tilt_variance=bad)
 
 
 def test_gamma_impulse_has_the_given_mean_and_paper_variance(prior: control.ControlPrior) -> None:
