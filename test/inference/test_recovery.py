@@ -274,25 +274,33 @@ def test_monitor_says_when_the_person_stands_still_and_when_they_walk_on(walk_st
     assert 45 <= frames[-1] + 1 <= 45 + 5                     # and the walk on within a sixth
 
 
-def test_the_walkers_are_held_while_the_person_stands_still(walk_stop_walk):
+@pytest.mark.parametrize("drift", [0.0, 0.03])
+def test_the_walkers_are_held_while_the_person_stands_still(walk_stop_walk, drift: float):
+    """Held walkers keep their pose about the pelvis and turn there; with ``held_drift`` they also shift over the
+    ground, smoothly and no faster than a person standing still, and without it they stay where they stand."""
     from awalker_tracker.inference.filter_model import ImageObservation, image_likelihood
 
     camera, features, pelvis = walk_stop_walk
     body = BodyDescription.default()
-    config = TrackerConfig(dt=1 / 30, recovery=RecoveryConfig(reacquire=False))
+    recovery = RecoveryConfig(reacquire=False)
+    config = TrackerConfig(dt=1 / 30, recovery=recovery, held_drift=(0.95, drift))
     start = StartDescription(0, (float(pelvis[0, 0]), float(pelvis[0, 1])), 0.0, 1.3, 0.7, LEFT)
     model = TrackerModel(body, start, image_likelihood(body, [camera]), config, cameras=[camera])
     rng = np.random.default_rng(0)
     states = model.initial(16, rng)
     weights = np.zeros(16)
-    held, turned = [], []
+    held, turned, shifted, accelerations = [], [], [], []
     for f, feats in enumerate(features):
         parent = states
         moved, _ = model.transition(parent, rng)
         states = model.rejuvenate(f, weights, parent, moved, ImageObservation(features=(feats,)), rng)
         if model.monitor.still(f):
-            # held where they stand: the pelvis stays, the body only turns about it (the same pose otherwise)
-            np.testing.assert_allclose(states.pose.markers[:, PELVIS], parent.pose.markers[:, PELVIS], atol=1e-9)
+            # held where they stand: the body only turns about its pelvis and shifts with it (the same pose otherwise)
+            step = states.pose.markers[:, PELVIS, :2] - parent.pose.markers[:, PELVIS, :2]
+            assert np.all(np.linalg.norm(step, axis=1) <= recovery.still_m_s * config.dt + 1e-12)
+            np.testing.assert_allclose(step, states.held_velocity * config.dt, atol=1e-9)
+            if held:
+                accelerations.append(np.linalg.norm(states.held_velocity - parent.held_velocity, axis=1))
             around = np.linalg.norm(states.pose.markers[..., :2] - states.pose.markers[:, PELVIS, None, :2], axis=2)
             before = np.linalg.norm(parent.pose.markers[..., :2] - parent.pose.markers[:, PELVIS, None, :2], axis=2)
             np.testing.assert_allclose(around, before, atol=1e-9)
@@ -301,12 +309,29 @@ def test_the_walkers_are_held_while_the_person_stands_still(walk_stop_walk):
             assert not model.outputs(states, _).heel_strike.any()
             held.append(f)
             turned.append(np.angle(np.exp(1j * (states.kin.heading - parent.kin.heading))))
+            shifted.append(step)
         else:
             assert states is moved
+            assert not states.held_velocity.any()              # walking: no shuffle carried into the next stop
     assert 15 <= len(held) <= 30
     # free to turn round on the spot: over the stop the walkers' headings spread by tens of degrees
     spread = np.degrees(np.std(np.sum(turned, axis=0)))
     assert 20 < spread < 180, spread
+    distance = np.linalg.norm(np.sum(shifted, axis=0), axis=1)
+    if drift == 0:
+        assert np.all(distance < 1e-9)
+        return
+    # over the ~0.8 s stop the walkers shuffle centimetres apart, each along a smooth path: the velocity changes
+    # by about sigma a frame (not a random walk of positions, whose MAP path would jitter)
+    assert 0.01 < np.median(distance) < recovery.still_m_s * len(held) * config.dt, distance
+    assert np.median(np.concatenate(accelerations)) < 2 * drift * np.sqrt(2)
+
+
+@pytest.mark.parametrize("held", [{"held_turn": (1.5, 0.3)}, {"held_turn": (0.9, -0.1)},
+                                  {"held_drift": (-0.1, 0.03)}, {"held_drift": (0.95, float("nan"))}])
+def test_held_walkers_refuse_a_persistence_outside_0_1_or_a_negative_or_nan_noise(held: dict):
+    with pytest.raises(ValueError, match=next(iter(held))):
+        TrackerConfig(**held)
 
 
 @pytest.mark.parametrize("target", ["seen_gait", "usual_gait"])

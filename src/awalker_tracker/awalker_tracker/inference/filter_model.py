@@ -263,6 +263,13 @@ class TrackerConfig:
     # wanders by this standard deviation (rad/s per frame); (0.95, 0.35): a stationary spread of ~64 deg/s, so a
     # person turning round on the spot in 2-3 s is within reach. sigma 0: held walkers keep their heading.
     held_turn: tuple[float, float] = (0.95, 0.35)
+    # ... and may shift where they stand (a person shuffling as they turn on the spot, or moving slower than
+    # RecoveryConfig.still_m_s): each one's ground velocity (m/s, 0 when the hold begins) persists by this factor
+    # per frame and wanders by this standard deviation per axis (m/s per frame), at most RecoveryConfig.still_m_s.
+    # sigma 0 (the default): held walkers stay where they stand. At (0.95, 0.03) the held frames' error fell on
+    # the tuning subjects' walks with stops but the walks after them swapped the legs more often (docs/tracking.md,
+    # "Alternatives measured and not used").
+    held_drift: tuple[float, float] = (0.95, 0.0)
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -298,6 +305,9 @@ class TrackerConfig:
                              f"{self.naming_test_particles}, {self.naming_switch_nats}")
         if not (0.0 <= self.held_turn[0] <= 1.0 and self.held_turn[1] >= 0.0):
             raise ValueError(f"TrackerConfig.held_turn must be (persistence in [0, 1], sigma >= 0), got {self.held_turn}")
+        if not (0.0 <= self.held_drift[0] <= 1.0 and self.held_drift[1] >= 0.0):
+            raise ValueError(f"TrackerConfig.held_drift must be (persistence in [0, 1], sigma >= 0), "
+                             f"got {self.held_drift}")
         if self.hip_over_ankle_min_cameras < 1:
             raise ValueError(f"TrackerConfig.hip_over_ankle_min_cameras must be >= 1, got "
                              f"{self.hip_over_ankle_min_cameras}")
@@ -348,6 +358,8 @@ class TrackerStates:
     jump: np.ndarray
     # (N,) bool: the particle's legs were named the other way round this frame (``TrackerConfig.label_flip_rate_hz``)
     flipped: np.ndarray
+    # (N, 2) m/s: the ground velocity of a held walker's shuffle (``TrackerConfig.held_drift``); 0 while walking
+    held_velocity: np.ndarray
 
     def __len__(self) -> int:
         return len(self.walker)
@@ -357,7 +369,8 @@ class TrackerStates:
                              self.pose.segments.take(indices))
         return TrackerStates(self.walker.take(indices), self.control.take(indices), self.kin.take(indices),
                              pose, self.speed[indices], self.fallen[indices], self.reseeded[indices],
-                             np.arange(len(indices)), self.jump[indices], self.flipped[indices])
+                             np.arange(len(indices)), self.jump[indices], self.flipped[indices],
+                             self.held_velocity[indices])
 
 
 LikelihoodFn = Callable[[TrackerStates | None, TrackerStates, Any], np.ndarray]
@@ -519,7 +532,7 @@ class TrackerModel:
             posture_spread=self.posture_spread, pelvis_ceiling_spread=self.pelvis_ceiling_spread)
         pose = self._kin.pose_body(self.body, self.params, walker, kin, self.kin_config)
         return TrackerStates(walker, control, kin, pose, speed.copy(), np.zeros(n, bool), np.zeros(n, np.int8),
-                             np.arange(n), np.zeros((n, 3)), np.zeros(n, bool))
+                             np.arange(n), np.zeros((n, 3)), np.zeros(n, bool), np.zeros((n, 2)))
 
     def _gait_known(self, speed: np.ndarray, step: np.ndarray) -> np.ndarray:
         """True where the gait table's lookup has converged corners with weight (a margin above what lookup needs)."""
@@ -612,7 +625,8 @@ class TrackerModel:
         speed = np.where(fallen, states.speed,
                          update_speed(states.speed, moved, self.config.dt, self.config.speed_time_constant_s))
         new = TrackerStates(walker, control, kin, pose, speed, fallen, np.zeros(len(states), np.int8),
-                            np.arange(len(states)), np.zeros((len(states), 3)), np.zeros(len(states), bool))
+                            np.arange(len(states)), np.zeros((len(states), 3)), np.zeros(len(states), bool),
+                            np.zeros((len(states), 2)))
         if self.config.recovery.reseed_fallen and fallen.any():
             new = self._reseed_fallen(new, np.flatnonzero(fallen), rng)
         if self.config.label_flip_rate_hz > 0:
@@ -787,17 +801,27 @@ class TrackerModel:
         """Held walkers turned about the vertical through their pelvis at their own turn rate, which wanders
         (``TrackerConfig.held_turn``: omega' = persistence omega + N(0, sigma^2) per frame, |omega| <= the turn
         prior's largest rate): people standing still turn round on the spot, and the walkers that face the
-        way the images do are the ones that walk on."""
+        way the images do are the ones that walk on. With ``TrackerConfig.held_drift`` the pelvis also moves
+        at its own wandering ground velocity v' = persistence v + N(0, sigma^2 I) (|v| <= ``still_m_s``)."""
         persistence, sigma = self.config.held_turn
-        if sigma <= 0:
+        drift_persistence, drift_sigma = self.config.held_drift
+        if sigma <= 0 and drift_sigma <= 0:
             return states
+        n = len(states)
         kin = states.kin.copy()
-        kin.turn_rate = np.clip(persistence * kin.turn_rate + sigma * rng.standard_normal(len(states)),
-                                -self._kin.TurnPrior().max_rate, self._kin.TurnPrior().max_rate)
+        if sigma > 0:
+            kin.turn_rate = np.clip(persistence * kin.turn_rate + sigma * rng.standard_normal(n),
+                                    -self._kin.TurnPrior().max_rate, self._kin.TurnPrior().max_rate)
+        velocity = states.held_velocity
+        if drift_sigma > 0:
+            velocity = drift_persistence * velocity + drift_sigma * rng.standard_normal((n, 2))
+            fastest = self.config.recovery.still_m_s
+            velocity *= np.minimum(1.0, fastest / np.maximum(np.linalg.norm(velocity, axis=1), 1e-12))[:, None]
         pelvis = states.pose.markers[:, MARKER_NAMES.index("pelvis"), :2]
-        turned = self._kin.moved_on_ground(kin, pelvis, pelvis, kin.turn_rate * self.config.dt)
+        turn = kin.turn_rate * self.config.dt if sigma > 0 else np.zeros(n)
+        turned = self._kin.moved_on_ground(kin, pelvis, pelvis + velocity * self.config.dt, turn)
         turned.turn_rate = kin.turn_rate
-        return replace(states, kin=turned,
+        return replace(states, kin=turned, held_velocity=velocity,
                        pose=self._kin.pose_body(self.body, self.params, states.walker, turned, self.kin_config))
 
     def log_likelihood(self, prev: TrackerStates | None, states: TrackerStates, obs: Any) -> np.ndarray:
