@@ -303,11 +303,11 @@ class TrackerConfig:
         if self.naming_test_particles < 0 or not (np.isfinite(self.naming_switch_nats) and self.naming_switch_nats > 0):
             raise ValueError(f"TrackerConfig: naming_test_particles must be >= 0 and naming_switch_nats > 0, got "
                              f"{self.naming_test_particles}, {self.naming_switch_nats}")
-        if not (0.0 <= self.held_turn[0] <= 1.0 and self.held_turn[1] >= 0.0):
-            raise ValueError(f"TrackerConfig.held_turn must be (persistence in [0, 1], sigma >= 0), got {self.held_turn}")
-        if not (0.0 <= self.held_drift[0] <= 1.0 and self.held_drift[1] >= 0.0):
-            raise ValueError(f"TrackerConfig.held_drift must be (persistence in [0, 1], sigma >= 0), "
-                             f"got {self.held_drift}")
+        for name in ("held_turn", "held_drift"):
+            persistence, sigma = getattr(self, name)
+            if not (0.0 <= persistence <= 1.0 and sigma >= 0.0):
+                raise ValueError(f"TrackerConfig.{name} must be (persistence in [0, 1], sigma >= 0), "
+                                 f"got {getattr(self, name)}")
         if self.hip_over_ankle_min_cameras < 1:
             raise ValueError(f"TrackerConfig.hip_over_ankle_min_cameras must be >= 1, got "
                              f"{self.hip_over_ankle_min_cameras}")
