@@ -327,8 +327,51 @@ def test_the_walkers_are_held_while_the_person_stands_still(walk_stop_walk, drif
     assert np.median(np.concatenate(accelerations)) < 2 * drift * np.sqrt(2)
 
 
+@pytest.mark.parametrize("follow_s", [0.0, 0.3])
+def test_held_walkers_follow_where_two_cameras_place_the_person(seen, follow_s: float):
+    """A person standing where cameras at two angles place them, the walkers held 0.25 m off (they walked on past
+    the stop): with ``held_follow_s`` every held walker takes the same ground step towards that place, no longer
+    than ``held_follow_m_s`` a frame's time, until the weighted mean pelvis stands within ``held_follow_within_m``
+    of it; without, they stay where the hold began."""
+    from test_detection import features_of as features_in
+    from vision_scene import front_camera
+
+    from awalker_tracker.inference.filter_model import ImageObservation, image_likelihood
+
+    side, side_features, markers = seen
+    front = front_camera()
+    front_features = features_in(front, walking_poses(3, x0=0.4), 1)[0][-1]
+    observation = ImageObservation(features=(side_features, front_features))
+    person = markers[PELVIS, :2]
+    config = TrackerConfig(dt=1 / 30, recovery=RecoveryConfig(reacquire=False), held_turn=(0.95, 0.0),
+                           held_follow_s=follow_s)
+    off = person + np.array([0.25, 0.0])            # ahead along the walk: 0.25 m past where the person stopped
+    start = StartDescription(0, (float(off[0]), float(off[1])), 0.0, 1.0, 0.6, LEFT)
+    model = TrackerModel(BODY, start, image_likelihood(BODY, [side, front]), config, cameras=[side, front])
+    for f in range(10):                             # the person has stood there for a third of a second
+        model.monitor.update(f, list(observation.features), markers[PELVIS])
+    rng = np.random.default_rng(0)
+    states = model.initial(16, rng)
+    weights = np.full(16, 1 / 16)
+    for f in range(10, 55):
+        parent = states
+        moved, _ = model.transition(parent, rng)
+        states = model.rejuvenate(f, np.log(weights), parent, moved, observation, rng)
+        assert model.monitor.still(f) and model.monitor.placed_position(f) is not None     # held; triangulated
+        step = states.pose.markers[:, PELVIS, :2] - parent.pose.markers[:, PELVIS, :2]
+        np.testing.assert_allclose(step, np.broadcast_to(step[0], step.shape), atol=1e-9)   # one step for all
+        assert np.linalg.norm(step[0]) <= config.held_follow_m_s * config.dt + 1e-12
+    gap = np.linalg.norm(weights @ states.pose.markers[:, PELVIS, :2] - person)
+    if follow_s == 0:
+        assert gap > 0.15, gap
+    else:        # within held_follow_within_m of it: the place is good to ~0.1 m, a hand start to 0.05
+        assert config.held_follow_within_m - 0.01 < gap < config.held_follow_within_m + 0.03, gap
+
+
 @pytest.mark.parametrize("held", [{"held_turn": (1.5, 0.3)}, {"held_turn": (0.9, -0.1)},
-                                  {"held_drift": (-0.1, 0.03)}, {"held_drift": (0.95, float("nan"))}])
+                                  {"held_drift": (-0.1, 0.03)}, {"held_drift": (0.95, float("nan"))},
+                                  {"held_follow_s": -0.1}, {"held_follow_m_s": float("nan")},
+                                  {"held_follow_within_m": -0.2}])
 def test_held_walkers_refuse_a_persistence_outside_0_1_or_a_negative_or_nan_noise(held: dict):
     with pytest.raises(ValueError, match=next(iter(held))):
         TrackerConfig(**held)

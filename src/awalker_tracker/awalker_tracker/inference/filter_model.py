@@ -270,6 +270,18 @@ class TrackerConfig:
     # the tuning subjects' walks with stops but the walks after them swapped the legs more often (docs/tracking.md,
     # "Alternatives measured and not used").
     held_drift: tuple[float, float] = (0.95, 0.0)
+    # ... and follow where cameras at different angles place the person (LostTrackMonitor.placed_position): each
+    # frame every held walker takes the same ground step, which closes the gap between the weighted mean pelvis and
+    # that place, less held_follow_within_m, at a rate 1 / held_follow_s, at most held_follow_m_s (m/s). A person
+    # slows to a stop over steps the walkers do not all slow down for, and shuffles while standing: held where the
+    # hold began, subject 91's bodies stood 0.2-0.3 m off. One step for all leaves the walkers' spread, and so their
+    # stride phases, as they were (held_drift's own steps made the images choose among them). The gap within
+    # held_follow_within_m is left alone: the triangulated place is good to ~0.1 m and a hand start to 0.05, and
+    # closing it all moved standing starts off the person (docs/tracking.md, "A person who stops"). 0 s: off; one
+    # camera places no one this way, so there the walkers stay where they stand.
+    held_follow_s: float = 0.3
+    held_follow_m_s: float = 0.3
+    held_follow_within_m: float = 0.15
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -303,6 +315,9 @@ class TrackerConfig:
         if self.naming_test_particles < 0 or not (np.isfinite(self.naming_switch_nats) and self.naming_switch_nats > 0):
             raise ValueError(f"TrackerConfig: naming_test_particles must be >= 0 and naming_switch_nats > 0, got "
                              f"{self.naming_test_particles}, {self.naming_switch_nats}")
+        if not (self.held_follow_s >= 0.0 and self.held_follow_m_s >= 0.0 and self.held_follow_within_m >= 0.0):
+            raise ValueError(f"TrackerConfig: held_follow_s, held_follow_m_s and held_follow_within_m must be >= 0, "
+                             f"got {self.held_follow_s}, {self.held_follow_m_s}, {self.held_follow_within_m}")
         for name in ("held_turn", "held_drift"):
             persistence, sigma = getattr(self, name)
             if not (0.0 <= persistence <= 1.0 and sigma >= 0.0):
@@ -753,7 +768,8 @@ class TrackerModel:
         if parent is not None and self.monitor.still(frame):
             # the person stands still: the frame's walkers are the previous frame's, not walking, but free to
             # turn where they stand (a person turning round on the spot)
-            states = replace(self._turned_in_place(parent, rng), speed=np.zeros(len(parent)),
+            states = replace(self._turned_in_place(parent, rng, self._follow_step(frame, w, parent)),
+                             speed=np.zeros(len(parent)),
                              reseeded=np.full(len(parent), HELD, np.int8), continues=np.arange(len(parent)),
                              jump=np.zeros((len(parent), 3)), flipped=np.zeros(len(parent), bool))
         if order is None:
@@ -797,15 +813,36 @@ class TrackerModel:
         continues[rows[:half]] = sources
         return replace(states, continues=continues)
 
-    def _turned_in_place(self, states: TrackerStates, rng: np.random.Generator) -> TrackerStates:
+    def _follow_step(self, frame: int, w: np.ndarray, held: TrackerStates) -> np.ndarray:
+        """The ground step (2,) m every held walker takes at ``frame`` towards where the cameras place the person
+        (``TrackerConfig.held_follow_s``): the gap from the weighted (``w``) mean pelvis of ``held``, less
+        held_follow_within_m, closed at a rate 1 / held_follow_s, at most held_follow_m_s; zero when off or where no
+        place is known."""
+        cfg = self.config
+        place = self.monitor.placed_position(frame) if cfg.held_follow_s > 0 else None
+        if place is None:
+            return np.zeros(2)
+        gap = place - w @ held.pose.markers[:, MARKER_NAMES.index("pelvis"), :2]
+        distance = float(np.linalg.norm(gap))
+        if distance <= cfg.held_follow_within_m:
+            return np.zeros(2)
+        step = gap * (1.0 - cfg.held_follow_within_m / distance) * min(1.0, cfg.dt / cfg.held_follow_s)
+        longest = cfg.held_follow_m_s * cfg.dt
+        norm = float(np.linalg.norm(step))
+        return step * (longest / norm) if norm > longest else step
+
+    def _turned_in_place(self, states: TrackerStates, rng: np.random.Generator,
+                         step: np.ndarray | None = None) -> TrackerStates:
         """Held walkers turned about the vertical through their pelvis at their own turn rate, which wanders
         (``TrackerConfig.held_turn``: omega' = persistence omega + N(0, sigma^2) per frame, |omega| <= the turn
         prior's largest rate): people standing still turn round on the spot, and the walkers that face the
         way the images do are the ones that walk on. With ``TrackerConfig.held_drift`` the pelvis also moves
-        at its own wandering ground velocity v' = persistence v + N(0, sigma^2 I) (|v| <= ``still_m_s``)."""
+        at its own wandering ground velocity v' = persistence v + N(0, sigma^2 I) (|v| <= ``still_m_s``), and with
+        ``step`` (2,) m all move by that common ground step (``_follow_step``)."""
         persistence, sigma = self.config.held_turn
         drift_persistence, drift_sigma = self.config.held_drift
-        if sigma <= 0 and drift_sigma <= 0:
+        step = np.zeros(2) if step is None else np.asarray(step, float)
+        if sigma <= 0 and drift_sigma <= 0 and not step.any():
             return states
         n = len(states)
         kin = states.kin.copy()
@@ -819,7 +856,7 @@ class TrackerModel:
             velocity *= np.minimum(1.0, fastest / np.maximum(np.linalg.norm(velocity, axis=1), 1e-12))[:, None]
         pelvis = states.pose.markers[:, MARKER_NAMES.index("pelvis"), :2]
         turn = kin.turn_rate * self.config.dt if sigma > 0 else np.zeros(n)
-        turned = self._kin.moved_on_ground(kin, pelvis, pelvis + velocity * self.config.dt, turn)
+        turned = self._kin.moved_on_ground(kin, pelvis, pelvis + velocity * self.config.dt + step, turn)
         turned.turn_rate = kin.turn_rate
         return replace(states, kin=turned, held_velocity=velocity,
                        pose=self._kin.pose_body(self.body, self.params, states.walker, turned, self.kin_config))

@@ -165,6 +165,7 @@ class LostTrackMonitor:
         self._gaps: dict[int, float] = {}   # one camera: the pelvis's ground distance from the feet-row position
         self._row_depths: dict[int, float] = {}   # one camera: the counted feet rows' depth per map row (m)
         self._feet_rows = GroundTrack(dt)   # one camera: the feet-row ground position per frame (None: it does not count)
+        self._placed = GroundTrack(dt)      # the triangulated ground position per frame (None: not triangulated)
         self._quiet_until = -1
         self._first_frame: int | None = None
         self.reacquisitions = 0
@@ -231,6 +232,14 @@ class LostTrackMonitor:
             return None
         return centre, max(self.config.depth_band_m, self.config.depth_band_rows * self._row_depths[frame])
 
+    def placed_position(self, frame: int) -> np.ndarray | None:
+        """Where cameras at different angles place the person at ``frame`` (m, world xy: the line fit over
+        ``track_window_s`` of the triangulated detections, steadier than one), when ``frame``'s detection was
+        triangulated (decided by ``update``); else None."""
+        if self._placed.positions.get(frame) is None:
+            return None
+        return self._placed.fitted_position(frame, self.config.track_window_s)
+
     def still(self, frame: int) -> bool:
         """Whether the person stood still at ``frame`` (decided by ``update``; False if not yet)."""
         return self._still.get(frame, False)
@@ -247,6 +256,7 @@ class LostTrackMonitor:
         detection = locate_person(seen, self.cameras, near=pelvis)
         reliable = detection is not None and wholly_in_view(detection, self.cameras)
         self.track.add(frame, detection.position if reliable else None)
+        self._placed.add(frame, detection.position if reliable and detection.triangulated else None)
         velocity = self.track.velocity(frame, cfg.track_window_s)
         speed = None if velocity is None else float(np.linalg.norm(velocity))
         recent = self.track.velocity(frame, cfg.still_window_s)
