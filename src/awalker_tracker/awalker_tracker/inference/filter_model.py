@@ -277,9 +277,10 @@ class TrackerConfig:
     # hold began, subject 91's bodies stood 0.2-0.3 m off. One step for all leaves the walkers' spread, and so their
     # stride phases, as they were (held_drift's own steps made the images choose among them). The gap within
     # held_follow_within_m is left alone: the triangulated place is good to ~0.1 m and a hand start to 0.05, and
-    # closing it all moved standing starts off the person (docs/tracking.md, "A person who stops"). 0 s: off; one
-    # camera places no one this way, so there the walkers stay where they stand.
-    held_follow_s: float = 0.3
+    # closing it all moved standing starts off the person. One camera places no one this way. 0 s (the default):
+    # off. At 0.3 s the tuning subjects' stops came nearer at no cost, but the reporting walk that turns on the spot
+    # went worse in 2 of 3 runs (docs/tracking.md, "A person who stops"), so it stays an option.
+    held_follow_s: float = 0.0
     held_follow_m_s: float = 0.3
     held_follow_within_m: float = 0.15
 
