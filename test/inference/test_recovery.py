@@ -307,6 +307,7 @@ def test_the_walkers_are_held_while_the_person_stands_still(walk_stop_walk, drif
             np.testing.assert_allclose(states.pose.markers[..., 2], parent.pose.markers[..., 2], atol=1e-9)
             assert (states.speed == 0).all() and (states.reseeded == HELD).all()
             assert not model.outputs(states, _).heel_strike.any()
+            assert model.monitor.placed_position(f) is None       # one camera places no one: held_follow has no aim
             held.append(f)
             turned.append(np.angle(np.exp(1j * (states.kin.heading - parent.kin.heading))))
             shifted.append(step)
