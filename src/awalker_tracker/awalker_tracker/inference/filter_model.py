@@ -447,6 +447,13 @@ def smooth_jumps(markers: np.ndarray, joint_angles: np.ndarray, jumps: np.ndarra
     return out, angles
 
 
+def _within_length(vectors: np.ndarray, longest: float) -> np.ndarray:
+    """``vectors`` (..., 2) each scaled down to at most ``longest`` long (in their own unit: m, m/s); shorter ones
+    are returned as they are."""
+    length = np.linalg.norm(vectors, axis=-1)
+    return vectors * np.minimum(1.0, longest / np.maximum(length, 1e-12))[..., None]
+
+
 class TrackerModel:
     """SMC model (``initial``, ``transition``, ``log_likelihood``) of the physics-based tracker."""
 
@@ -828,9 +835,7 @@ class TrackerModel:
         if distance <= cfg.held_follow_within_m:
             return np.zeros(2)
         step = gap * (1.0 - cfg.held_follow_within_m / distance) * min(1.0, cfg.dt / cfg.held_follow_s)
-        longest = cfg.held_follow_m_s * cfg.dt
-        norm = float(np.linalg.norm(step))
-        return step * (longest / norm) if norm > longest else step
+        return _within_length(step, cfg.held_follow_m_s * cfg.dt)
 
     def _turned_in_place(self, states: TrackerStates, rng: np.random.Generator,
                          step: np.ndarray | None = None) -> TrackerStates:
@@ -852,9 +857,8 @@ class TrackerModel:
                                     -self._kin.TurnPrior().max_rate, self._kin.TurnPrior().max_rate)
         velocity = states.held_velocity
         if drift_sigma > 0:
-            velocity = drift_persistence * velocity + drift_sigma * rng.standard_normal((n, 2))
-            fastest = self.config.recovery.still_m_s
-            velocity *= np.minimum(1.0, fastest / np.maximum(np.linalg.norm(velocity, axis=1), 1e-12))[:, None]
+            velocity = _within_length(drift_persistence * velocity + drift_sigma * rng.standard_normal((n, 2)),
+                                      self.config.recovery.still_m_s)
         pelvis = states.pose.markers[:, MARKER_NAMES.index("pelvis"), :2]
         turn = kin.turn_rate * self.config.dt if sigma > 0 else np.zeros(n)
         turned = self._kin.moved_on_ground(kin, pelvis, pelvis + velocity * self.config.dt + step, turn)
