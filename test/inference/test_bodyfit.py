@@ -7,42 +7,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from awalker_tracker.inference.bodyfit import BodyFitConfig, fit_leg_length, fit_stance_leg, legs_scaled
+from awalker_tracker.inference.bodyfit import BodyFitConfig, fit_leg_length, fit_stance_leg
 from awalker_tracker.inference.filter_model import StartDescription, TrackerConfig, marker_likelihood
 from awalker_tracker.model.body import BodyDescription
 from awalker_tracker.model.walker import LEFT, RIGHT
 from test_filter_model import simulate_walk
 
 
-def test_legs_scaled_changes_thigh_and_shank_only():
-    body = BodyDescription.default()
-    longer = legs_scaled(body, 1.05)
-    assert longer.upper_leg_length == pytest.approx(1.05 * body.upper_leg_length)
-    assert longer.lower_leg_length == pytest.approx(1.05 * body.lower_leg_length)
-    assert longer.leg_length - body.leg_length == pytest.approx(0.05 * (body.upper_leg_length + body.lower_leg_length))
-    assert (longer.torso_length, longer.ankle_height, longer.hip_width) == (body.torso_length, body.ankle_height,
-                                                                            body.hip_width)
-
-
-def test_legs_scaled_keeping_the_height_takes_it_from_torso_and_head():
-    body = BodyDescription.default()
-    longer = legs_scaled(body, 1.06, keep_height=True)
-    assert longer.height == pytest.approx(body.height)
-    assert longer.leg_length == pytest.approx(legs_scaled(body, 1.06).leg_length)
-    lost = body.torso_length + body.head_length - (longer.torso_length + longer.head_length)
-    assert lost == pytest.approx(longer.leg_length - body.leg_length)
-    assert longer.torso_length / longer.head_length == pytest.approx(body.torso_length / body.head_length)
-    assert (longer.ankle_height, longer.hip_width, longer.foot_length) == (body.ankle_height, body.hip_width,
-                                                                           body.foot_length)
-    assert legs_scaled(body, 0.94, keep_height=True).torso_length > body.torso_length
-    short_trunk = replace(body, torso_length=0.30, head_length=0.20)
-    with pytest.raises(ValueError, match="torso and head"):      # more than half of torso and head gone to the legs
-        legs_scaled(short_trunk, 1.4, keep_height=True)
-
-
 def test_the_evidence_finds_the_walkers_leg_length():
     true_body, markers, _, _ = simulate_walk(40, 1.3, 0.7, 0.4, seed=12)
-    given = legs_scaled(true_body, 1 / 0.94)           # a tape measure 6 % long on the legs
+    given = true_body.legs_scaled(1 / 0.94)           # a tape measure 6 % long on the legs
     obs = markers + 0.01 * np.random.default_rng(5).standard_normal(markers.shape)
     start = StartDescription(0, tuple(markers[0, 0, :2]), 0.4, 1.3, 0.7, LEFT)
     messages = []

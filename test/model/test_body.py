@@ -1,11 +1,14 @@
 """Body description: sizes, parts, YAML round trip and errors."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from awalker_tracker.errors import InputError
-from awalker_tracker.model.body import MARKER_NAMES, PART_CLASSES, PART_NAMES, SKELETON_EDGES, BodyDescription
+from awalker_tracker.model.body import (
+    MARKER_NAMES, PART_CLASSES, PART_NAMES, SEEN_HEIGHT_LEG_FRACTION, SKELETON_EDGES, BodyDescription)
 from awalker_tracker.model.walker import WalkerParams
 
 
@@ -77,3 +80,48 @@ def test_the_skeleton_joins_every_marker_once_per_edge():
                     reached.add(far)
                     frontier.append(far)
     assert reached == set(MARKER_NAMES)
+
+
+def test_legs_scaled_changes_thigh_and_shank_only():
+    body = BodyDescription.default()
+    longer = body.legs_scaled(1.05)
+    assert longer.upper_leg_length == pytest.approx(1.05 * body.upper_leg_length)
+    assert longer.lower_leg_length == pytest.approx(1.05 * body.lower_leg_length)
+    assert longer.leg_length - body.leg_length == pytest.approx(0.05 * (body.upper_leg_length + body.lower_leg_length))
+    assert (longer.torso_length, longer.ankle_height, longer.hip_width) == (body.torso_length, body.ankle_height,
+                                                                            body.hip_width)
+
+
+def test_legs_scaled_keeping_the_height_takes_it_from_torso_and_head():
+    body = BodyDescription.default()
+    longer = body.legs_scaled(1.06, keep_height=True)
+    assert longer.height == pytest.approx(body.height)
+    assert longer.leg_length == pytest.approx(body.legs_scaled(1.06).leg_length)
+    lost = body.torso_length + body.head_length - (longer.torso_length + longer.head_length)
+    assert lost == pytest.approx(longer.leg_length - body.leg_length)
+    assert longer.torso_length / longer.head_length == pytest.approx(body.torso_length / body.head_length)
+    assert (longer.ankle_height, longer.hip_width, longer.foot_length) == (body.ankle_height, body.hip_width,
+                                                                           body.foot_length)
+    assert body.legs_scaled(0.94, keep_height=True).torso_length > body.torso_length
+    short_trunk = replace(body, torso_length=0.30, head_length=0.20)
+    with pytest.raises(ValueError, match="torso and head"):      # more than half of torso and head gone to the legs
+        short_trunk.legs_scaled(1.4, keep_height=True)
+
+
+def test_a_body_from_the_seen_height_has_that_height_and_with_two_cameras_the_walking_leg_fraction():
+    for height in (1.45, 1.70, 1.95):
+        scaled = BodyDescription.default().scaled_to_height(height)
+        # one camera: the default's proportions (awalker track fits the legs next)
+        assert BodyDescription.from_seen_height(height, 1) == scaled
+        body = BodyDescription.from_seen_height(height, 2)
+        assert body == BodyDescription.from_seen_height(height, 3)
+        assert body.height == pytest.approx(height)
+        assert body.leg_length == pytest.approx(SEEN_HEIGHT_LEG_FRACTION * height)
+        # the legs longer than the default's proportion, the rest of the shape as scaled
+        assert body.leg_length > scaled.leg_length + 0.02
+        assert body.torso_length / body.head_length == pytest.approx(scaled.torso_length / scaled.head_length)
+        assert (body.ankle_height, body.hip_width, body.foot_length) == (scaled.ankle_height, scaled.hip_width,
+                                                                         scaled.foot_length)
+        assert body.upper_leg_length / body.lower_leg_length == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="height must lie"):
+        BodyDescription.from_seen_height(0.5, 2)

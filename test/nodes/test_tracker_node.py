@@ -328,6 +328,7 @@ def test_an_automatic_start_found_only_at_the_end_still_tracks(ros_context, tmp_
 
     from rclpy.parameter import Parameter
 
+    from awalker_tracker.model.body import BodyDescription
     from awalker_tracker.nodes.features_node import features_to_msg
     from awalker_tracker.nodes.messages import header
     from awalker_tracker.nodes.tracker_node import TrackerNode
@@ -345,7 +346,8 @@ def test_an_automatic_start_found_only_at_the_end_still_tracks(ros_context, tmp_
     save_calibration([camera], tmp_path / "calibration.yaml")
     node = TrackerNode(context=ros_context, parameter_overrides=[
         Parameter("cameras", value=[camera.name]), Parameter("calibration", value=str(tmp_path / "calibration.yaml")),
-        Parameter("auto_start", value=True), Parameter("num_particles", value=50), Parameter("frame_rate", value=30.0)])
+        Parameter("auto_start", value=True), Parameter("num_particles", value=50), Parameter("frame_rate", value=30.0),
+        Parameter("estimate_body", value=True)])
     try:
         for k, f in enumerate(features):
             node._on_features(camera.name, features_to_msg(f, header(1_000_000_000 + k * 33_333_333, "side_optical"),
@@ -354,5 +356,10 @@ def test_an_automatic_start_found_only_at_the_end_still_tracks(ros_context, tmp_
         node.flush()
         assert node.start is not None and node.start_found_automatically and 8 <= node.start.frame <= 24
         assert node.tracker is not None and node.stats.summaries == len(features) - node.start.frame
+        # no body description: the body scaled to the seen height, with one camera's proportions (the default's)
+        height = node._finder.estimated_height()
+        assert node.body == BodyDescription.from_seen_height(float(np.clip(height, 1.2, 2.1)), 1)
+        assert node.body.leg_length / node.body.height == pytest.approx(
+            BodyDescription.default().leg_length / BodyDescription.default().height)
     finally:
         node.destroy_node()

@@ -145,6 +145,16 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys, monkeypat
     assert fitted["height_kept"] is True and got.height == pytest.approx(given.height)
     assert got.upper_leg_length == pytest.approx(fitted["leg_factor"] * given.upper_leg_length)
     assert (got.torso_length < given.torso_length) == (fitted["leg_factor"] > 1.0)
+    # without --factors: around a height two cameras measured (a person's proportion of it already), and upwards
+    # from one made by one camera (the default's proportions, legs short)
+    defaults = ["fitbody", str(out), "--particles", "50", "--frames", "4"]
+    assert main(defaults) == 0
+    assert [float(k) for k in yaml.safe_load(capsys.readouterr().out)["fitbody"]["log_evidence"]] == list(
+        fit_body.MEASURED_HEIGHT_FACTORS)
+    monkeypatch.setattr(fit_body, "KEEP_HEIGHT_CAMERAS", 2)
+    assert main(defaults) == 0
+    assert [float(k) for k in yaml.safe_load(capsys.readouterr().out)["fitbody"]["log_evidence"]] == list(
+        fit_body.HEIGHT_SCALED_FACTORS)
 
 
 def test_fitbody_says_when_the_maps_are_finer_than_the_fit_was_measured_on(synth_bag: Path, tmp_path: Path, capsys):
@@ -185,6 +195,35 @@ def test_track_fit_body_tracks_again_with_the_fitted_legs(synth_bag: Path, tmp_p
     assert run["body_fit"]["leg_factor"] == pytest.approx(factor) and run["body_fit"]["seconds_first_pass_and_fit"] > 0
     assert BodyDescription.from_yaml(out / "body.yaml").upper_leg_length == pytest.approx(got.upper_leg_length)
     assert evaluation.read_poses_csv(out / "poses.csv").markers.shape == (FRAMES, 13, 3)
+
+
+@pytest.mark.parametrize("cameras", [1, 2])
+def test_a_body_from_the_seen_height_has_its_legs_fitted_with_one_camera_only(tmp_path: Path, monkeypatch,
+                                                                              cameras: int):
+    """No start and no body (hands off): a first pass, then the stance leg weighed; the leg length too with one
+    camera, whose seen height comes from the depth it estimates. Two cameras keep the legs of the body scaled to the
+    height they measured (``BodyDescription.from_seen_height``; the fit chose legs 1-6 cm long there) and the pelvis
+    ceiling; the run tracks with the first pass's body, not one scaled again from the finer maps."""
+    from types import SimpleNamespace
+
+    from awalker_tools import pipeline
+
+    passes, fits = [], []
+    written = tmp_path / "run" / "first_pass" / "body_fitted.yaml"
+    monkeypatch.setattr(pipeline, "resolve_descriptions", lambda *a: (None, "--auto-start", None, "none found"))
+    monkeypatch.setattr(pipeline, "_track_once", lambda options, *a, **k: passes.append(options) or "tracked")
+    monkeypatch.setattr(fit_body, "fit_run_dir", lambda run_dir, factors, **k: fits.append(factors) or {
+        "leg_factor": 1.0, "leg_length_m": 0.9, "written": str(written), "stance_leg": "left",
+        "start_written": str(written.parent / "start_fitted.yaml")})
+    reader = SimpleNamespace(cameras=[f"cam{k}" for k in range(cameras)])
+    options = pipeline.TrackOptions(bag=tmp_path / "walk.bag", out=tmp_path / "run", quiet=True)
+    assert pipeline._run_passes(options, reader, pipeline.StopRequest()) == "tracked"
+    first, second = passes
+    assert first.out == tmp_path / "run" / "first_pass" and second.out == tmp_path / "run"
+    assert fits == [None if cameras == 1 else (1.0,)]        # None: fit_body's candidates for a seen-height body
+    assert second.body == written and second.fitted_start == written.parent / "start_fitted.yaml"
+    # the ceiling is left to the profile with two cameras; a fitted leg carries the pelvis at the walker's hip
+    assert [p.pelvis_ceiling for p in passes] == ([1.0, 1.0] if cameras == 1 else [None, None])
 
 
 def test_the_first_pass_stops_after_the_frames_the_fit_uses(synth_bag: Path, tmp_path: Path, monkeypatch, capsys):

@@ -23,18 +23,24 @@ import numpy as np
 
 from awalker_tracker.errors import InputError, parse_yaml
 from awalker_tracker.inference.sync import DEFAULT_TOLERANCE
+from awalker_tracker.model.body import SEEN_HEIGHT_MIN_CAMERAS
 
 from awalker_tools.outdir import RESULT_BAG, add_written, check_may_write
 
 FITTED_FILE = "body_fitted.yaml"
 FITTED_START_FILE = "start_fitted.yaml"
 # Candidate leg scales by where the run's body came from (run.yaml body_source): a body given (a tape
-# measure: the real-walks benchmark's legs 6 % long) or one scaled to the seen height (legs 6-9 % short).
+# measure: the real-walks benchmark's legs 6 % long) or one scaled to the seen height by one camera (the default's
+# proportions, ``BodyDescription.from_seen_height``: legs 6-9 % short).
 GIVEN_BODY_FACTORS = (0.91, 0.94, 0.97, 1.0, 1.03)
 HEIGHT_SCALED_FACTORS = (0.97, 1.0, 1.03, 1.06, 1.09, 1.12)
+# ... or scaled to a height two cameras or more measured: a person's proportion of it already (`awalker track`
+# fits none, below; these for `awalker fitbody` on its first pass)
+MEASURED_HEIGHT_FACTORS = (0.94, 0.97, 1.0, 1.03, 1.06)
 # Cameras from which a body scaled to the seen height keeps that height in the leg fit (its torso and head give
-# what the legs gain): several cameras measure the height; one camera makes it from the depth it estimates.
-KEEP_HEIGHT_CAMERAS = 2
+# what the legs gain): several cameras measure the height; one camera makes it from the depth it estimates. `awalker
+# track` fits no legs there (``pipeline._run_passes``): the body has a person's proportion of the measured height.
+KEEP_HEIGHT_CAMERAS = SEEN_HEIGHT_MIN_CAMERAS
 
 
 def _features(run_dir: Path, cameras: list[Any], tolerance: float) -> tuple[list[int], list[tuple]]:
@@ -97,7 +103,8 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None,
     """Fit the leg length of the tracking run in ``run_dir`` (module docstring), write
     ``run_dir/body_fitted.yaml`` and return a summary (factor, leg lengths, evidence, the file written; with
     the stance leg fitted, the leg, each leg's evidence and ``start_written``). ``leg_factors``: the
-    candidates; None: by the body's source (``GIVEN_BODY_FACTORS`` or ``HEIGHT_SCALED_FACTORS``); ``(1.0,)``:
+    candidates; None: by the body's source (``GIVEN_BODY_FACTORS``, ``HEIGHT_SCALED_FACTORS`` or
+    ``MEASURED_HEIGHT_FACTORS``); ``(1.0,)``:
     the body as it is (only the stance leg is weighed). ``settings``: the other ``BodyFitConfig`` fields
     (frames, particles, seed, stance_repeats, stance_max_repeats); ``check``: called before each frame of each
     candidate filter, it may raise to stop the fit (`awalker track` stops on a signal). Progress goes to stderr."""
@@ -119,11 +126,11 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None,
         _required(run_dir / name)
     cameras = load_calibration(run_dir / "calibration.yaml")
     scaled = str(info.get("body_source", "")).startswith("scaled to the person's height")
+    measured = scaled and len(cameras) >= KEEP_HEIGHT_CAMERAS
     if leg_factors is None:
-        leg_factors = HEIGHT_SCALED_FACTORS if scaled else GIVEN_BODY_FACTORS
+        leg_factors = MEASURED_HEIGHT_FACTORS if measured else HEIGHT_SCALED_FACTORS if scaled else GIVEN_BODY_FACTORS
     try:
-        fit_config = BodyFitConfig(leg_factors=tuple(leg_factors),
-                                   keep_height=scaled and len(cameras) >= KEEP_HEIGHT_CAMERAS, **settings)
+        fit_config = BodyFitConfig(leg_factors=tuple(leg_factors), keep_height=measured, **settings)
     except ValueError as exc:
         raise InputError(f"fitbody options: {exc}") from None
     start = StartDescription.from_yaml(run_dir / "start.yaml")

@@ -462,18 +462,23 @@ def _undecodable_camera(features: Sequence[Any], at_end: bool) -> str | None:
 
 def _run_passes(options: TrackOptions, reader: Any, stop: StopRequest) -> TrackResult:
     """``run_tracking`` on the bag open in ``reader`` (a ``bagio.SequenceReader``)."""
-    from awalker_tools.fit_body import fit_run_dir
+    from awalker_tools.fit_body import KEEP_HEIGHT_CAMERAS, fit_run_dir
     from awalker_tracker.inference.bodyfit import BodyFitConfig
     from awalker_tracker.vision.features import FeatureConfig
 
     bag, out = Path(options.bag), Path(options.out)
-    fit_legs, fit_stance = bool(options.fit_body), False
+    fit_legs, fit_stance, seen_body = bool(options.fit_body), False, False
     if options.fit_body is not False:
         try:
             start, _, body, _ = resolve_descriptions(bag, reader, options.start, options.body, options.auto_start)
         except InputError:
             return _track_once(options, reader, stop)          # which reports what is missing
-        fit_legs = fit_legs or body is None
+        # a body scaled to the seen height (``BodyDescription.from_seen_height``) keeps its legs where two cameras
+        # or more measured that height (``fit_body.KEEP_HEIGHT_CAMERAS``): the fit, its torso and head giving what
+        # the legs gain, chose legs a median 1.1 cm long and the pelvis 30 mm high on the tuning subjects
+        # (docs/tracking.md, *Body fit*)
+        seen_body = body is None
+        fit_legs = fit_legs or (seen_body and len(reader.cameras) < KEEP_HEIGHT_CAMERAS)
         fit_stance = start is None or start.stance_leg is None
     if not (fit_legs or fit_stance):
         return _track_once(options, reader, stop)
@@ -509,7 +514,8 @@ def _run_passes(options: TrackOptions, reader: Any, stop: StopRequest) -> TrackR
         [f"stance leg {fitted['stance_leg']} at the start"] if "stance_leg" in fitted else [])
     _progress(options, f"awalker track: {', '.join(chosen)}; tracking again")
     fitted["seconds_first_pass_and_fit"] = round(time.monotonic() - started, 3)
-    second = replace(options, body=Path(fitted["written"]) if fit_legs else options.body,
+    # (a body scaled to the seen height is the first pass's: the second pass's finer maps see the person taller)
+    second = replace(options, body=Path(fitted["written"]) if fit_legs or seen_body else options.body,
                      fitted_start=Path(fitted["start_written"]) if "start_written" in fitted else None)
     stop.check("after the first pass's fit")
     return _track_once(second, reader, stop, body_fit=fitted, backgrounds=learned)

@@ -7,11 +7,12 @@ high however well the rest is tracked (real walks: the tape's leg 4.5 cm longer 
 height, the pelvis 75 mm high; docs/tracking.md, "Body fit").
 
 ``fit_leg_length`` runs the tracker's own filter once per candidate, each with thigh and shank scaled
-by a factor (``legs_scaled``; ankle, feet, torso and head unchanged), over the first ``frames`` frames,
-and keeps the candidate with the highest evidence log p(z_1:T) = sum_t log sum_j w_{t-1,j} p(z_t | s_t^j)
-(``FilterStep.log_evidence``). The image likelihood for this comparison counts the person's foreground
-above the head against the body (``LikelihoodConfig.head_top_weight`` 1): without it the evidence
-preferred legs 3 % short on our own renders, where the drawn body is the tracker's.
+by a factor (``BodyDescription.legs_scaled``; ankle, feet, torso and head unchanged), over the first
+``frames`` frames, and keeps the candidate with the highest evidence
+log p(z_1:T) = sum_t log sum_j w_{t-1,j} p(z_t | s_t^j) (``FilterStep.log_evidence``). The image likelihood
+for this comparison counts the person's foreground above the head against the body
+(``LikelihoodConfig.head_top_weight`` 1): without it the evidence preferred legs 3 % short on our own renders,
+where the drawn body is the tracker's.
 
 Measured (``awalker fitbody`` on the real-walks benchmark's hand-started runs, tracker seeds
 0-2, then ``awalker track --body`` the fitted body; docs/tracking.md, "Body fit"): two cameras,
@@ -65,7 +66,8 @@ class BodyFitConfig:
 
     leg_factors: tuple[float, ...] = (0.91, 0.94, 0.97, 1.0, 1.03)   # thigh and shank x factor
     # True: each candidate keeps the body's standing height, its torso and head scaled by what the legs gain
-    # or lose (``legs_scaled(keep_height=True)``): for a height the images measured (module docstring)
+    # or lose (``BodyDescription.legs_scaled(keep_height=True)``): for a height the images measured (module
+    # docstring)
     keep_height: bool = False
     frames: int = 60                 # frames of evidence from the start frame (2 s at 30 Hz)
     particles: int = 5000            # per candidate (2500 picked less reliably: README)
@@ -92,20 +94,6 @@ class BodyFit:
     body: BodyDescription
     log_evidence: dict[float, float]
     frames: int
-
-
-def legs_scaled(body: BodyDescription, factor: float, keep_height: bool = False) -> BodyDescription:
-    """``body`` with thigh and shank lengths times ``factor``; the rest unchanged, or with ``keep_height`` the
-    torso and head lengths scaled alike so that the standing height (``BodyDescription.height``) stays."""
-    legs = replace(body, upper_leg_length=body.upper_leg_length * factor,
-                   lower_leg_length=body.lower_leg_length * factor)
-    if not keep_height:
-        return legs
-    scale = (body.height - legs.leg_length) / (body.torso_length + body.head_length)
-    if scale <= 0.5:
-        raise ValueError(f"legs_scaled: legs x{factor} leave {body.height - legs.leg_length:.3f} m of a "
-                         f"{body.height:.3f} m body for torso and head")
-    return replace(legs, torso_length=body.torso_length * scale, head_length=body.head_length * scale)
 
 
 @dataclass(frozen=True)
@@ -184,15 +172,15 @@ def fit_leg_length(body: BodyDescription, start: StartDescription, likelihood_fo
 
     def report(factor: object, evidence: float, count: int) -> None:
         if progress is not None:
-            progress(f"legs x{factor:.2f} (leg length {legs_scaled(body, factor).leg_length:.3f} m"
+            progress(f"legs x{factor:.2f} (leg length {body.legs_scaled(factor).leg_length:.3f} m"
                      + (", height kept" if config.keep_height else "") + f"): log evidence {evidence:.1f} over "
                      f"{count} frames")
 
-    evidence = _log_evidence({factor: (legs_scaled(body, factor, config.keep_height), start, config.seed)
+    evidence = _log_evidence({factor: (body.legs_scaled(factor, config.keep_height), start, config.seed)
                               for factor in config.leg_factors},
                              likelihood_for, used, tracker_config, config, cameras, report, check)
     best = _best(evidence, "fit_leg_length: every candidate lost the person (evidence -inf)")
-    return BodyFit(best, legs_scaled(body, best, config.keep_height), evidence, len(used))
+    return BodyFit(best, body.legs_scaled(best, config.keep_height), evidence, len(used))
 
 
 def fit_stance_leg(body: BodyDescription, start: StartDescription, likelihood_for: Callable[[BodyDescription], object],

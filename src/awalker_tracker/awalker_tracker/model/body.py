@@ -101,6 +101,16 @@ class PartShape:
         return float(max(self.radii_start.max(), self.radii_end.max()))
 
 
+#: A walking person's standing hip height (the walker's leg length L) as a fraction of the height the images see
+#: them walk at (``BodyDescription.from_seen_height``). The default body's is 0.517; on the development set's tuning
+#: subjects, hands off, two cameras (seeds 0-1, 22 runs) the true leg length was a median 0.542 of the seen height
+#: (0.527-0.575), where the default scaled to the seen height had legs 1.4-9.4 cm short (median 3.7; anthropometric
+#: tables put the hip at 0.52-0.53 of a standing person's stature; the blob of a walking person is a little lower).
+SEEN_HEIGHT_LEG_FRACTION = 0.54
+#: Cameras from which the seen height is a measurement (the person triangulated): with fewer, one camera makes it from
+#: the depth it estimates, and ``from_seen_height`` keeps the default's proportions for the leg fit that follows.
+SEEN_HEIGHT_MIN_CAMERAS = 2
+
 _PAIR_FIELDS = (
     "torso_radii_bottom", "torso_radii_top", "head_radii_bottom", "head_radii_top",
     "upper_leg_radii_top", "upper_leg_radii_bottom", "lower_leg_radii_top", "lower_leg_radii_bottom",
@@ -181,6 +191,35 @@ class BodyDescription:
         k = height / self.height
         return type(self)(**{f.name: (tuple(v * k for v in getattr(self, f.name)) if f.name in _PAIR_FIELDS
                                       else getattr(self, f.name) * k) for f in fields(self)})
+
+    def legs_scaled(self, factor: float, keep_height: bool = False) -> "BodyDescription":
+        """This body with thigh and shank lengths times ``factor``; the rest unchanged, or with ``keep_height`` the
+        torso and head lengths scaled alike so that the standing height stays."""
+        legs = replace(self, upper_leg_length=self.upper_leg_length * factor,
+                       lower_leg_length=self.lower_leg_length * factor)
+        if not keep_height:
+            return legs
+        scale = (self.height - legs.leg_length) / (self.torso_length + self.head_length)
+        if scale <= 0.5:
+            raise ValueError(f"BodyDescription.legs_scaled: legs x{factor} leave {self.height - legs.leg_length:.3f} m "
+                             f"of a {self.height:.3f} m body for torso and head")
+        return replace(legs, torso_length=self.torso_length * scale, head_length=self.head_length * scale)
+
+    @classmethod
+    def from_seen_height(cls, height: float, cameras: int) -> "BodyDescription":
+        """A body for a person whom nobody measured, seen ``height`` (m) tall walking by ``cameras`` cameras: the
+        default's shape scaled to that height, and with ``SEEN_HEIGHT_MIN_CAMERAS`` or more its thigh and shank then
+        scaled so that the leg length is ``SEEN_HEIGHT_LEG_FRACTION`` of the height, the torso and head giving what
+        the legs gain. One camera keeps the default's proportions: `awalker track` fits its legs next, adding to
+        the height (with the fraction as well, the tuning subjects' one-camera runs came out worse, docs/tracking.md,
+        *Body from the seen height*)."""
+        scaled = cls.default().scaled_to_height(height)
+        if cameras < SEEN_HEIGHT_MIN_CAMERAS:
+            return scaled
+        thigh_and_shank = scaled.upper_leg_length + scaled.lower_leg_length
+        below_knee_joints = scaled.leg_length - thigh_and_shank        # ankle height and sole sag
+        factor = (SEEN_HEIGHT_LEG_FRACTION * scaled.height - below_knee_joints) / thigh_and_shank
+        return scaled.legs_scaled(factor, keep_height=True)
 
     def walker_params(self, **overrides: float) -> WalkerParams:
         """Walker parameters with L = this body's leg length (other fields from ``overrides``)."""

@@ -481,7 +481,8 @@ class TrackerNode(AwalkerNode):
         if self.body is None and self.estimate_body and self._finder is not None:
             height = self._finder.estimated_height()
             if height is not None:
-                self.body = BodyDescription.default().scaled_to_height(float(np.clip(height, 1.2, 2.1)))
+                self.body = BodyDescription.from_seen_height(float(np.clip(height, 1.2, 2.1)),
+                                                             len(self.camera_names))
                 self.get_logger().info(f"body scaled to the person's height, {self.body.height:.2f} m (seen "
                                        f"{height:.2f} m): leg length {self.body.leg_length:.2f} m")
                 if self.body_output:
