@@ -515,7 +515,8 @@ def _run_passes(options: TrackOptions, reader: Any, stop: StopRequest) -> TrackR
     _progress(options, f"awalker track: {', '.join(chosen)}; tracking again")
     fitted["seconds_first_pass_and_fit"] = round(time.monotonic() - started, 3)
     # (a body scaled to the seen height is the first pass's: the second pass's finer maps see the person taller)
-    second = replace(options, body=Path(fitted["written"]) if fit_legs or seen_body else options.body,
+    second_body = Path(fitted["written"]) if fit_legs else first_dir / BODY_FILE if seen_body else options.body
+    second = replace(options, body=second_body,
                      fitted_start=Path(fitted["start_written"]) if "start_written" in fitted else None)
     stop.check("after the first pass's fit")
     return _track_once(second, reader, stop, body_fit=fitted, backgrounds=learned)
