@@ -129,7 +129,7 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys, monkeypat
     assert evidence[f"{fitted['leg_factor']:.2f}"] == max(evidence.values())
     assert fitted["height_kept"] is False
     # a body scaled to the height the images showed: with one camera (a height made from the estimated depth)
-    # the candidates still add to it; from KEEP_HEIGHT_CAMERAS cameras on they keep it, torso and head giving way
+    # the candidates still add to it; from SEEN_HEIGHT_MIN_CAMERAS cameras on they keep it, torso and head giving way
     run_yaml = out / "run.yaml"
     run_yaml.write_text(yaml.safe_dump({**yaml.safe_load(run_yaml.read_text()),
                                         "body_source": "scaled to the person's height seen in the images"}))
@@ -138,7 +138,7 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys, monkeypat
     fitted = yaml.safe_load(capsys.readouterr().out)["fitbody"]
     got = BodyDescription.from_yaml(out / "body_fitted.yaml")
     assert fitted["height_kept"] is False and got.torso_length == given.torso_length
-    monkeypatch.setattr(fit_body, "KEEP_HEIGHT_CAMERAS", 1)
+    monkeypatch.setattr(fit_body, "SEEN_HEIGHT_MIN_CAMERAS", 1)
     assert main(fitbody) == 0
     fitted = yaml.safe_load(capsys.readouterr().out)["fitbody"]
     got = BodyDescription.from_yaml(out / "body_fitted.yaml")
@@ -151,7 +151,7 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys, monkeypat
     assert main(defaults) == 0
     assert [float(k) for k in yaml.safe_load(capsys.readouterr().out)["fitbody"]["log_evidence"]] == list(
         fit_body.MEASURED_HEIGHT_FACTORS)
-    monkeypatch.setattr(fit_body, "KEEP_HEIGHT_CAMERAS", 2)
+    monkeypatch.setattr(fit_body, "SEEN_HEIGHT_MIN_CAMERAS", 2)
     assert main(defaults) == 0
     assert [float(k) for k in yaml.safe_load(capsys.readouterr().out)["fitbody"]["log_evidence"]] == list(
         fit_body.HEIGHT_SCALED_FACTORS)

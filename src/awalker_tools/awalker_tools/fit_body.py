@@ -5,7 +5,7 @@ Reads the output directory of a tracking run (the image features it recorded in 
 calibration.yaml, start.yaml, body.yaml and run.yaml), runs the filter once per candidate leg length
 over the first frames from the start (``inference.bodyfit``) and writes DIR/body_fitted.yaml, to track
 again with ``awalker track BAG --body DIR/body_fitted.yaml``. A body scaled to the height seen in the
-images keeps that height in the fit when two or more cameras saw it (``KEEP_HEIGHT_CAMERAS``). When the start
+images keeps that height in the fit when two or more cameras saw it (``SEEN_HEIGHT_MIN_CAMERAS``). When the start
 names no stance leg (found automatically, or ``stance_leg: unknown``), it then weighs the two legs with the
 fitted body the same way and writes DIR/start_fitted.yaml, the start with the leg chosen (``awalker track``
 hands it to its second pass's tracker: ``TrackOptions.fitted_start``). Its files follow ``outdir``'s rule: each
@@ -37,10 +37,6 @@ HEIGHT_SCALED_FACTORS = (0.97, 1.0, 1.03, 1.06, 1.09, 1.12)
 # ... or scaled to a height two cameras or more measured: a person's proportion of it already (`awalker track`
 # fits none, below; these for `awalker fitbody` on its first pass)
 MEASURED_HEIGHT_FACTORS = (0.94, 0.97, 1.0, 1.03, 1.06)
-# Cameras from which a body scaled to the seen height keeps that height in the leg fit (its torso and head give
-# what the legs gain): several cameras measure the height; one camera makes it from the depth it estimates. `awalker
-# track` fits no legs there (``pipeline._run_passes``): the body has a person's proportion of the measured height.
-KEEP_HEIGHT_CAMERAS = SEEN_HEIGHT_MIN_CAMERAS
 
 
 def _features(run_dir: Path, cameras: list[Any], tolerance: float) -> tuple[list[int], list[tuple]]:
@@ -126,7 +122,9 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None,
         _required(run_dir / name)
     cameras = load_calibration(run_dir / "calibration.yaml")
     scaled = str(info.get("body_source", "")).startswith("scaled to the person's height")
-    measured = scaled and len(cameras) >= KEEP_HEIGHT_CAMERAS
+    # from SEEN_HEIGHT_MIN_CAMERAS cameras the seen height was measured: the candidates keep it, torso and head giving
+    # what the legs gain (one camera makes it from the depth it estimates: the legs are added to it)
+    measured = scaled and len(cameras) >= SEEN_HEIGHT_MIN_CAMERAS
     if leg_factors is None:
         leg_factors = MEASURED_HEIGHT_FACTORS if measured else HEIGHT_SCALED_FACTORS if scaled else GIVEN_BODY_FACTORS
     try:
