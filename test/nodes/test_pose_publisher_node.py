@@ -273,10 +273,10 @@ def test_heel_strikes_become_gait_steps(ros_context):
         assert [stamp_to_ns(m.header.stamp) for m in got] == [stamps[15], stamps[30], stamps[45], stamps[60]]
         # the strike itself: where the stance probability crossed 0.5 (half way into the frame's period), less the
         # walker's strike delay (inference.gait_events.PosteriorSteps)
-        from awalker_tracker.inference.gait_events import TYPICAL_STEP_TIME_S, WALKER_STRIKE_DELAY
+        from awalker_tracker.inference.gait_events import TYPICAL_STEP_TIME_S, walker_strike_delay_s
 
         crossed = [0.5 * (stamps[k - 1] + stamps[k]) for k in (15, 30, 45, 60)]
-        delays = [WALKER_STRIKE_DELAY * TYPICAL_STEP_TIME_S] + [WALKER_STRIKE_DELAY * 0.5] * 3
+        delays = [walker_strike_delay_s(TYPICAL_STEP_TIME_S)] + [walker_strike_delay_s(0.5)] * 3
         assert [stamp_to_ns(m.strike) for m in got] == pytest.approx([c - d * 1e9 for c, d in zip(crossed, delays)],
                                                                      abs=2)
         assert [m.foot for m in got] == [GaitStep.RIGHT, GaitStep.LEFT, GaitStep.RIGHT, GaitStep.LEFT]

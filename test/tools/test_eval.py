@@ -230,7 +230,7 @@ def test_walk_quality_heading_swaps_falls_and_the_last_frame():
 
 def test_gait_is_compared_over_the_frames_the_estimate_covers():
     """An estimate that starts later than the truth (an automatic start): step times count from its first
-    frame in both, so an exact estimate is off only by the walker's double-support shift (``gait_events.WALKER_STRIKE_DELAY``) and
+    frame in both, so an exact estimate is off only by the walker's double-support shift (``gait_events.walker_strike_delay_s``) and
     only the covered strikes count."""
     import sys
     from pathlib import Path
@@ -249,8 +249,8 @@ def test_gait_is_compared_over_the_frames_the_estimate_covers():
     result = evaluation.gait_comparison(estimate, truth, summary)["comparison"]
     assert result["true_strikes"] == sum(late < f for f in strikes)
     assert result["matched_strikes"] == result["true_strikes"]
-    # the walker's strikes are dated late in a double support: WALKER_STRIKE_DELAY x the 0.5 s steps earlier
-    shift = gait_events.WALKER_STRIKE_DELAY * 0.5
+    # the walker's strikes are dated late in a double support: half of one of the 0.5 s steps' earlier
+    shift = gait_events.walker_strike_delay_s(0.5)
     assert result["timing_error_s_median"] == pytest.approx(shift, abs=1e-9)
     assert result["timing_bias_s_median"] == pytest.approx(-shift, abs=1e-9)      # reported early
 

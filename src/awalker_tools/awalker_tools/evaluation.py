@@ -429,7 +429,7 @@ def track_steps(track: PoseTrack, stance_leg: np.ndarray | None = None,
                 strike_fraction: np.ndarray | None = None) -> list:
     """The steps of a pose track (``inference.gait_events``): from its stance legs (0 left / 1 right per frame)
     when given (the tracker's own strikes, timed within the frame by ``strike_fraction``, the heel strike
-    ``gait_events.WALKER_STRIKE_DELAY`` x the step time before), else from its heel markers (``gait_events.heel_strikes``;
+    half a person's double support before: ``gait_events.walker_strike_delay_s``), else from its heel markers (``gait_events.heel_strikes``;
     each step where its heel comes to rest: ``gait_events.heel_at_rest``)."""
     from awalker_tracker.inference import gait_events
 
@@ -440,7 +440,7 @@ def track_steps(track: PoseTrack, stance_leg: np.ndarray | None = None,
         stance, fraction = gait_events.stance_from_heels(markers, (track.stamps_ns - track.stamps_ns[0]) * 1e-9)
         return gait_events.steps(track.frames, track.stamps_ns, markers, stance, fraction, at_rest=True)
     return gait_events.steps(track.frames, track.stamps_ns, markers, np.asarray(stance_leg), strike_fraction,
-                             gait_events.WALKER_STRIKE_DELAY)
+                             walker_strikes=True)
 
 
 @dataclass(frozen=True)

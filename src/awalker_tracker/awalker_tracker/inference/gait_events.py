@@ -16,14 +16,17 @@ foot stands from its own strike to the other foot's next one: stance is exactly 
 and there is no double support (people: about 60 % and 20 %). ``summary`` says so rather than
 reporting a measured proportion.
 
-Heel-strike time of a walker's step: a person's support passes from foot to foot over a double
-support (heel strike to the other foot's toe-off, ``HUMAN_DOUBLE_SUPPORT`` = 10 % of the stride each
-time in normal walking; Perry and Burnfield, *Gait Analysis*), the walker's in one instant. Fitted to a
-person's images, the walker's transfer falls within that double support; the tracker dates the heel strike
-half a double support before it (``WALKER_STRIKE_DELAY`` = 0.10 of the step time, which is half the stride;
-``StepCounter(double_support=...)``; the first step, with no step time yet, uses ``TYPICAL_STEP_TIME_S``).
-This is a fact about walking, not a constant fitted to walks: it holds for slow and fast walkers alike as a
-share of their own step time. Steps from heel markers (``heel_strikes``) are not shifted.
+Heel-strike time of a walker's step: a person's support passes from foot to foot over a double support (heel
+strike to the other foot's toe-off), the walker's in one instant. Fitted to a person's images, the walker's
+transfer falls within that double support; the tracker dates the heel strike half a double support before it
+(``walker_strike_delay_s``; ``StepCounter(walker_strikes=True)``; the first step, with no step time yet, uses
+``TYPICAL_STEP_TIME_S``). A double support lasts the step time less the swing time, and the swing time changes
+less with the pace than the stance does: ``SWING_TIME_S`` + ``SWING_PER_STEP_TIME`` x the step time (0.42 s of a
+1.1 s stride at 110 steps/min, stance 62 %; 0.6 s of a 2 s stride at 60 steps/min, stance 70 %: slow walkers
+stand longer on both feet), so the delay is 0.3 x the step time - 0.1 s (0.065 s at 0.55 s steps, 0.2 s at 1 s).
+The two constants were chosen on the development set's tuning subjects (``docs/tracking.md``, *Gait events*);
+a step longer than ``LONGEST_STEP_TIME_S`` held a pause and counts as that long. Steps from heel markers
+(``heel_strikes``) are not shifted.
 """
 from __future__ import annotations
 
@@ -37,9 +40,19 @@ from awalker_tracker.model.walker import LEFT
 _M = {n: i for i, n in enumerate(MARKER_NAMES)}
 _FOOT = {0: ("left_heel", "left_toe"), 1: ("right_heel", "right_toe")}
 
-HUMAN_DOUBLE_SUPPORT = 0.10    # each double support, share of the stride (normal walking)
-WALKER_STRIKE_DELAY = HUMAN_DOUBLE_SUPPORT   # share of the step time: half a double support, the walker's strike after the heel's
+SWING_TIME_S = 0.2             # s: a person's swing time at a step time of 0 (module docstring)
+SWING_PER_STEP_TIME = 0.4      # the swing time's share of each second of step time
+LONGEST_STEP_TIME_S = 1.2      # s, 50 steps/min: a longer step held a pause, and its double support is this one's
 TYPICAL_STEP_TIME_S = 0.55     # s, 110 steps/min: the first step's, before one is measured
+
+
+def walker_strike_delay_s(step_time_s: float) -> float:
+    """How long (s) after a person's heel strike the walker's instant support transfer falls: half a double
+    support, which lasts the step time (s) less the swing time (module docstring); 0 for steps shorter than
+    the swing."""
+    step = min(float(step_time_s), LONGEST_STEP_TIME_S)
+    double_support = step - (SWING_TIME_S + SWING_PER_STEP_TIME * step)
+    return max(0.5 * double_support, 0.0)
 
 
 @dataclass(frozen=True)
@@ -112,13 +125,14 @@ class StepCounter:
     """Steps from heel strikes as they come (online: the tracker's events while it runs); ``steps``
     feeds it a whole walk. Times in s, positions world xy (m)."""
 
-    def __init__(self, double_support: float = 0.0) -> None:
-        self.double_support = float(double_support)    # WALKER_STRIKE_DELAY for the walker's events, else 0
+    def __init__(self, walker_strikes: bool = False) -> None:
+        self.walker_strikes = bool(walker_strikes)     # the walker's support transfers: dated back to the heel's
         self.strikes: list[tuple[float, np.ndarray]] = []      # (time, heel xy) of every strike so far
 
     def add(self, frame: int, stamp_ns: int, time_s: float, foot: int, heel_xy: np.ndarray) -> Step:
-        """The step that ends with this strike of ``foot`` (LEFT 0 / RIGHT 1) at ``time_s``; its reported
-        time is the heel strike, ``double_support`` x the step time before (module docstring)."""
+        """The step that ends with this strike of ``foot`` (LEFT 0 / RIGHT 1) at ``time_s``; for the walker's
+        strikes its reported time is the heel strike, ``walker_strike_delay_s`` of the step time before (module
+        docstring)."""
         heel = np.asarray(heel_xy, float)[:2]
         k = len(self.strikes)
         length = width = step_time = stride_time = cadence = speed = float("nan")
@@ -135,23 +149,24 @@ class StepCounter:
             cadence = 60.0 / step_time if step_time > 0 else float("nan")
             speed = length / step_time if step_time > 0 else float("nan")
         self.strikes.append((float(time_s), heel))
-        heel_strike = time_s - self.double_support * (step_time if step_time > 0 else TYPICAL_STEP_TIME_S)
+        heel_strike = time_s - (walker_strike_delay_s(step_time if step_time > 0 else TYPICAL_STEP_TIME_S)
+                                if self.walker_strikes else 0.0)
         return Step(k, int(frame), int(stamp_ns), float(heel_strike), "left" if foot == LEFT else "right",
                     float(heel[0]), float(heel[1]), length, width, step_time, stride_time, cadence, speed)
 
 
 def steps(frames: np.ndarray, stamps_ns: np.ndarray, markers: np.ndarray, stance_leg: np.ndarray,
-          strike_fraction: np.ndarray | None = None, double_support: float = 0.0,
+          strike_fraction: np.ndarray | None = None, walker_strikes: bool = False,
           at_rest: bool = False) -> list[Step]:
     """The steps of a walk: markers (F, 13, 3) in MARKER_NAMES order, stance leg per frame (0/1) and,
     if known, when in the period before each frame the strike happened (0-1; NaN: at the frame);
-    ``double_support`` as for ``StepCounter``. A step's position is the striking heel's at the strike, or
+    ``walker_strikes`` as for ``StepCounter``. A step's position is the striking heel's at the strike, or
     with ``at_rest`` (marker data, strikes from ``stance_from_heels``) where that heel comes to rest
     (``heel_at_rest``)."""
     stance = np.asarray(stance_leg).astype(int)
     t = (np.asarray(stamps_ns, np.int64) - int(stamps_ns[0])) * 1e-9
     fraction = np.full(len(stance), np.nan) if strike_fraction is None else np.asarray(strike_fraction, float)
-    counter = StepCounter(double_support)
+    counter = StepCounter(walker_strikes)
     heels = markers[:, [_M[_FOOT[0][0]], _M[_FOOT[1][0]]], :2]          # (F, 2 feet, xy)
     # over-the-ground speed of each heel (central differences), once for all strikes
     heel_speed = np.linalg.norm(np.gradient(heels, t, axis=0), axis=2) if at_rest and len(t) >= 2 else None
@@ -193,7 +208,7 @@ class PosteriorSteps:
     the left foot stands crosses 0.5 and goes on past ``confirm`` (or 1 - ``confirm``): a heel strike of the new
     stance foot, timed where the probability crossed 0.5 (interpolated between frames: when half the particles
     had struck), placed at that foot's contact estimate at the confirming frame, and dated
-    ``WALKER_STRIKE_DELAY`` x the step time earlier like the MAP trajectory's steps (``StepCounter``). The
+    half a double support earlier like the MAP trajectory's steps (``walker_strike_delay_s``). The
     posterior's majority follows the MAP trajectory's stance, so these are the steps gait.csv has, at the
     look-ahead lag; a majority of particles striking within one frame (what a per-frame vote needs) is rare
     when their strikes spread over a few frames."""
@@ -202,7 +217,7 @@ class PosteriorSteps:
         if not 0.5 < confirm < 1.0:
             raise ValueError(f"PosteriorSteps: confirm must lie in (0.5, 1), got {confirm}")
         self.confirm = float(confirm)
-        self.counter = StepCounter(WALKER_STRIKE_DELAY)
+        self.counter = StepCounter(walker_strikes=True)
         self.foot: int | None = None                       # the stance foot the posterior settled on
         self._last: tuple[float, float] | None = None      # (time s, left probability) of the last frame
         self._crossed: tuple[float, int, int] | None = None  # (time s, frame, stamp) of the last 0.5 crossing
@@ -250,7 +265,8 @@ def summary(walk: list[Step], sides_known: bool = True) -> dict[str, object]:
     out["double_support_fraction"] = 0.0
     out["stance_note"] = ("impulsive toe-off: each foot stands from its heel strike to the other foot's next one, "
                           "so stance is half the stride and there is no double support (people: ~60 % and ~20 %); "
-                          f"the tracker dates each heel strike {WALKER_STRIKE_DELAY:g} x the step time before its "
+                          "the tracker dates each heel strike half a person's double support "
+                          f"({(1 - SWING_PER_STEP_TIME) / 2:g} x the step time - {SWING_TIME_S / 2:g} s) before its "
                           "walker's instant support transfer, where a person's heel comes down")
     if not sides_known:
         out["sides_note"] = SIDES_NOTE
