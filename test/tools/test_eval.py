@@ -230,8 +230,8 @@ def test_walk_quality_heading_swaps_falls_and_the_last_frame():
 
 def test_gait_is_compared_over_the_frames_the_estimate_covers():
     """An estimate that starts later than the truth (an automatic start): step times count from its first
-    frame in both, so an exact estimate is off only by the walker's double-support shift (``gait_events.walker_strike_delay_s``) and
-    only the covered strikes count."""
+    frame in both, so an exact estimate is off only by the walker's double-support shift
+    (``gait_events.walker_strike_delay_s``) and only the covered strikes count."""
     import sys
     from pathlib import Path
 

@@ -428,9 +428,9 @@ GAIT_COLUMNS = ("index", "frame", "stamp_ns", "time_s", "foot", "x", "y", "step_
 def track_steps(track: PoseTrack, stance_leg: np.ndarray | None = None,
                 strike_fraction: np.ndarray | None = None) -> list:
     """The steps of a pose track (``inference.gait_events``): from its stance legs (0 left / 1 right per frame)
-    when given (the tracker's own strikes, timed within the frame by ``strike_fraction``, the heel strike
-    half a person's double support before: ``gait_events.walker_strike_delay_s``), else from its heel markers (``gait_events.heel_strikes``;
-    each step where its heel comes to rest: ``gait_events.heel_at_rest``)."""
+    when given (the tracker's own strikes, timed within the frame by ``strike_fraction``, the heel strike half a
+    person's double support before: ``gait_events.walker_strike_delay_s``), else from its heel markers
+    (``gait_events.heel_strikes``; each step where its heel comes to rest: ``gait_events.heel_at_rest``)."""
     from awalker_tracker.inference import gait_events
 
     from awalker_tracker.model.body import MARKER_NAMES
