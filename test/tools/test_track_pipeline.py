@@ -19,6 +19,7 @@ from bag_helpers import isolated_ros, rewrite_images, synth_walk  # noqa: F401 (
 from awalker_tools import evaluation, fit_body
 from awalker_tools.cli import main
 from awalker_tracker.inference.recovery import RecoveryConfig
+from awalker_tracker.model import body as body_module
 from awalker_tracker.model.body import BodyDescription
 
 FRAMES, BACKGROUND = 10, 4
@@ -138,7 +139,7 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys, monkeypat
     fitted = yaml.safe_load(capsys.readouterr().out)["fitbody"]
     got = BodyDescription.from_yaml(out / "body_fitted.yaml")
     assert fitted["height_kept"] is False and got.torso_length == given.torso_length
-    monkeypatch.setattr(fit_body, "SEEN_HEIGHT_MIN_CAMERAS", 1)
+    monkeypatch.setattr(body_module, "SEEN_HEIGHT_MIN_CAMERAS", 1)
     assert main(fitbody) == 0
     fitted = yaml.safe_load(capsys.readouterr().out)["fitbody"]
     got = BodyDescription.from_yaml(out / "body_fitted.yaml")
@@ -151,7 +152,7 @@ def test_track_in_one_process(synth_bag: Path, tmp_path: Path, capsys, monkeypat
     assert main(defaults) == 0
     assert [float(k) for k in yaml.safe_load(capsys.readouterr().out)["fitbody"]["log_evidence"]] == list(
         fit_body.MEASURED_HEIGHT_FACTORS)
-    monkeypatch.setattr(fit_body, "SEEN_HEIGHT_MIN_CAMERAS", 2)
+    monkeypatch.setattr(body_module, "SEEN_HEIGHT_MIN_CAMERAS", 2)
     assert main(defaults) == 0
     assert [float(k) for k in yaml.safe_load(capsys.readouterr().out)["fitbody"]["log_evidence"]] == list(
         fit_body.HEIGHT_SCALED_FACTORS)

@@ -5,7 +5,7 @@ Reads the output directory of a tracking run (the image features it recorded in 
 calibration.yaml, start.yaml, body.yaml and run.yaml), runs the filter once per candidate leg length
 over the first frames from the start (``inference.bodyfit``) and writes DIR/body_fitted.yaml, to track
 again with ``awalker track BAG --body DIR/body_fitted.yaml``. A body scaled to the height seen in the
-images keeps that height in the fit when two or more cameras saw it (``SEEN_HEIGHT_MIN_CAMERAS``). When the start
+images keeps that height in the fit when two or more cameras saw it (``seen_height_measured``). When the start
 names no stance leg (found automatically, or ``stance_leg: unknown``), it then weighs the two legs with the
 fitted body the same way and writes DIR/start_fitted.yaml, the start with the leg chosen (``awalker track``
 hands it to its second pass's tracker: ``TrackOptions.fitted_start``). Its files follow ``outdir``'s rule: each
@@ -23,7 +23,7 @@ import numpy as np
 
 from awalker_tracker.errors import InputError, parse_yaml
 from awalker_tracker.inference.sync import DEFAULT_TOLERANCE
-from awalker_tracker.model.body import SEEN_HEIGHT_MIN_CAMERAS
+from awalker_tracker.model.body import seen_height_measured
 
 from awalker_tools.outdir import RESULT_BAG, add_written, check_may_write
 
@@ -122,9 +122,9 @@ def fit_run_dir(run_dir: Path, leg_factors: Sequence[float] | None = None,
         _required(run_dir / name)
     cameras = load_calibration(run_dir / "calibration.yaml")
     scaled = str(info.get("body_source", "")).startswith("scaled to the person's height")
-    # from SEEN_HEIGHT_MIN_CAMERAS cameras the seen height was measured: the candidates keep it, torso and head giving
-    # what the legs gain (one camera makes it from the depth it estimates: the legs are added to it)
-    measured = scaled and len(cameras) >= SEEN_HEIGHT_MIN_CAMERAS
+    # a seen height the cameras measured: the candidates keep it, torso and head giving what the legs gain (one
+    # camera makes it from the depth it estimates: the legs are added to it)
+    measured = scaled and seen_height_measured(len(cameras))
     if leg_factors is None:
         leg_factors = MEASURED_HEIGHT_FACTORS if measured else HEIGHT_SCALED_FACTORS if scaled else GIVEN_BODY_FACTORS
     try:

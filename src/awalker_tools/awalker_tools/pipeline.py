@@ -44,7 +44,7 @@ from awalker_tracker.errors import InputError
 from awalker_tracker.inference.filter_model import StartDescription, TrackerConfig
 from awalker_tracker.inference.profiles import DEFAULT_PROFILE, PROFILES, particle_count_text, tracking_profile
 from awalker_tracker.inference.sync import DEFAULT_TOLERANCE
-from awalker_tracker.model.body import SEEN_HEIGHT_MIN_CAMERAS, BodyDescription
+from awalker_tracker.model.body import BodyDescription, seen_height_measured
 from awalker_tracker.model.walker import LEG_NAMES
 
 from awalker_tools import evaluation
@@ -474,11 +474,11 @@ def _run_passes(options: TrackOptions, reader: Any, stop: StopRequest) -> TrackR
         except InputError:
             return _track_once(options, reader, stop)          # which reports what is missing
         # a body scaled to the seen height (``BodyDescription.from_seen_height``) keeps its legs where two cameras
-        # or more measured that height (``SEEN_HEIGHT_MIN_CAMERAS``): the fit, its torso and head giving what
+        # or more measured that height (``seen_height_measured``): the fit, its torso and head giving what
         # the legs gain, chose legs a median 1.1 cm long and the pelvis 30 mm high on the tuning subjects
         # (docs/tracking.md, *Body fit*)
         seen_body = body is None
-        fit_legs = fit_legs or (seen_body and len(reader.cameras) < SEEN_HEIGHT_MIN_CAMERAS)
+        fit_legs = fit_legs or (seen_body and not seen_height_measured(len(reader.cameras)))
         fit_stance = start is None or start.stance_leg is None
     if not (fit_legs or fit_stance):
         return _track_once(options, reader, stop)

@@ -111,6 +111,12 @@ SEEN_HEIGHT_LEG_FRACTION = 0.54
 #: the depth it estimates, and ``from_seen_height`` keeps the default's proportions for the leg fit that follows.
 SEEN_HEIGHT_MIN_CAMERAS = 2
 
+
+def seen_height_measured(cameras: int) -> bool:
+    """Whether ``cameras`` cameras measure the height a person is seen walking at (``SEEN_HEIGHT_MIN_CAMERAS``):
+    then a body scaled to it takes a walking person's leg fraction and its legs are not fitted."""
+    return cameras >= SEEN_HEIGHT_MIN_CAMERAS
+
 _PAIR_FIELDS = (
     "torso_radii_bottom", "torso_radii_top", "head_radii_bottom", "head_radii_top",
     "upper_leg_radii_top", "upper_leg_radii_bottom", "lower_leg_radii_top", "lower_leg_radii_bottom",
@@ -214,11 +220,11 @@ class BodyDescription:
         the height (with the fraction as well, the tuning subjects' one-camera runs came out worse, docs/tracking.md,
         *Body from the seen height*)."""
         scaled = cls.default().scaled_to_height(height)
-        if cameras < SEEN_HEIGHT_MIN_CAMERAS:
+        if not seen_height_measured(cameras):
             return scaled
         thigh_and_shank = scaled.upper_leg_length + scaled.lower_leg_length
-        below_knee_joints = scaled.leg_length - thigh_and_shank        # ankle height and sole sag
-        factor = (SEEN_HEIGHT_LEG_FRACTION * scaled.height - below_knee_joints) / thigh_and_shank
+        ankle_to_sole = scaled.leg_length - thigh_and_shank        # ankle height and sole sag
+        factor = (SEEN_HEIGHT_LEG_FRACTION * scaled.height - ankle_to_sole) / thigh_and_shank
         return scaled.legs_scaled(factor, keep_height=True)
 
     def walker_params(self, **overrides: float) -> WalkerParams:
