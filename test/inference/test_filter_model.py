@@ -93,6 +93,19 @@ def test_tracks_a_simulated_walk(walk):
     speed = np.array([s.speed for s in summaries])
     assert np.median(np.abs(speed[15:] - true_speed[15:])) < 0.1 * np.median(true_speed)
     assert any(s.resampled for s in summaries)
+    # the live steps (PosteriorSummary.steps): the final MAP lineage's strikes, each in the summary of a frame
+    # step_lag_s after it (but at the track's end, which takes the rest), timed on the stamps' clock within the
+    # strike's frame period (the lineage then may since have moved to a particle that struck earlier in the period)
+    from awalker_tracker.inference import gait_events
+
+    whole = gait_events.steps(traj.frames, traj.stamps_ns, traj.markers, traj.stance_leg, traj.strike_fraction,
+                              walker_strikes=True)
+    live = [(s.frame_index, step) for s in summaries for step in s.steps]
+    assert len(whole) >= 2 and [(step.frame, step.foot) for _, step in live] == [(w.frame, w.foot) for w in whole]
+    lag = round(TrackerConfig().step_lag_s * 30)
+    assert all(at - step.frame >= lag or at == len(markers) - 1 for at, step in live), live
+    np.testing.assert_allclose([step.time_s - traj.stamps_ns[0] * 1e-9 for _, step in live], [w.time_s for w in whole],
+                               atol=1 / 30)
 
 
 def test_start_description_yaml():

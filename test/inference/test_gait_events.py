@@ -188,39 +188,62 @@ def test_strikes_are_matched_one_to_one_and_swapped_feet_are_counted():
     assert (result["matched_strikes"], result["missed_strikes"], result["swapped_strikes"]) == (0, 6, 6)
 
 
-def test_the_live_steps_follow_the_posteriors_stance_foot():
-    """PosteriorSteps: a step each time the stance-left probability crosses 0.5 and settles past 0.7 / 0.3,
-    timed at the crossing (less the walker's strike delay), one step per change however slowly the particles
-    strike; no step for a wobble that does not settle."""
-    steps = gait_events.PosteriorSteps()
-    contacts = {0: np.array([0.0, 0.1]), 1: np.array([0.7, -0.1])}
-    # left stands, then the particles strike with the right over 4 frames (never a majority within one frame),
-    # a wobble to 0.45 and back, then the left strikes
-    p = [0.95] * 5 + [0.8, 0.6, 0.4, 0.2] + [0.1] * 6 + [0.45, 0.2] + [0.1] * 3 + [0.5, 0.9] + [0.95] * 3
-    out = []
-    for frame, left in enumerate(p):
-        step = steps.add(frame, frame * 33_333_333, frame / RATE, left, contacts)
-        if step is not None:
-            out.append((frame, step))
-    assert [s.foot for _, s in out] == ["right", "left"]
-    assert [f for f, _ in out] == [8, 21]                       # confirmed past 0.3 / 0.7
-    # the right's strike crossed 0.5 halfway between frames 6 and 7; no step time yet: a typical one
+def lineage_window(stance: list[int], first: int = 0):
+    """A lineage window's per-frame arrays from frame ``first`` on (LineageSteps.add): 30 Hz stamps, the left heel at
+    x = 0 and the right at x = 0.7 m, every strike halfway through its frame's period, the person in view."""
+    n = len(stance) - first
+    frames = np.arange(first, len(stance))
+    stamps = 1_000_000_000 + np.round(frames * 1e9 / RATE).astype(np.int64)
+    heels = np.zeros((n, 2, 2))
+    heels[:, 1, 0] = 0.7
+    return (first, frames, stamps, stamps * 1e-9, heels, np.asarray(stance[first:]), np.full(n, 0.5),
+            np.ones(n, bool))
+
+
+def test_the_live_steps_are_the_lineages_strikes_taken_once():
+    """LineageSteps: fed the lineage frame by frame, each strike is taken once, when the frames up to it are settled
+    (``until``), timed where the walker struck less its strike delay, and they are the steps ``steps`` finds in
+    the whole lineage."""
+    stance = [0] * 10 + [1] * 16 + [0] * 16 + [1] * 6
+    live = gait_events.LineageSteps()
+    taken = []
+    for until in range(len(stance)):
+        first, frames, stamps, times, heels, legs, fraction, in_view = lineage_window(stance, max(0, until - 20))
+        taken += [(until, s) for s in live.add(first, until, frames, stamps, times, heels, legs, fraction, in_view)]
+    assert [(u, s.frame, s.foot) for u, s in taken] == [(10, 10, "right"), (26, 26, "left"), (42, 42, "right")]
+    _, frames, stamps, times, heels, legs, fraction, _ = lineage_window(stance)
+    markers = np.zeros((len(stance), len(MARKER_NAMES), 3))
+    markers[:, MARKER_NAMES.index("right_heel"), 0] = 0.7
+    whole = gait_events.steps(frames, stamps, markers, legs, fraction, walker_strikes=True)
+    assert [(s.frame, s.foot, s.x) for _, s in taken] == [(s.frame, s.foot, s.x) for s in whole]
+    np.testing.assert_allclose([s.step_length_m for _, s in taken], [s.step_length_m for s in whole])
     delay = gait_events.walker_strike_delay_s
-    assert out[0][1].time_s == pytest.approx(6.5 / RATE - delay(gait_events.TYPICAL_STEP_TIME_S))
-    assert out[1][1].time_s == pytest.approx(20 / RATE - delay(20 / RATE - 6.5 / RATE))
-    assert (out[0][1].x, out[1][1].x) == (0.7, 0.0)
+    assert taken[0][1].time_s == pytest.approx(times[9] + 0.5 / RATE - delay(gait_events.TYPICAL_STEP_TIME_S))
+    assert taken[1][1].time_s - times[0] == pytest.approx(whole[1].time_s)
 
 
-def test_a_renaming_of_the_legs_is_no_live_step():
-    """When the posterior renames the legs (the naming test), the stance-left probability flips at once: read as
-    it stands that is a step; told of the renaming, PosteriorSteps renames the foot it stood on and counts the
-    next real change of stance as the next step."""
-    contacts = {0: np.array([0.0, 0.1]), 1: np.array([0.7, -0.1])}
-    p = [0.95] * 5 + [0.05] * 5 + [0.4, 0.9] + [0.95] * 3      # renamed at frame 5, a real strike at frame 11
-    for told in (True, False):
-        steps = gait_events.PosteriorSteps()
-        out = [(frame, step) for frame, left in enumerate(p)
-               if (step := steps.add(frame, frame * 33_333_333, frame / RATE, left, contacts,
-                                     legs_renamed=told and frame == 5)) is not None]
-        assert [f for f, _ in out] == ([11] if told else [5, 11])
-        assert steps.foot == 0
+def test_a_strike_the_lineage_moves_later_is_no_second_step():
+    """Once a strike is taken, a later lineage whose strike of the same foot falls a frame later (the MAP moved to
+    another particle) adds no step; a strike while the person was out of view is counted, not returned."""
+    live = gait_events.LineageSteps()
+    first, frames, stamps, times, heels, legs, fraction, in_view = lineage_window([0] * 10 + [1] * 10)
+    assert [s.frame for s in live.add(first, 12, frames, stamps, times, heels, legs, fraction, in_view)] == [10]
+    first, frames, stamps, times, heels, legs, fraction, in_view = lineage_window([0] * 11 + [1] * 9 + [0] * 5)
+    assert live.add(first, 18, frames, stamps, times, heels, legs, fraction, in_view) == []
+    in_view[20] = False
+    assert live.add(first, 24, frames, stamps, times, heels, legs, fraction, in_view) == []
+    assert live.counter.strikes[-1][0] == pytest.approx(times[19] + 0.5 / RATE)      # counted
+    back = [0] * 11 + [1] * 9 + [0] * 10 + [1] * 5
+    first, frames, stamps, times, heels, legs, fraction, in_view = lineage_window(back)
+    (step,) = live.add(first, 34, frames, stamps, times, heels, legs, fraction, in_view)
+    assert (step.frame, step.foot, step.index) == (30, "right", 2)
+
+
+def test_a_strike_the_lineage_moves_earlier_is_still_taken():
+    """The lineage's strike moves by a frame or two as the particles' lineages coalesce: a strike that lay after the
+    frames looked at and then moves back into them is taken when it is next seen."""
+    live = gait_events.LineageSteps()
+    first, frames, stamps, times, heels, legs, fraction, in_view = lineage_window([0] * 12 + [1] * 8)
+    assert live.add(first, 11, frames, stamps, times, heels, legs, fraction, in_view) == []
+    first, frames, stamps, times, heels, legs, fraction, in_view = lineage_window([0] * 10 + [1] * 10)
+    assert [s.frame for s in live.add(first, 12, frames, stamps, times, heels, legs, fraction, in_view)] == [10]

@@ -1,12 +1,13 @@
 """Pose publisher node and summary message conversion (in-process, private rclpy context)."""
 from __future__ import annotations
 
-import dataclasses
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from awalker_tracker.inference.gait_events import Step
 from awalker_tracker.inference.posterior import LEFT, RIGHT, WALKER_FIELDS, FootContactEstimate, MarkerCloud, PosteriorSummary
 from awalker_tracker.model.body import JOINT_NAMES, MARKER_NAMES, BodyDescription
 
@@ -44,8 +45,13 @@ def test_summary_message_roundtrip():
     assert back.clouds[0].points.shape == (20, 3) and np.allclose(back.clouds[0].points, s.clouds[0].points, atol=1e-6)
     assert back.speed == 1.3 and back.resampled and back.effective_sample_size == 321.0
     assert not back.legs_renamed
-    from dataclasses import replace
     assert summary_from_msg(summary_to_msg(replace(s, legs_renamed=True), "world")).legs_renamed
+    assert back.steps == ()
+    carried = (gait_step(0, 3, "right", float("nan")), gait_step(1, 4, "left", 0.7))
+    steps = summary_from_msg(summary_to_msg(replace(s, steps=carried), "world")).steps
+    assert [(t.index, t.frame, t.stamp_ns, t.foot, t.x, t.step_length_m) for t in steps[1:]] == [
+        (c.index, c.frame, c.stamp_ns, c.foot, c.x, c.step_length_m) for c in carried[1:]]
+    assert [t.time_s for t in steps] == pytest.approx([c.time_s for c in carried], abs=1e-9)
 
 
 def test_cylinder_geometry():
@@ -127,7 +133,7 @@ def test_particle_clouds_pack_into_a_pointcloud2_heaviest_first():
     from awalker_tracker.nodes.messages import PARTICLE_POINT, particles_to_pointcloud2, summary_to_msg
 
     rng = np.random.default_rng(3)
-    s = dataclasses.replace(make_summary(10, 0, rng), clouds=(
+    s = replace(make_summary(10, 0, rng), clouds=(
         MarkerCloud("head", rng.normal(size=(20, 3)), rng.random(20) / 20),
         MarkerCloud("left_ankle", rng.normal(size=(30, 3)), rng.random(30) / 30)))
     msg = summary_to_msg(s)
@@ -232,14 +238,22 @@ def test_bad_body_description_is_reported(ros_context, tmp_path):
                           parameter_overrides=[Parameter("body_description", value=str(bad))])
 
 
-def test_heel_strikes_become_gait_steps(ros_context):
-    """The posterior's stance foot changes every 15 frames (0.5 s), alternate feet 0.7 m apart along x and 0.2 m
-    across: GaitStep messages at those frames with the step geometry and timing (inference.gait_events.PosteriorSteps)."""
+def gait_step(index: int, frame: int, foot: str, length: float) -> Step:
+    """A step struck 0.1 s before its frame (30 Hz stamps from 1 s), timed on the stamps' clock."""
+    stamp = 1_000_000_000 + frame * 33_333_333
+    return Step(index, frame, stamp, stamp * 1e-9 - 0.1, foot, 0.7 * index, 0.1, length, 0.2, 0.5, 1.0, 120.0, 1.4)
+
+
+def test_the_summaries_steps_become_gait_steps(ros_context):
+    """The steps the tracker's summaries carry (PosteriorSummary.steps, the MAP lineage's strikes at the step lag)
+    come out on /awalker/gait_steps in order, each stamped with its strike frame's stamp, the strike itself, foot,
+    heel and step values."""
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
 
     from awalker_msgs.msg import GaitStep
+    from awalker_msgs.msg import PosteriorSummary as SummaryMsg
     from awalker_tracker.nodes.messages import stamp_to_ns, summary_to_msg
     from awalker_tracker.nodes.pose_publisher_node import PosePublisherNode
 
@@ -248,43 +262,34 @@ def test_heel_strikes_become_gait_steps(ros_context):
     got: list = []
     qos = QoSProfile(depth=100)
     probe.create_subscription(GaitStep, "/awalker/gait_steps", got.append, qos)
-    from awalker_msgs.msg import PosteriorSummary as SummaryMsg
     pub = probe.create_publisher(SummaryMsg, "/awalker/posterior", qos)
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(node)
     executor.add_node(probe)
+    carried = {17: (gait_step(0, 2, "right", float("nan")),),
+               32: (gait_step(1, 17, "left", 0.7),), 35: (gait_step(2, 20, "right", 0.65), gait_step(3, 35, "left", 0.7))}
     try:
         deadline = time.monotonic() + 5
         while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
         rng = np.random.default_rng(4)
-        stamps = [1_000_000_000 + k * 33_333_333 for k in range(61)]
-        for k, stamp in enumerate(stamps):
-            strike = k > 0 and k % 15 == 0
-            foot = (k // 15) % 2                     # 0 left, 1 right
-            spot = np.array([0.7 * (k // 15), 0.1 if foot == LEFT else -0.1, 0.0])
-            contacts = (FootContactEstimate(foot, spot, 0.9, strike), FootContactEstimate(1 - foot, spot, 0.1, False))
-            pub.publish(summary_to_msg(make_summary(stamp, k, rng, contacts, 0.9 if foot == LEFT else 0.1)))
+        for k in range(36):
+            summary = replace(make_summary(1_000_000_000 + k * 33_333_333, k, rng), steps=carried.get(k, ()))
+            pub.publish(summary_to_msg(summary))
             for _ in range(3):                        # the node keeps up (its queue holds 10 summaries)
                 executor.spin_once(timeout_sec=0.01)
         while len(got) < 4 and time.monotonic() < deadline + 5:
             executor.spin_once(timeout_sec=0.05)
-        assert [m.frame_index for m in got] == [15, 30, 45, 60]
-        assert [stamp_to_ns(m.header.stamp) for m in got] == [stamps[15], stamps[30], stamps[45], stamps[60]]
-        # the strike itself: where the stance probability crossed 0.5 (half way into the frame's period), less the
-        # walker's strike delay (inference.gait_events.PosteriorSteps)
-        from awalker_tracker.inference.gait_events import TYPICAL_STEP_TIME_S, walker_strike_delay_s
-
-        crossed = [0.5 * (stamps[k - 1] + stamps[k]) for k in (15, 30, 45, 60)]
-        delays = [walker_strike_delay_s(TYPICAL_STEP_TIME_S)] + [walker_strike_delay_s(0.5)] * 3
-        assert [stamp_to_ns(m.strike) for m in got] == pytest.approx([c - d * 1e9 for c, d in zip(crossed, delays)],
-                                                                     abs=2)
+        steps = [step for k in sorted(carried) for step in carried[k]]
+        assert [(m.index, m.frame_index) for m in got] == [(s.index, s.frame) for s in steps]
+        assert [stamp_to_ns(m.header.stamp) for m in got] == [s.stamp_ns for s in steps]
+        assert [stamp_to_ns(m.strike) for m in got] == [s.stamp_ns - 100_000_000 for s in steps]
         assert [m.foot for m in got] == [GaitStep.RIGHT, GaitStep.LEFT, GaitStep.RIGHT, GaitStep.LEFT]
-        assert np.isnan(got[0].step_length) and np.isnan(got[1].step_width)
-        assert [round(m.step_length, 6) for m in got[2:]] == [0.7, 0.7]
-        assert [round(m.step_width, 6) for m in got[2:]] == [0.2, 0.2]
-        assert all(abs(m.step_time - 0.5) < 1e-6 and abs(m.cadence - 120) < 1e-3 for m in got[1:])
-        assert abs(got[3].stride_time - 1.0) < 1e-6 and abs(got[3].speed - 1.4) < 1e-6
+        assert np.isnan(got[0].step_length) and [m.step_length for m in got[1:]] == [0.7, 0.65, 0.7]
+        assert [m.position.x for m in got] == pytest.approx([0.0, 0.7, 1.4, 2.1])
+        assert all((m.step_width, m.step_time, m.stride_time, m.cadence, m.speed) == (0.2, 0.5, 1.0, 120.0, 1.4)
+                   for m in got)
+        assert all(m.header.frame_id == "world" for m in got)
     finally:
         executor.shutdown()
         node.destroy_node()

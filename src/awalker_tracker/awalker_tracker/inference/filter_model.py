@@ -27,6 +27,7 @@ import yaml
 from scipy.special import logsumexp
 
 from awalker_tracker.errors import InputError, read_text_file
+from awalker_tracker.inference.gait_events import LineageSteps, Step
 from awalker_tracker.inference.posterior import ParticleOutputs, PosteriorSummary, summarize
 from awalker_tracker.inference.recovery import (
     HELD, REACQUIRED, RESEEDED_FALLEN, LostTrackMonitor, RecoveryConfig, put_rows)
@@ -198,6 +199,9 @@ class TrackerConfig:
     likelihood_scale: float = 0.1
     recovery: RecoveryConfig = RecoveryConfig()
     view: ViewConfig = ViewConfig()      # when the person counts as in view, and the track ends (inference.visibility)
+    # how long (s) the MAP lineage carries a heel strike before the live steps (PosteriorSummary.steps,
+    # /awalker/gait_steps) take it: the lineage that far back is mostly the one the track ends with (Tracker.map_trajectory)
+    step_lag_s: float = 1.0
     cloud_size: int = 200
     # Leg lengths the filter explores (docs/design.md, *Leg length per particle*; off by default): with
     # leg_scale_spread > 0 each particle's thigh and shank are x its own factor, log-normal with this spread
@@ -992,6 +996,12 @@ def relabel_lineage(markers: np.ndarray, joint_angles: np.ndarray, stance_leg: n
     return markers, joint_angles, stance_leg
 
 
+#: Seconds of the MAP lineage before the live steps' newest frames that name its legs with them (``relabel_lineage``'s
+#: vote) and hold the frame before each strike (``Tracker.lineage_steps``).
+LINEAGE_STEP_CONTEXT_S = 2.0
+#: How often (s) the live steps look at the MAP lineage (its last 3 s named: ~1 ms at 30 Hz, 2 at 60 Hz).
+LINEAGE_STEP_EVERY_S = 0.1
+
 #: The fastest the published pelvis moves from one frame to the next (m/s): a walking person's pelvis stays under
 #: ~2 m/s, so faster is a jump of the estimate (PublishedPath).
 MAX_PUBLISHED_SPEED_M_S = 2.5
@@ -1051,6 +1061,7 @@ class Tracker:
         self._features: dict[int, tuple] = {}       # push index -> the frame's image features, until completed
         self.views = ViewMonitor(self.config.dt, self.config.view)
         self.ended: TrackEnd | None = None
+        self.live_steps = LineageSteps()
 
     def push(self, frame_index: int, stamp_ns: int, obs: Any) -> list[PosteriorSummary]:
         """Add the observation of one frame; returns the summaries completed (in frame order)."""
@@ -1069,7 +1080,7 @@ class Tracker:
 
     def finish(self) -> list[PosteriorSummary]:
         """Flush the frames still waiting for look-ahead observations."""
-        return [] if self.ended is not None else self._completed(self.filter.finish())
+        return [] if self.ended is not None else self._completed(self.filter.finish(), finishing=True)
 
     def released(self) -> "Tracker":
         """This ended track without its particles and pending frames (what ``map_trajectory`` needs stays); returns
@@ -1088,16 +1099,16 @@ class Tracker:
         """Frames whose summaries are out."""
         return len(self._in_view)
 
-    def _completed(self, steps: list[FilterStep]) -> list[PosteriorSummary]:
-        """The summaries of ``steps``, up to the one that ends the track."""
+    def _completed(self, steps: list[FilterStep], finishing: bool = False) -> list[PosteriorSummary]:
+        """The summaries of ``steps``, up to the one that ends the track (``finishing``: the last one does)."""
         out = []
-        for step in steps:
-            out.append(self._summarize(step))
+        for k, step in enumerate(steps):
+            out.append(self._summarize(step, last=finishing and k == len(steps) - 1))
             if self.ended is not None:
                 break
         return out
 
-    def _summarize(self, step: FilterStep) -> PosteriorSummary:
+    def _summarize(self, step: FilterStep, last: bool = False) -> PosteriorSummary:
         frame_index, stamp_ns = self._frames[step.frame]
         features = self._features.pop(step.frame, None)
         out = self.model.outputs(step.states, step.info)
@@ -1117,7 +1128,8 @@ class Tracker:
         self.ended = self.views.update(frame_index, stamp_ns, views)
         summary = replace(summary, track_id=self.track_id, person_in_view=in_view,
                           cameras_in_view=tuple(v.camera for v in views if v.in_view),
-                          legs_renamed=bool(self.model.naming_decisions.get(step.frame, False)))
+                          legs_renamed=bool(self.model.naming_decisions.get(step.frame, False)),
+                          steps=self.lineage_steps(final=last or self.ended is not None))
         offset = self.published.update(out.markers[:, MARKER_NAMES.index("pelvis"), :2], step.ancestors,
                                        step.states.jump, step.best_index)
         if not offset.any():
@@ -1126,25 +1138,40 @@ class Tracker:
         return replace(summary, map_markers=summary.map_markers - shift,
                        map_torso_position=summary.map_torso_position - shift)
 
-    def map_trajectory(self) -> MapTrajectory:
-        """Lineage of the highest-weight particle of the last completed frame, its legs named the way the posterior
-        favoured (``relabel_lineage``; one way throughout but where the whole posterior renamed them), re-seedings'
-        jumps spread over the frames before them (``smooth_jumps``)."""
+    def map_trajectory(self, first: int = 0) -> MapTrajectory:
+        """Lineage of the highest-weight particle of the last completed frame (from push index ``first`` on), its legs
+        named the way the posterior favoured (``relabel_lineage``; one way throughout but where the whole posterior
+        renamed them), re-seedings' jumps spread over the frames before them (``smooth_jumps``)."""
         if self._last_step is None:
             raise ValueError("no frame has been completed yet")
-        traj = self.history.trajectory(self._last_step.best_index)
+        traj = self.history.trajectory(self._last_step.best_index, first)
         count = len(self.history)
-        frames = np.array([f for f, _ in self._frames[:count]], np.int64)
-        stamps = np.array([s for _, s in self._frames[:count]], np.int64)
+        frames = np.array([f for f, _ in self._frames[first:count]], np.int64)
+        stamps = np.array([s for _, s in self._frames[first:count]], np.int64)
         renamed = np.zeros(count, bool)           # the frames each renaming of the whole posterior names anew
         for frame, onset in self.model.naming_onsets.items():
             renamed[onset:min(frame, count)] ^= True
+        own_flips = traj["flipped"] & ~np.isin(np.arange(first, count), self.model.renamed_frames)
         markers, angles, stance = relabel_lineage(traj["markers"].astype(float), traj["joint_angles"].astype(float),
-                                                  traj["stance_leg"], traj["flipped"] & ~np.isin(np.arange(count),
-                                                  self.model.renamed_frames), self._left_probability[:count], renamed)
+                                                  traj["stance_leg"], own_flips, self._left_probability[first:count],
+                                                  renamed[first:])
         markers, angles = smooth_jumps(markers, angles, traj["jump"].astype(float), self.model.config.dt)
         return MapTrajectory(frames, stamps, markers, angles, stance, traj["heel_strike"].astype(bool),
-                             traj["strike_fraction"].astype(float), np.array(self._in_view[:count], bool))
+                             traj["strike_fraction"].astype(float), np.array(self._in_view[first:count], bool))
+
+    def lineage_steps(self, final: bool = False) -> tuple[Step, ...]:
+        """The steps the MAP lineage has carried for ``TrackerConfig.step_lag_s`` since the last call, looked for every
+        ``LINEAGE_STEP_EVERY_S`` (``final``: every step up to the last completed frame, at the track's end), from its
+        last ``LINEAGE_STEP_CONTEXT_S`` + lag (``gait_events.LineageSteps``), timed in s of the stamps' clock."""
+        count = len(self.history)
+        until = count - 1 - (0 if final else round(self.config.step_lag_s / self.config.dt))
+        if until - self.live_steps.taken_until < (1 if final else max(1, round(LINEAGE_STEP_EVERY_S / self.config.dt))):
+            return ()
+        first = max(0, self.live_steps.taken_until - round(LINEAGE_STEP_CONTEXT_S / self.config.dt))
+        lineage = self.map_trajectory(first)
+        heels = lineage.markers[:, [MARKER_NAMES.index("left_heel"), MARKER_NAMES.index("right_heel")], :2]
+        return tuple(self.live_steps.add(first, until, lineage.frames, lineage.stamps_ns, lineage.stamps_ns * 1e-9,
+                                         heels, lineage.stance_leg, lineage.strike_fraction, lineage.in_view))
 
 
 def marker_likelihood(sigma_m: float = 0.03, names: tuple[str, ...] = MARKER_NAMES) -> LikelihoodFn:

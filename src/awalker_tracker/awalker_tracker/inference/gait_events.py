@@ -3,7 +3,7 @@
 A step ends at a heel strike: the frame where the stance leg changes to the other foot (the
 walker's own event for the tracker's MAP trajectory, timed within the frame where the walker's
 strike time is given; for marker data without stance labels, where a heel comes down after a
-swing and stops: ``heel_strikes``; live, where the posterior's stance foot changes: ``PosteriorSteps``).
+swing and stops: ``heel_strikes``; live, the MAP lineage's strikes at a lag: ``LineageSteps``).
 Per step: time (s),
 foot, ground position (the striking heel's xy, m; for marker data where that heel comes to rest,
 ``heel_at_rest``); step length = the displacement from the
@@ -174,13 +174,18 @@ def steps(frames: np.ndarray, stamps_ns: np.ndarray, markers: np.ndarray, stance
     for f in range(1, len(stance)):
         if stance[f] == stance[f - 1]:
             continue
-        # the strike happened during the transition from frame f-1 to frame f
-        when = t[f - 1] + fraction[f] * (t[f] - t[f - 1]) if np.isfinite(fraction[f]) else t[f]
         foot = int(stance[f])
         where = (heels[f, foot] if heel_speed is None else
                  heel_at_rest(heels[:, foot], heel_speed[:, foot], stance, f))
-        walk.append(counter.add(int(frames[f]), int(stamps_ns[f]), float(when), foot, where))
+        walk.append(counter.add(int(frames[f]), int(stamps_ns[f]), strike_time(t, fraction, f), foot, where))
     return walk
+
+
+def strike_time(times_s: np.ndarray, strike_fraction: np.ndarray, frame: int) -> float:
+    """When (s) the strike seen at ``frame`` happened: during the period from the frame before, that share of it
+    (``strike_fraction``; NaN: at the frame)."""
+    t, share = times_s, strike_fraction[frame]
+    return float(t[frame - 1] + share * (t[frame] - t[frame - 1]) if np.isfinite(share) else t[frame])
 
 
 def heel_at_rest(heel_xy: np.ndarray, heel_speed: np.ndarray, stance: np.ndarray, strike: int) -> np.ndarray:
@@ -203,47 +208,42 @@ SIDES_NOTE = ("one camera and no stance leg in the start: which foot is the left
               "runs); name the standing foot in a start description (stance_leg) or add a camera to be sure")
 
 
-class PosteriorSteps:
-    """Steps as the live tracker sees them, one per change of the posterior's stance foot: the probability that
-    the left foot stands crosses 0.5 and goes on past ``confirm`` (or 1 - ``confirm``): a heel strike of the new
-    stance foot, timed where the probability crossed 0.5 (interpolated between frames: when half the particles
-    had struck), placed at that foot's contact estimate at the confirming frame, and dated
-    half a double support earlier like the MAP trajectory's steps (``walker_strike_delay_s``). The
-    posterior's majority follows the MAP trajectory's stance, so these are the steps gait.csv has, at the
-    look-ahead lag; a majority of particles striking within one frame (what a per-frame vote needs) is rare
-    when their strikes spread over a few frames."""
+class LineageSteps:
+    """Steps as the live tracker publishes them: the heel strikes of the MAP lineage (the trajectory gait.csv is
+    made of), each taken once the lineage has carried it for a lag (``TrackerConfig.step_lag_s``): particle
+    lineages coalesce within a few frames, so the lineage that far back is, most of the time, the one the whole
+    track ends with, but for where in a few frames each strike falls: from frame to frame the lineage's strike
+    moves by a frame or two either way, so each call looks for strikes from the last one taken on, not from the
+    frame the last call reached. Fed the lineage's latest frames each frame (``add``). A strike of the foot that
+    struck last is that strike again (the MAP moved to a particle whose strike fell a frame later, or the legs
+    were renamed), not a step."""
 
-    def __init__(self, confirm: float = 0.7) -> None:
-        if not 0.5 < confirm < 1.0:
-            raise ValueError(f"PosteriorSteps: confirm must lie in (0.5, 1), got {confirm}")
-        self.confirm = float(confirm)
+    def __init__(self) -> None:
         self.counter = StepCounter(walker_strikes=True)
-        self.foot: int | None = None                       # the stance foot the posterior settled on
-        self._last: tuple[float, float] | None = None      # (time s, left probability) of the last frame
-        self._crossed: tuple[float, int, int] | None = None  # (time s, frame, stamp) of the last 0.5 crossing
+        self.taken_until = 0                  # the frame (push index) up to which the strikes were looked for
+        self.last_strike = 0                  # the frame (push index) of the last strike taken
+        self.foot: int | None = None          # the foot that struck last
 
-    def add(self, frame: int, stamp_ns: int, time_s: float, left_probability: float,
-            contacts: dict[int, np.ndarray], legs_renamed: bool = False) -> Step | None:
-        """The step this frame completes, if any; ``contacts``: foot (LEFT 0 / RIGHT 1) -> its contact xy (m);
-        ``legs_renamed``: the posterior renamed the legs at this frame (``PosteriorSummary.legs_renamed``), so the
-        foot it stood on and the last probability are renamed too, and the flip of the probability is no step."""
-        p = float(left_probability)
-        if legs_renamed:
-            self.foot = None if self.foot is None else 1 - self.foot
-            self._last = None if self._last is None else (self._last[0], 1.0 - self._last[1])
-        if self._last is not None and (self._last[1] - 0.5) * (p - 0.5) <= 0.0 and self._last[1] != p:
-            t0, p0 = self._last
-            self._crossed = (t0 + (0.5 - p0) / (p - p0) * (time_s - t0), int(frame), int(stamp_ns))
-        self._last = (float(time_s), p)
-        side = LEFT if p >= self.confirm else (1 - LEFT if p <= 1.0 - self.confirm else None)
-        if side is None or side == self.foot:
-            return None
-        first, self.foot = self.foot is None, side
-        where = contacts.get(side)
-        if first or where is None or not np.all(np.isfinite(where)):
-            return None
-        when, at_frame, at_stamp = self._crossed if self._crossed is not None else (time_s, frame, stamp_ns)
-        return self.counter.add(at_frame, at_stamp, when, side, np.asarray(where, float))
+    def add(self, first: int, until: int, frames: np.ndarray, stamps_ns: np.ndarray, times_s: np.ndarray,
+            heels_xy: np.ndarray, stance_leg: np.ndarray, strike_fraction: np.ndarray,
+            in_view: np.ndarray) -> list[Step]:
+        """The steps of the frames after ``last_strike`` up to ``until`` (push indices), from a lineage window that
+        starts at push index ``first``: per frame its index, stamp, time (s), heels (W, 2 feet, xy m), stance leg,
+        strike fraction (``steps``) and whether the person was in view. A step whose strike frame had the person
+        out of view is counted (the next step's length is from it) but not returned."""
+        walk = []
+        for f in range(max(self.last_strike, first) + 1, until + 1):
+            i = f - first
+            foot = int(stance_leg[i])
+            if foot == int(stance_leg[i - 1]) or foot == self.foot:
+                continue
+            self.foot, self.last_strike = foot, f
+            step = self.counter.add(int(frames[i]), int(stamps_ns[i]), strike_time(times_s, strike_fraction, i),
+                                    foot, heels_xy[i, foot])
+            if in_view[i]:
+                walk.append(step)
+        self.taken_until = max(self.taken_until, until)
+        return walk
 
 
 def summary(walk: list[Step], sides_known: bool = True) -> dict[str, object]:

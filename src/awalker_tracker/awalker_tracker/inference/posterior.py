@@ -12,6 +12,8 @@ from dataclasses import dataclass, fields
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from awalker_tracker.inference.gait_events import Step
+
 LEFT, RIGHT = 0, 1
 CLOUD_MARKERS = ("head", "pelvis", "left_knee", "right_knee", "left_ankle", "right_ankle")
 WALKER_FIELDS = ("stance_angle", "swing_angle", "stance_rate", "swing_rate", "contact_origin",
@@ -90,6 +92,8 @@ class PosteriorSummary:
     cameras_in_view: tuple[str, ...] = ()   # the cameras that see the person
     legs_renamed: bool = False      # every particle renamed its legs at this frame (the naming test): the stance
                                     # foot's name changed, the foot did not
+    steps: tuple[Step, ...] = ()    # the steps the MAP lineage settled at this frame
+                                    # (Tracker.lineage_steps), timed in s of the stamps' clock (time_s = stamp_ns / 1e9)
 
     @property
     def heel_strike_foot(self) -> str:

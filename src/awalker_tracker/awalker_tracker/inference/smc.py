@@ -410,20 +410,21 @@ class AncestryHistory:
             alive = parents
         self._payloads[0] = {k: v[alive] for k, v in self._payloads[0].items()}
 
-    def lineage(self, index: int) -> np.ndarray:
-        """Row of each frame's payload on the path ending at particle ``index`` of the last frame."""
-        rows = np.empty(len(self), np.int64)
-        for f in range(len(self) - 1, -1, -1):
-            rows[f] = index
+    def lineage(self, index: int, first: int = 0) -> np.ndarray:
+        """Row of each frame's payload from frame ``first`` on, on the path ending at particle ``index`` of the last
+        frame."""
+        rows = np.empty(len(self) - first, np.int64)
+        for f in range(len(self) - 1, first - 1, -1):
+            rows[f - first] = index
             if f > 0:
                 index = int(self._ancestors[f][index])
         return rows
 
-    def trajectory(self, index: int) -> dict[str, np.ndarray]:
-        """Payload arrays stacked over frames along the lineage of particle ``index``."""
-        rows = self.lineage(index)
+    def trajectory(self, index: int, first: int = 0) -> dict[str, np.ndarray]:
+        """Payload arrays stacked over frames ``first``.. (default all) along the lineage of particle ``index``."""
+        rows = self.lineage(index, first)
         keys = self._payloads[0].keys()
-        return {k: np.stack([self._payloads[f][k][rows[f]] for f in range(len(self))]) for k in keys}
+        return {k: np.stack([self._payloads[first + i][k][row] for i, row in enumerate(rows)]) for k in keys}
 
 
 def map_trajectory(history: AncestryHistory, final_log_weights: np.ndarray) -> dict[str, np.ndarray]:

@@ -10,13 +10,14 @@ import array
 from typing import TYPE_CHECKING
 
 import numpy as np
-from awalker_msgs.msg import BodyPose, FootContact, ParticleCloud, PosteriorSummary, WalkerState
+from awalker_msgs.msg import BodyPose, FootContact, GaitStep, ParticleCloud, PosteriorSummary, WalkerState
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, Pose, PoseStamped
 from sensor_msgs.msg import CameraInfo, PointCloud2, PointField
 from std_msgs.msg import Header
 
 from awalker_tracker.inference import posterior as core
+from awalker_tracker.inference.gait_events import Step
 
 if TYPE_CHECKING:
     from awalker_tracker.vision.camera import Camera
@@ -106,7 +107,26 @@ def summary_to_msg(summary: core.PosteriorSummary, world_frame: str = "world") -
                                 positions=array.array("f", np.asarray(c.points, np.float32).tobytes()),
                                 weights=array.array("f", np.asarray(c.weights, np.float32).tobytes()))
                   for c in summary.clouds]
+    msg.steps = [step_to_msg(step, world_frame) for step in summary.steps]
     return msg
+
+
+def step_to_msg(step: Step, world_frame: str = "world") -> GaitStep:
+    """awalker_msgs/GaitStep of a step timed in s of the stamps' clock (``PosteriorSummary.steps``): stamped with its
+    strike frame's image stamp, the heel in ``world_frame``."""
+    return GaitStep(header=header(step.stamp_ns, world_frame), strike=ns_to_stamp(round(step.time_s * NS_PER_S)),
+                    index=step.index, frame_index=step.frame, foot=GaitStep.LEFT if step.foot == "left" else GaitStep.RIGHT,
+                    position=Point(x=step.x, y=step.y, z=0.0), step_length=step.step_length_m,
+                    step_width=step.step_width_m, step_time=step.step_time_s, stride_time=step.stride_time_s,
+                    cadence=step.cadence_steps_min, speed=step.speed_m_s)
+
+
+def step_from_msg(msg: GaitStep) -> Step:
+    """The step of an awalker_msgs/GaitStep (inverse of ``step_to_msg``)."""
+    return Step(int(msg.index), int(msg.frame_index), stamp_to_ns(msg.header.stamp), stamp_to_ns(msg.strike) / NS_PER_S,
+                "left" if msg.foot == GaitStep.LEFT else "right", float(msg.position.x), float(msg.position.y),
+                float(msg.step_length), float(msg.step_width), float(msg.step_time), float(msg.stride_time),
+                float(msg.cadence), float(msg.speed))
 
 
 def summary_from_msg(msg: PosteriorSummary) -> core.PosteriorSummary:
@@ -133,7 +153,8 @@ def summary_from_msg(msg: PosteriorSummary) -> core.PosteriorSummary:
         contacts=tuple(core.FootContactEstimate(int(c.foot), np.array([c.position.x, c.position.y, c.position.z]),
                                                 float(c.probability), bool(c.heel_strike)) for c in msg.contacts),
         clouds=tuple(core.MarkerCloud(c.marker_name, cloud_positions(c), np.asarray(c.weights, float))
-                     for c in msg.clouds))
+                     for c in msg.clouds),
+        steps=tuple(step_from_msg(m) for m in msg.steps))
 
 
 def cloud_positions(cloud: ParticleCloud) -> np.ndarray:

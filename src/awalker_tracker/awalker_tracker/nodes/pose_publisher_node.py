@@ -9,11 +9,10 @@ the image stamp of each summary:
   strikes larger; the contact of a foot that has lifted is sent as a DELETE);
 - ``/awalker/particles`` sensor_msgs/PointCloud2 in the world frame: the heaviest samples of the
   posterior's head/pelvis/knee/ankle clouds, fields x, y, z, weight, marker (``messages.PARTICLE_POINT``);
-- ``/awalker/gait_steps`` awalker_msgs/GaitStep at every heel strike: each change of the posterior's stance
-  foot (``inference.gait_events.PosteriorSteps``): where the heel came down, step length and width, step and
-  stride time, cadence and speed; online, at the filter's look-ahead lag, the steps gait.csv has; only
-  steps whose strike frame had the person in view (``PosteriorSummary.person_in_view``), counted anew for
-  each track (``track_id``);
+- ``/awalker/gait_steps`` awalker_msgs/GaitStep for every heel strike the tracker's summaries carry
+  (``PosteriorSummary.steps``: the MAP lineage's strikes once it has carried them ``TrackerConfig.step_lag_s``,
+  ``inference.gait_events.LineageSteps``; of frames with the person in view; counted anew for each track): where
+  the heel came down, step length and width, step and stride time, cadence and speed; the steps gait.csv has;
 - tf ``world -> <body_id>_pelvis`` when ``tf2_ros`` can be imported (not on PyPI; optional).
 """
 from __future__ import annotations
@@ -28,11 +27,10 @@ from sensor_msgs.msg import JointState, PointCloud2
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
-from awalker_tracker.inference.gait_events import PosteriorSteps, Step
 from awalker_tracker.model.body import SKELETON_EDGES, BodyDescription
 from awalker_tracker.nodes.base import AwalkerNode, NodeParameter, declare_parameters
 from awalker_tracker.nodes.messages import (
-    POSTERIOR_DEPTH, ns_to_stamp, particles_to_pointcloud2, points_from_msg, stamp_to_ns)
+    POSTERIOR_DEPTH, particles_to_pointcloud2, points_from_msg)
 from awalker_tracker.nodes.spin import run_node
 
 #: Samples per body marker's cloud in /awalker/particles (the heaviest; the posterior message carries 200).
@@ -64,15 +62,6 @@ def quaternion_z_to(direction: np.ndarray) -> tuple[float, float, float, float]:
     q = np.array([-d[1], d[0], 0.0, w])
     q /= np.linalg.norm(q)
     return tuple(float(v) for v in q)
-
-
-def gait_step_to_msg(step: Step, header, strike_ns: int) -> GaitStep:
-    """awalker_msgs/GaitStep of one step (``header``: the frame's that completed it; ``strike_ns``: when it struck)."""
-    return GaitStep(header=header, strike=ns_to_stamp(strike_ns), index=step.index, frame_index=step.frame,
-                    foot=GaitStep.LEFT if step.foot == "left" else GaitStep.RIGHT,
-                    position=Point(x=step.x, y=step.y, z=0.0), step_length=step.step_length_m,
-                    step_width=step.step_width_m, step_time=step.step_time_s, stride_time=step.stride_time_s,
-                    cadence=step.cadence_steps_min, speed=step.speed_m_s)
 
 
 def contact_on_ground(contact: FootContact) -> bool:
@@ -196,10 +185,6 @@ class PosePublisherNode(AwalkerNode):
         self.marker_pub = self.create_publisher(MarkerArray, "/awalker/markers", qos)
         self.particles_pub = self.create_publisher(PointCloud2, "/awalker/particles", qos)
         self.gait_pub = self.create_publisher(GaitStep, "/awalker/gait_steps", qos)
-        self.steps = PosteriorSteps()          # a step whenever the posterior's stance foot changes
-        self._first_stamp_ns: int | None = None
-        self._track_id: int | None = None
-        self._in_view: dict[int, bool] = {}    # frame index -> person in view, over the last frames of the track
         self.tf_broadcaster = _tf_broadcaster(self)
         self.count = 0
         self.create_subscription(PosteriorSummary, values["posterior_topic"], self.on_summary,
@@ -215,20 +200,8 @@ class PosePublisherNode(AwalkerNode):
         self.marker_pub.publish(self.markers.build(msg))
         if self.publish_clouds:
             self.particles_pub.publish(particles_to_pointcloud2(msg.header, msg.clouds, self.cloud_points))
-        stamp = stamp_to_ns(msg.header.stamp)
-        if msg.track_id != self._track_id:     # a new person: their own steps, timed from their first frame
-            self.steps, self._first_stamp_ns, self._track_id, self._in_view = PosteriorSteps(), None, msg.track_id, {}
-        if self._first_stamp_ns is None:
-            self._first_stamp_ns = stamp
-        self._in_view[int(msg.frame_index)] = bool(msg.person_in_view)
-        for old in [f for f in self._in_view if f < msg.frame_index - 300]:
-            del self._in_view[old]
-        step = self.steps.add(msg.frame_index, stamp, (stamp - self._first_stamp_ns) * 1e-9,
-                              msg.stance_left_probability,
-                              {int(c.foot): np.array([c.position.x, c.position.y]) for c in msg.contacts},
-                              bool(msg.legs_renamed))
-        if step is not None and self._in_view.get(step.frame, msg.person_in_view):
-            self.gait_pub.publish(gait_step_to_msg(step, msg.header, self._first_stamp_ns + round(step.time_s * 1e9)))
+        for step in msg.steps:
+            self.gait_pub.publish(step)
         if self.tf_broadcaster is not None:
             from geometry_msgs.msg import TransformStamped
 

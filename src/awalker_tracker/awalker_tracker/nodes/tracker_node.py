@@ -66,6 +66,7 @@ class TrackerNodeStats:
     frames_received: int = 0
     frames_tracked: int = 0
     summaries: int = 0
+    steps: int = 0              # gait steps the summaries carried (PosteriorSummary.steps)
     sync_issues: list[str] = field(default_factory=list)
     seconds_in_filter: float = 0.0
     frames_skipped: int = 0     # frames that waited longer than max_lag_s, skipped to keep up (live)
@@ -559,6 +560,7 @@ class TrackerNode(AwalkerNode):
         for s in summaries:
             self.posterior_pub.publish(summary_to_msg(s, self.world_frame))
             self.stats.summaries += 1
+            self.stats.steps += len(s.steps)
             if s.reacquired:
                 self.get_logger().info(f"frame {s.frame_index}: track lost, {s.reacquired} particles re-seeded "
                                        "at the person seen in the images")
