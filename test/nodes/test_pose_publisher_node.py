@@ -266,8 +266,8 @@ def test_the_summaries_steps_become_gait_steps(ros_context):
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(node)
     executor.add_node(probe)
-    carried = {17: (gait_step(0, 2, "right", float("nan")),),
-               32: (gait_step(1, 17, "left", 0.7),), 35: (gait_step(2, 20, "right", 0.65), gait_step(3, 35, "left", 0.7))}
+    carried = {17: (gait_step(0, 2, "right", float("nan")),), 32: (gait_step(1, 17, "left", 0.7),),
+               35: (gait_step(2, 20, "right", 0.65), gait_step(3, 35, "left", 0.7))}
     try:
         deadline = time.monotonic() + 5
         while pub.get_subscription_count() == 0 and time.monotonic() < deadline:

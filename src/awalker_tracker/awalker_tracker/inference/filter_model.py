@@ -200,7 +200,8 @@ class TrackerConfig:
     recovery: RecoveryConfig = RecoveryConfig()
     view: ViewConfig = ViewConfig()      # when the person counts as in view, and the track ends (inference.visibility)
     # how long (s) the MAP lineage carries a heel strike before the live steps (PosteriorSummary.steps,
-    # /awalker/gait_steps) take it: the lineage that far back is mostly the one the track ends with (Tracker.map_trajectory)
+    # /awalker/gait_steps) take it: the lineage that far back is mostly the one the track ends with
+    # (Tracker.lineage_steps)
     step_lag_s: float = 1.0
     cloud_size: int = 200
     # Leg lengths the filter explores (docs/design.md, *Leg length per particle*; off by default): with

@@ -115,7 +115,8 @@ def step_to_msg(step: Step, world_frame: str = "world") -> GaitStep:
     """awalker_msgs/GaitStep of a step timed in s of the stamps' clock (``PosteriorSummary.steps``): stamped with its
     strike frame's image stamp, the heel in ``world_frame``."""
     return GaitStep(header=header(step.stamp_ns, world_frame), strike=ns_to_stamp(round(step.time_s * NS_PER_S)),
-                    index=step.index, frame_index=step.frame, foot=GaitStep.LEFT if step.foot == "left" else GaitStep.RIGHT,
+                    index=step.index, frame_index=step.frame,
+                    foot=GaitStep.LEFT if step.foot == "left" else GaitStep.RIGHT,
                     position=Point(x=step.x, y=step.y, z=0.0), step_length=step.step_length_m,
                     step_width=step.step_width_m, step_time=step.step_time_s, stride_time=step.stride_time_s,
                     cadence=step.cadence_steps_min, speed=step.speed_m_s)
