@@ -106,6 +106,8 @@ def test_tracks_a_simulated_walk(walk):
     assert all(at - step.frame >= lag or at == len(markers) - 1 for at, step in live), live
     np.testing.assert_allclose([step.time_s - traj.stamps_ns[0] * 1e-9 for _, step in live], [w.time_s for w in whole],
                                atol=1 / 30)
+    with pytest.raises(ValueError, match="step_lag_s"):
+        TrackerConfig(step_lag_s=-0.5)
 
 
 def test_start_description_yaml():

@@ -329,6 +329,8 @@ class TrackerConfig:
             if not (0.0 <= persistence <= 1.0 and sigma >= 0.0):
                 raise ValueError(f"TrackerConfig.{name} must be (persistence in [0, 1], sigma >= 0), "
                                  f"got {getattr(self, name)}")
+        if not (np.isfinite(self.step_lag_s) and self.step_lag_s >= 0.0):
+            raise ValueError(f"TrackerConfig.step_lag_s must be >= 0 s, got {self.step_lag_s}")
         if self.hip_over_ankle_min_cameras < 1:
             raise ValueError(f"TrackerConfig.hip_over_ankle_min_cameras must be >= 1, got "
                              f"{self.hip_over_ankle_min_cameras}")
