@@ -169,16 +169,14 @@ def test_the_speed_is_found_from_a_wrong_start_speed(tracked):
 
 def live_steps(result: dict, first_stamp_ns: int) -> list:
     """The steps the run published on /awalker/gait_steps, timed at their strikes from ``first_stamp_ns``."""
-    from awalker_tools.bagio import SequenceReader, stamp_ns_of
-    from awalker_tracker.inference.gait_events import Step
+    from dataclasses import replace
+
+    from awalker_tools.bagio import SequenceReader
+    from awalker_tracker.nodes.messages import step_from_msg
 
     with SequenceReader(Path(result["run_dir"]) / "result.bag") as reader:
-        live = [m for _, _, _, m in reader.messages(["/awalker/gait_steps"])]
-    nan = float("nan")
-    return [Step(k, m.frame_index, stamp_ns_of(m.header),
-                 (int(m.strike.sec) * 1_000_000_000 + int(m.strike.nanosec) - first_stamp_ns) * 1e-9,
-                 "left" if m.foot == 0 else "right", m.position.x, m.position.y, nan, nan, nan, nan, nan, nan)
-            for k, m in enumerate(live)]
+        live = [step_from_msg(m) for _, _, _, m in reader.messages(["/awalker/gait_steps"])]
+    return [replace(step, time_s=step.time_s - first_stamp_ns * 1e-9) for step in live]
 
 
 def offline_steps(result: dict) -> list:

@@ -705,22 +705,19 @@ def _track_once(options: TrackOptions, reader: Any, stop: StopRequest, body_fit:
             """'topic count' for each of ``topics`` recorded fewer than ``expected`` times."""
             return [f"{t} {recorder.counts[t]}" for t in topics if recorder.counts[t] < expected]
 
-        while time.monotonic() < deadline and (short(per_posterior, tracker.stats.summaries)
-                                               or short(["/awalker/gait_steps"], tracker.stats.steps)
-                                               or short(features_topics, tracker.stats.frames_received)):
+        # (topics, how many each should hold, what the run made of them) for the wait and its warnings
+        expected = [(per_posterior, tracker.stats.summaries, f"{tracker.stats.summaries} posteriors"),
+                    (["/awalker/gait_steps"], tracker.stats.steps,
+                     f"the posteriors carried {tracker.stats.steps} gait steps"),
+                    (features_topics, tracker.stats.frames_received,
+                     f"the tracker took {tracker.stats.frames_received} frames")]
+        while time.monotonic() < deadline and any(short(topics, count) for topics, count, _ in expected):
             executor.spin_once(timeout_sec=0.05)
         # poses.csv and summary.csv still hold every frame (from the tracker); the result bag does not
-        if missing := short(per_posterior, tracker.stats.summaries):
-            print(f"awalker track: warning: {tracker.stats.summaries} posteriors, but {result_bag} recorded only "
-                  f"{', '.join(missing)} within {RECORD_WAIT_S:g} s of the last frame", file=sys.stderr, flush=True)
-        if missing := short(["/awalker/gait_steps"], tracker.stats.steps):
-            print(f"awalker track: warning: the posteriors carried {tracker.stats.steps} gait steps, but {result_bag} "
-                  f"recorded only {', '.join(missing)} within {RECORD_WAIT_S:g} s of the last frame",
-                  file=sys.stderr, flush=True)
-        if missing := short(features_topics, tracker.stats.frames_received):
-            print(f"awalker track: warning: the tracker took {tracker.stats.frames_received} frames, but {result_bag} "
-                  f"recorded only {', '.join(missing)} within {RECORD_WAIT_S:g} s of the last frame",
-                  file=sys.stderr, flush=True)
+        for topics, count, made in expected:
+            if missing := short(topics, count):
+                print(f"awalker track: warning: {made}, but {result_bag} recorded only {', '.join(missing)} within "
+                      f"{RECORD_WAIT_S:g} s of the last frame", file=sys.stderr, flush=True)
         result.seconds_streaming = time.monotonic() - streaming
         executor.shutdown()
         result.frames = tracker.stats.frames_received

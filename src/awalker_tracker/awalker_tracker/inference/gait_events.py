@@ -184,8 +184,9 @@ def steps(frames: np.ndarray, stamps_ns: np.ndarray, markers: np.ndarray, stance
 def strike_time(times_s: np.ndarray, strike_fraction: np.ndarray, frame: int) -> float:
     """When (s) the strike seen at ``frame`` happened: during the period from the frame before, that share of it
     (``strike_fraction``; NaN: at the frame)."""
-    t, share = times_s, strike_fraction[frame]
-    return float(t[frame - 1] + share * (t[frame] - t[frame - 1]) if np.isfinite(share) else t[frame])
+    share = strike_fraction[frame]
+    return float(times_s[frame - 1] + share * (times_s[frame] - times_s[frame - 1]) if np.isfinite(share)
+                 else times_s[frame])
 
 
 def heel_at_rest(heel_xy: np.ndarray, heel_speed: np.ndarray, stance: np.ndarray, strike: int) -> np.ndarray:
