@@ -16,7 +16,8 @@ percentile run and the worst run, runs with legs swapped on more than 5 % of fra
 swaps its legs at every extra step), the pelvis's mean error along the first camera's line of sight (its
 depth, ``awalker eval``'s ``view_bias``: what one camera sees least), the largest
 frame-to-frame pelvis step of the MAP path (poses.csv) and of the live path (the published MAP pose), the
-turning trials' median, runs that ended on the person, per subject the heel-strike timing and step length
+turning trials' median, runs that ended on the person, runs in which most of the walkers fell in one frame
+(JSON only), per subject the heel-strike timing and step length
 errors (medians over runs of each run's median); hands off: the ratio to the hand-started figure and, per
 walk, the runs whose start named the wrong stance leg.
 
@@ -106,6 +107,7 @@ def score(result: dict, run_dir: Path, truth_csv: Path) -> dict:
             "depth_bias_mm": None if first_camera is None else first_camera["depth_mm"],
             "start_leg_right": start_leg_right(run_dir, truth_csv),
             "reacquisitions": result.get("recovery", {}).get("reacquisitions", 0),
+            "frames_most_walkers_fallen": result.get("recovery", {}).get("frames_most_walkers_fallen", 0),
             **filter_load(run_dir)}
 
 
@@ -158,6 +160,8 @@ def summarise(runs: dict[tuple[str, int], dict], trials: dict) -> dict:
            "largest_map_step_m_s": float(np.nanmax([r["map_max_step_m_s"] for r in runs.values()])),
            "largest_live_step_m_s": float(np.nanmax([r["live_max_step_m_s"] for r in runs.values()])),
            "runs_ended_on_person": int(sum(r["ended_on_person"] for r in runs.values())),
+           # runs in which most of the particle cloud fell in one frame (slow walks: docs/tracking.md, Alternatives)
+           "runs_most_walkers_fell": int(sum(r.get("frames_most_walkers_fallen", 0) > 0 for r in runs.values())),
            "runs_failed": int(sum("failed" in r for r in runs.values())),
            "median_filter_frames_per_s": _median_of(runs, "filter_frames_per_s"),
            "median_mean_particles": _median_of(runs, "mean_particles"),

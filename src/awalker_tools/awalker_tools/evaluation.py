@@ -404,8 +404,13 @@ def evaluate(estimate: PoseTrack, truth: PoseTrack, summary: dict[str, np.ndarra
     if len(truth.stamps_ns) > 1:
         result["truth_speed_m_s"] = float(np.nanmedian(track_speed(truth)))
     if summary is not None:
+        particles = np.asarray(summary["particles"], float)
         result["recovery"] = {"reseeded_fallen_particles": int(np.sum(summary["reseeded_fallen"])),
                               "frames_with_fallen_reseeds": int(np.sum(summary["reseeded_fallen"] > 0)),
+                              # frames where most of the particle cloud fell at once (a summary without the
+                              # particle count: none counted)
+                              "frames_most_walkers_fallen": int(np.sum((particles > 0) & (
+                                  summary["reseeded_fallen"] > 0.5 * particles))),
                               "reacquisitions": int(np.sum(summary["reacquired"] > 0)),
                               "still_frames": int(np.sum(summary["person_still"] > 0))}
         result["estimated_speed_m_s"] = float(np.median(summary["speed"]))
@@ -669,6 +674,8 @@ def format_table(result: dict[str, object], label: str = "") -> str:
         lines.append(f"recovery: {rec['reacquisitions']} re-acquisitions of a lost track, "
                      f"{rec['reseeded_fallen_particles']} fallen particles re-seeded over "
                      f"{rec['frames_with_fallen_reseeds']} frames"
+                     + (f" (most of the walkers at once on {rec['frames_most_walkers_fallen']})"
+                        if rec.get("frames_most_walkers_fallen") else "")
                      + (f"; the person stood still (walkers held) on {rec['still_frames']} frames"
                         if rec.get("still_frames") else ""))
     if "estimated_speed_m_s" in result and "truth_speed_m_s" in result:
