@@ -189,8 +189,9 @@ def test_strikes_are_matched_one_to_one_and_swapped_feet_are_counted():
 
 
 def lineage_window(stance: list[int], first: int = 0):
-    """A lineage window's per-frame arrays from frame ``first`` on (LineageSteps.add): 30 Hz stamps, the left heel at
-    x = 0 and the right at x = 0.7 m, every strike halfway through its frame's period, the person in view."""
+    """A lineage window's per-frame arrays from frame ``first`` on (LineageSteps.add's, and the stamps' times in s):
+    30 Hz stamps, the left heel at x = 0 and the right at x = 0.7 m, every strike halfway through its frame's
+    period, the person in view."""
     n = len(stance) - first
     frames = np.arange(first, len(stance))
     stamps = 1_000_000_000 + np.round(frames * 1e9 / RATE).astype(np.int64)
@@ -209,7 +210,7 @@ def test_the_live_steps_are_the_lineages_strikes_taken_once():
     taken = []
     for until in range(len(stance)):
         first, frames, stamps, times, heels, legs, fraction, in_view = lineage_window(stance, max(0, until - 20))
-        taken += [(until, s) for s in live.add(first, until, frames, stamps, times, heels, legs, fraction, in_view)]
+        taken += [(until, s) for s in live.add(first, until, frames, stamps, heels, legs, fraction, in_view)]
     assert [(u, s.frame, s.foot) for u, s in taken] == [(10, 10, "right"), (26, 26, "left"), (42, 42, "right")]
     _, frames, stamps, times, heels, legs, fraction, _ = lineage_window(stance)
     markers = np.zeros((len(stance), len(MARKER_NAMES), 3))
@@ -227,15 +228,15 @@ def test_a_strike_the_lineage_moves_later_is_no_second_step():
     another particle) adds no step; a strike while the person was out of view is counted, not returned."""
     live = gait_events.LineageSteps()
     first, frames, stamps, times, heels, legs, fraction, in_view = lineage_window([0] * 10 + [1] * 10)
-    assert [s.frame for s in live.add(first, 12, frames, stamps, times, heels, legs, fraction, in_view)] == [10]
+    assert [s.frame for s in live.add(first, 12, frames, stamps, heels, legs, fraction, in_view)] == [10]
     first, frames, stamps, times, heels, legs, fraction, in_view = lineage_window([0] * 11 + [1] * 9 + [0] * 5)
-    assert live.add(first, 18, frames, stamps, times, heels, legs, fraction, in_view) == []
+    assert live.add(first, 18, frames, stamps, heels, legs, fraction, in_view) == []
     in_view[20] = False
-    assert live.add(first, 24, frames, stamps, times, heels, legs, fraction, in_view) == []
+    assert live.add(first, 24, frames, stamps, heels, legs, fraction, in_view) == []
     assert live.counter.strikes[-1][0] == pytest.approx(times[19] + 0.5 / RATE)      # counted
     back = [0] * 11 + [1] * 9 + [0] * 10 + [1] * 5
     first, frames, stamps, times, heels, legs, fraction, in_view = lineage_window(back)
-    (step,) = live.add(first, 34, frames, stamps, times, heels, legs, fraction, in_view)
+    (step,) = live.add(first, 34, frames, stamps, heels, legs, fraction, in_view)
     assert (step.frame, step.foot, step.index) == (30, "right", 2)
 
 
@@ -244,6 +245,6 @@ def test_a_strike_the_lineage_moves_earlier_is_still_taken():
     frames looked at and then moves back into them is taken when it is next seen."""
     live = gait_events.LineageSteps()
     first, frames, stamps, times, heels, legs, fraction, in_view = lineage_window([0] * 12 + [1] * 8)
-    assert live.add(first, 11, frames, stamps, times, heels, legs, fraction, in_view) == []
+    assert live.add(first, 11, frames, stamps, heels, legs, fraction, in_view) == []
     first, frames, stamps, times, heels, legs, fraction, in_view = lineage_window([0] * 10 + [1] * 10)
-    assert [s.frame for s in live.add(first, 12, frames, stamps, times, heels, legs, fraction, in_view)] == [10]
+    assert [s.frame for s in live.add(first, 12, frames, stamps, heels, legs, fraction, in_view)] == [10]

@@ -1173,8 +1173,8 @@ class Tracker:
         first = max(0, self.live_steps.taken_until - round(LINEAGE_STEP_CONTEXT_S / self.config.dt))
         lineage = self.map_trajectory(first)
         heels = lineage.markers[:, [MARKER_NAMES.index("left_heel"), MARKER_NAMES.index("right_heel")], :2]
-        return tuple(self.live_steps.add(first, until, lineage.frames, lineage.stamps_ns, lineage.stamps_ns * 1e-9,
-                                         heels, lineage.stance_leg, lineage.strike_fraction, lineage.in_view))
+        return tuple(self.live_steps.add(first, until, lineage.frames, lineage.stamps_ns, heels, lineage.stance_leg,
+                                         lineage.strike_fraction, lineage.in_view))
 
 
 def marker_likelihood(sigma_m: float = 0.03, names: tuple[str, ...] = MARKER_NAMES) -> LikelihoodFn:

@@ -225,13 +225,14 @@ class LineageSteps:
         self.last_strike = 0                  # the frame (push index) of the last strike taken
         self.foot: int | None = None          # the foot that struck last
 
-    def add(self, first: int, until: int, frames: np.ndarray, stamps_ns: np.ndarray, times_s: np.ndarray,
-            heels_xy: np.ndarray, stance_leg: np.ndarray, strike_fraction: np.ndarray,
-            in_view: np.ndarray) -> list[Step]:
+    def add(self, first: int, until: int, frames: np.ndarray, stamps_ns: np.ndarray, heels_xy: np.ndarray,
+            stance_leg: np.ndarray, strike_fraction: np.ndarray, in_view: np.ndarray) -> list[Step]:
         """The steps of the frames after ``last_strike`` up to ``until`` (push indices), from a lineage window that
-        starts at push index ``first``: per frame its index, stamp, time (s), heels (W, 2 feet, xy m), stance leg,
-        strike fraction (``steps``) and whether the person was in view. A step whose strike frame had the person
-        out of view is counted (the next step's length is from it) but not returned."""
+        starts at push index ``first``: per frame its index, stamp (ns; the steps are timed in s of its clock),
+        heels (W, 2 feet, xy m), stance leg, strike fraction (``steps``) and whether the person was in view. A step
+        whose strike frame had the person out of view is counted (the next step's length is from it) but not
+        returned."""
+        times_s = np.asarray(stamps_ns, np.int64) * 1e-9
         walk = []
         for f in range(max(self.last_strike, first) + 1, until + 1):
             i = f - first
