@@ -25,6 +25,12 @@ walk, the runs whose start named the wrong stance leg.
     .venv/bin/python benchmarks/bench_realwalks.py --set reporting --seeds 0 1 2 3 4 5 6 7 8 9 --markdown table.md
     .venv/bin/python benchmarks/bench_realwalks.py --set tuning --trials 91_10 --seeds 0 --settings mono
 
+``--against REPORT`` compares each run with the same run of an earlier report (the JSON this benchmark
+printed, other code on the same recordings): per setting and mode, the paired differences' mean with its
+standard error, median, and the runs better and worse. A default chosen on these same runs starts ahead of
+any change, and the slow walks move by +-25-33 mm a run whatever changes (docs/tracking.md, *Reading these
+comparisons*): a standard error of 4-5 mm over 22 runs does not tell a 5 mm change from chance.
+
 Sequences and runs are kept in --out and reused (a run with an eval.json is not tracked again; delete it to
 re-run; a run folder without one, left by a run stopped before its evaluation, is tracked afresh). A run's
 result bags (60-550 MB each; the reporting set over ten seeds would fill ~50 GB) are deleted once it is
@@ -181,6 +187,40 @@ def summarise(runs: dict[tuple[str, int], dict], trials: dict) -> dict:
     return out
 
 
+#: A run counts as better or worse than the baseline's by more than this (mm of its median error).
+PAIRED_MARGIN_MM = 1.0
+
+
+def paired(runs: dict[str, dict[str, dict]], baseline: dict[str, dict[str, dict]]) -> dict[str, dict]:
+    """Each setting and mode's runs against the same runs (trial, seed, setting, mode) of a baseline report (both
+    ``report["runs"]``: {"07_01 s0": {"two": figures}}): the paired difference of each run's median error (mm),
+    its mean with the standard error of the mean, its median, the runs better and worse by more than
+    PAIRED_MARGIN_MM and the largest changes. A run that failed on one side only is infinitely better or worse:
+    counted, not averaged."""
+    differences: dict[str, list[tuple[str, float, float]]] = {}
+    for key, variants in sorted(runs.items()):
+        for variant, entry in variants.items():
+            base = baseline.get(key, {}).get(variant)
+            if base is not None:
+                differences.setdefault(variant, []).append(
+                    (key, float(base["absolute_median_mm"]), float(entry["absolute_median_mm"])))
+    out = {}
+    for variant, rows in sorted(differences.items()):
+        with np.errstate(invalid="ignore"):
+            change = np.array([new - old for _, old, new in rows])
+        finite = change[np.isfinite(change)]
+        order = sorted((r for r, d in zip(rows, change) if not np.isnan(d)), key=lambda r: abs(r[2] - r[1]),
+                       reverse=True)
+        out[variant] = {
+            "runs": len(rows), "mean_mm": round(float(finite.mean()), 1) if finite.size else None,
+            "standard_error_mm": round(float(finite.std(ddof=1) / np.sqrt(finite.size)), 1) if finite.size > 1 else None,
+            "median_mm": round(float(np.median(change)), 1) if change.size and not np.isnan(change).any() else None,
+            "better": int(np.sum(change < -PAIRED_MARGIN_MM)), "worse": int(np.sum(change > PAIRED_MARGIN_MM)),
+            "not_finite": int(change.size - finite.size),
+            "largest": [f"{key} {old:.0f} -> {new:.0f}" for key, old, new in order[:4]]}
+    return out
+
+
 def _median_of(runs: dict[tuple[str, int], dict], key: str) -> float | None:
     """The median of a run figure over the runs that have it (None if none has)."""
     values = [r.get(key) for r in runs.values() if r.get(key) is not None]
@@ -274,7 +314,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--markdown", type=Path, help="also write the summary table (markdown) here")
     parser.add_argument("--keep-bags", action="store_true",
                         help="keep each run's result bags (by default deleted once the run is evaluated)")
+    parser.add_argument("--against", type=Path, metavar="REPORT",
+                        help="a JSON report of an earlier run of this benchmark (other code, the same recordings): "
+                             "each run's error against the same run there (paired differences)")
     args = parser.parse_args(argv)
+    baseline = None
+    if args.against is not None:
+        try:
+            baseline = json.loads(args.against.read_text())["runs"]
+            if not isinstance(baseline, dict):
+                raise TypeError(f"its 'runs' is a {type(baseline).__name__}, not a mapping of runs")
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            parser.error(f"--against {args.against}: not a report of this benchmark (a JSON document with its "
+                         f"'runs'): {exc}")
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
     trials = devset.trials_of(args.set)
     if args.trials:
@@ -331,6 +383,13 @@ def main(argv: list[str] | None = None) -> int:
                     + f"swapped {entry['swap_fraction']:.0%}, steps {entry['map_max_step_m_s']:.1f} / "
                     f"{entry['live_max_step_m_s']:.1f} m/s ({(time.monotonic() - started) / 60:.1f} min)")
     report["summary"] = {key: summarise(runs, devset.TRIALS) for key, runs in scores.items()}
+    if baseline is not None:
+        report["against"] = {"report": str(args.against), "by_setting": paired(report["runs"], baseline)}
+        for variant, figures in report["against"]["by_setting"].items():
+            log(f"against {args.against}, {variant}: {figures['runs']} runs, mean {figures['mean_mm']} mm "
+                f"(standard error {figures['standard_error_mm']}), median {figures['median_mm']}, "
+                f"{figures['better']} better and {figures['worse']} worse by more than {PAIRED_MARGIN_MM:.0f} mm; "
+                + "; ".join(figures["largest"]))
     table = markdown(report)
     report["markdown"] = table
     if args.markdown:

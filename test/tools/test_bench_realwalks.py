@@ -1,0 +1,56 @@
+"""benchmarks/bench_realwalks.py's paired comparison against an earlier report (``--against``)."""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+
+import bench_realwalks  # noqa: E402
+
+
+def _runs(errors: dict[str, dict[str, float]]) -> dict[str, dict[str, dict]]:
+    return {key: {variant: {"absolute_median_mm": mm} for variant, mm in by_variant.items()}
+            for key, by_variant in errors.items()}
+
+
+def test_each_run_is_paired_with_the_same_run_of_the_baseline() -> None:
+    baseline = _runs({"07_01 s0": {"two": 50.0, "mono": 100.0}, "07_01 s1": {"two": 60.0, "mono": 90.0},
+                      "91_10 s0": {"two": 70.0}, "91_10 s1": {"two": 80.0}})
+    report = _runs({"07_01 s0": {"two": 50.5, "mono": 130.0}, "07_01 s1": {"two": 57.0, "mono": 70.0},
+                    "91_10 s0": {"two": math.inf}, "91_10 s1": {"two": 100.0},
+                    "69_01 s0": {"two": 10.0}})          # not in the baseline: not paired
+    result = bench_realwalks.paired(report, baseline)
+    two, mono = result["two"], result["mono"]
+    assert two["runs"] == 4 and mono["runs"] == 2
+    # two: +0.5, -3, inf (failed here only), +20; the mean and its standard error over the finite ones
+    finite = [0.5, -3.0, 20.0]
+    mean = sum(finite) / 3
+    sd = math.sqrt(sum((d - mean) ** 2 for d in finite) / 2)
+    assert two["mean_mm"] == pytest.approx(round(mean, 1))
+    assert two["standard_error_mm"] == pytest.approx(round(sd / math.sqrt(3), 1))
+    assert (two["better"], two["worse"], two["not_finite"]) == (1, 2, 1)     # +0.5 is within the margin
+    assert two["median_mm"] == pytest.approx(round((0.5 + 20.0) / 2, 1))
+    assert two["largest"][0] == "91_10 s0 70 -> inf" and two["largest"][1] == "91_10 s1 80 -> 100"
+    assert mono["mean_mm"] == pytest.approx(5.0) and (mono["better"], mono["worse"]) == (1, 1)
+    assert mono["standard_error_mm"] == pytest.approx(25.0)
+    assert bench_realwalks.paired(report, {}) == {}
+
+
+@pytest.mark.parametrize("content", ["not json", json.dumps({"benchmark": "realwalks"}), json.dumps({"runs": [1]})])
+def test_against_a_file_that_is_not_a_report_is_refused_by_name(tmp_path: Path, capsys, content: str) -> None:
+    bad = tmp_path / "old.json"
+    bad.write_text(content)
+    with pytest.raises(SystemExit) as stop:
+        bench_realwalks.main(["--against", str(bad), "--out", str(tmp_path / "out")])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert f"--against {bad}" in err and "not a report of this benchmark" in err
+    assert not (tmp_path / "out").exists()          # refused before anything was rendered or tracked
+    with pytest.raises(SystemExit):
+        bench_realwalks.main(["--against", str(tmp_path / "missing.json"), "--out", str(tmp_path / "out")])
+    assert "missing.json" in capsys.readouterr().err
