@@ -211,9 +211,10 @@ def paired(runs: dict[str, dict[str, dict]], baseline: dict[str, dict[str, dict]
         finite = change[np.isfinite(change)]
         order = sorted((r for r, d in zip(rows, change) if not np.isnan(d)), key=lambda r: abs(r[2] - r[1]),
                        reverse=True)
+        error = float(finite.std(ddof=1) / np.sqrt(finite.size)) if finite.size > 1 else None
         out[variant] = {
             "runs": len(rows), "mean_mm": round(float(finite.mean()), 1) if finite.size else None,
-            "standard_error_mm": round(float(finite.std(ddof=1) / np.sqrt(finite.size)), 1) if finite.size > 1 else None,
+            "standard_error_mm": None if error is None else round(error, 1),
             "median_mm": round(float(np.median(change)), 1) if change.size and not np.isnan(change).any() else None,
             "better": int(np.sum(change < -PAIRED_MARGIN_MM)), "worse": int(np.sum(change > PAIRED_MARGIN_MM)),
             "not_finite": int(change.size - finite.size),
