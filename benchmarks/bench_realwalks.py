@@ -206,16 +206,15 @@ def paired(runs: dict[str, dict[str, dict]], baseline: dict[str, dict[str, dict]
                     (key, float(base["absolute_median_mm"]), float(entry["absolute_median_mm"])))
     out = {}
     for variant, rows in sorted(differences.items()):
-        with np.errstate(invalid="ignore"):
-            change = np.array([new - old for _, old, new in rows])
+        # a run that failed on both sides did not change
+        change = np.array([0.0 if new == old else new - old for _, old, new in rows])
         finite = change[np.isfinite(change)]
-        order = sorted((r for r, d in zip(rows, change) if not np.isnan(d)), key=lambda r: abs(r[2] - r[1]),
-                       reverse=True)
+        order = sorted((r for r, d in zip(rows, change) if d != 0.0), key=lambda r: abs(r[2] - r[1]), reverse=True)
         error = float(finite.std(ddof=1) / np.sqrt(finite.size)) if finite.size > 1 else None
         out[variant] = {
             "runs": len(rows), "mean_mm": round(float(finite.mean()), 1) if finite.size else None,
             "standard_error_mm": None if error is None else round(error, 1),
-            "median_mm": round(float(np.median(change)), 1) if change.size and not np.isnan(change).any() else None,
+            "median_mm": round(float(np.median(change)), 1),
             "better": int(np.sum(change < -PAIRED_MARGIN_MM)), "worse": int(np.sum(change > PAIRED_MARGIN_MM)),
             "not_finite": int(change.size - finite.size),
             "largest": [f"{key} {old:.0f} -> {new:.0f}" for key, old, new in order[:4]]}
@@ -325,7 +324,11 @@ def main(argv: list[str] | None = None) -> int:
             baseline = json.loads(args.against.read_text())["runs"]
             if not isinstance(baseline, dict):
                 raise TypeError(f"its 'runs' is a {type(baseline).__name__}, not a mapping of runs")
-        except (OSError, ValueError, KeyError, TypeError) as exc:
+            for key, variants in baseline.items():
+                for variant, entry in variants.items():
+                    if not isinstance(entry.get("absolute_median_mm"), (int, float)):
+                        raise TypeError(f"run {key!r} {variant} has no absolute_median_mm")
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
             parser.error(f"--against {args.against}: not a report of this benchmark (a JSON document with its "
                          f"'runs'): {exc}")
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")

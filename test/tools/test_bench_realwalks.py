@@ -24,24 +24,29 @@ def test_each_run_is_paired_with_the_same_run_of_the_baseline() -> None:
     report = _runs({"07_01 s0": {"two": 50.5, "mono": 130.0}, "07_01 s1": {"two": 57.0, "mono": 70.0},
                     "91_10 s0": {"two": math.inf}, "91_10 s1": {"two": 100.0},
                     "69_01 s0": {"two": 10.0}})          # not in the baseline: not paired
+    baseline["91_36 s0"] = report["91_36 s0"] = {"two": {"absolute_median_mm": math.inf}}   # failed both times
     result = bench_realwalks.paired(report, baseline)
     two, mono = result["two"], result["mono"]
-    assert two["runs"] == 4 and mono["runs"] == 2
-    # two: +0.5, -3, inf (failed here only), +20; the mean and its standard error over the finite ones
-    finite = [0.5, -3.0, 20.0]
-    mean = sum(finite) / 3
-    sd = math.sqrt(sum((d - mean) ** 2 for d in finite) / 2)
+    assert two["runs"] == 5 and mono["runs"] == 2
+    # two: +0.5, -3, inf (failed here only), +20, and 0 where it failed both times; the mean and its standard
+    # error over the finite ones
+    finite = [0.5, -3.0, 20.0, 0.0]
+    mean = sum(finite) / 4
+    sd = math.sqrt(sum((d - mean) ** 2 for d in finite) / 3)
     assert two["mean_mm"] == pytest.approx(round(mean, 1))
-    assert two["standard_error_mm"] == pytest.approx(round(sd / math.sqrt(3), 1))
+    assert two["standard_error_mm"] == pytest.approx(round(sd / math.sqrt(4), 1))
     assert (two["better"], two["worse"], two["not_finite"]) == (1, 2, 1)     # +0.5 is within the margin
-    assert two["median_mm"] == pytest.approx(round((0.5 + 20.0) / 2, 1))
+    assert two["median_mm"] == pytest.approx(0.5)
+    assert len(two["largest"]) == 4                  # the unchanged run is no change
     assert two["largest"][0] == "91_10 s0 70 -> inf" and two["largest"][1] == "91_10 s1 80 -> 100"
     assert mono["mean_mm"] == pytest.approx(5.0) and (mono["better"], mono["worse"]) == (1, 1)
     assert mono["standard_error_mm"] == pytest.approx(25.0)
     assert bench_realwalks.paired(report, {}) == {}
 
 
-@pytest.mark.parametrize("content", ["not json", json.dumps({"benchmark": "realwalks"}), json.dumps({"runs": [1]})])
+@pytest.mark.parametrize("content", ["not json", json.dumps({"benchmark": "realwalks"}), json.dumps({"runs": [1]}),
+                                     json.dumps({"runs": {"07_01 s0": {"two": {"swap_fraction": 0.0}}}}),
+                                     json.dumps({"runs": {"07_01 s0": [50.0]}})])
 def test_against_a_file_that_is_not_a_report_is_refused_by_name(tmp_path: Path, capsys, content: str) -> None:
     bad = tmp_path / "old.json"
     bad.write_text(content)
