@@ -209,7 +209,7 @@ def paired(runs: dict[str, dict[str, dict]], baseline: dict[str, dict[str, dict]
         # a run that failed on both sides did not change
         change = np.array([0.0 if new == old else new - old for _, old, new in rows])
         finite = change[np.isfinite(change)]
-        order = sorted((r for r, d in zip(rows, change) if d != 0.0), key=lambda r: abs(r[2] - r[1]), reverse=True)
+        order = [row for row, d in sorted(zip(rows, change), key=lambda pair: abs(pair[1]), reverse=True) if d != 0.0]
         error = float(finite.std(ddof=1) / np.sqrt(finite.size)) if finite.size > 1 else None
         out[variant] = {
             "runs": len(rows), "mean_mm": round(float(finite.mean()), 1) if finite.size else None,
