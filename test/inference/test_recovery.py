@@ -53,15 +53,16 @@ def _model(reseed: bool) -> TrackerModel:
 
 
 @pytest.mark.parametrize("reseed", [True, False])
-def test_fallen_walkers_are_reseeded_standing_where_they_fell(reseed: bool):
+def test_fallen_walkers_are_caught_by_their_other_leg_where_they_fell(reseed: bool):
     model = _model(reseed)
     rng = np.random.default_rng(3)
     states = model.initial(8, rng)
     down = np.arange(8) < 3
-    # a stance leg past horizontal: the walker has fallen
+    # a stance leg past horizontal: the walker has fallen forwards
     walker = replace(states.walker, stance_angle=np.where(down, -1.8, states.walker.stance_angle))
     states = replace(states, walker=walker)
     contact, heading = states.kin.contact_point.copy(), states.kin.heading.copy()
+    stance_leg = states.walker.stance_leg.copy()
     new, events = model.transition(states, rng)
     assert np.asarray(events.fallen)[down].all() and not np.asarray(events.fallen)[~down].any()
     if not reseed:
@@ -77,7 +78,14 @@ def test_fallen_walkers_are_reseeded_standing_where_they_fell(reseed: bool):
     pelvis = new.pose.markers[down, PELVIS]
     leg = model.params.leg_length
     assert (pelvis[:, 2] > 0.85 * leg).all()                    # upright again, hips at walking height
-    assert np.linalg.norm(pelvis[:, :2] - contact[down], axis=1).max() < 0.5 * leg   # where it stood
+    # caught where it fell: the pelvis keeps its place over the ground (the recorded jump is the height only),
+    # far ahead of the foot it fell over (stood over that foot instead, it jumped back 0.8-0.9 leg lengths)
+    assert np.abs(new.jump[down, :2]).max() < 1e-6
+    forward = np.column_stack([np.cos(heading[down]), np.sin(heading[down])])
+    assert (np.sum((pelvis[:, :2] - contact[down]) * forward, axis=1) > 0.7 * leg).all()
+    # on the leg that swung: it stands in front of the pelvis, the leg it fell over trails
+    assert (new.walker.stance_leg[down] == 1 - stance_leg[down]).all()
+    assert (np.sum((new.kin.contact_point[down] - pelvis[:, :2]) * forward, axis=1) > 0.1 * leg).all()
     assert np.allclose(new.kin.heading[down], heading[down], atol=0.05)
     # the others keep walking as the dynamics move them
     assert np.isfinite(new.pose.markers).all() and np.allclose(new.kin.heading[~down], heading[~down], atol=0.2)

@@ -674,14 +674,18 @@ class TrackerModel:
         return put_rows(states, rows, flipped)
 
     def _reseed_fallen(self, states: TrackerStates, rows: np.ndarray, rng: np.random.Generator) -> TrackerStates:
-        """Replace fallen walkers by walkers on the cyclic gait of their recent speed, standing where their
-        stance foot is, walking along their heading (a new step, no phase spread)."""
+        """Replace fallen walkers by walkers on the cyclic gait of their recent speed, caught by their other leg
+        where they fell: the pelvis where it was over the ground, the leg that swung just struck in front (a new
+        step on it, no phase spread), walking along their heading. The falls seen in tracking are forwards (the
+        stance leg past ``dynamics.MAX_STANCE_LEAN``, the swing leg not yet through); stood over the foot they
+        fell over instead, they jumped back 0.5-0.7 m."""
         still = InitialSpread(position_m=0.0, heading_rad=0.0, speed_fraction=0.05, step_length_fraction=0.05,
                               joint_rad=0.02, random_phase=False)
         speed = states.speed[rows]
-        fresh = self._fresh(rows.size, states.kin.contact_point[rows], states.kin.heading[rows], speed,
-                            self._cyclic_gaits.preferred_step_length(self.params, speed), states.walker.stance_leg[rows],
-                            rng, still)
+        pelvis = states.pose.markers[rows, MARKER_NAMES.index("pelvis"), :2]
+        fresh = self._fresh(rows.size, pelvis, states.kin.heading[rows], speed,
+                            self._cyclic_gaits.preferred_step_length(self.params, speed),
+                            (1 - states.walker.stance_leg[rows]).astype(np.int8), rng, still)
         fresh.reseeded[:] = RESEEDED_FALLEN
         fresh.jump[:] = pose_jump(states.take(rows), fresh)
         self.reseeded_fallen += rows.size

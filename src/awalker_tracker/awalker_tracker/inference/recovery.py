@@ -6,7 +6,8 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   never gets up: without recovery it keeps a large log-likelihood penalty and, when every particle
   has fallen, the posterior is a body lying on the floor. With ``reseed_fallen`` each particle whose
   walker falls is replaced, in the frame it falls, by a walker on the cyclic gait of its recent
-  speed (clamped to the gait table), standing on its current stance foot, with its heading.
+  speed (clamped to the gait table), caught where it fell: its pelvis kept, the leg that swung just
+  struck in front, with its heading.
 - **Lost tracks.** The person followed is, in each camera, the foreground blob nearest to where the
   particles' weighted-mean pelvis projects (``vision.detection``; a second person elsewhere in view
   is not mixed in). The track is lost when, for ``lost_after_s``, that pelvis projects outside every
