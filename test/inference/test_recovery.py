@@ -78,8 +78,8 @@ def test_fallen_walkers_are_caught_by_their_other_leg_where_they_fell(reseed: bo
     pelvis = new.pose.markers[down, PELVIS]
     leg = model.params.leg_length
     assert (pelvis[:, 2] > 0.85 * leg).all()                    # upright again, hips at walking height
-    # caught where it fell: the pelvis keeps its place over the ground (the recorded jump is the height only),
-    # far ahead of the foot it fell over (stood over that foot instead, it jumped back 0.8-0.9 leg lengths)
+    # caught where it fell: the pelvis keeps its place over the ground (no jump recorded), far ahead of the foot
+    # it fell over (stood over that foot instead, it jumped back 0.8-1.0 leg lengths)
     assert np.abs(new.jump[down, :2]).max() < 1e-6
     forward = np.column_stack([np.cos(heading[down]), np.sin(heading[down])])
     assert (np.sum((pelvis[:, :2] - contact[down]) * forward, axis=1) > 0.7 * leg).all()
