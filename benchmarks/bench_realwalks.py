@@ -32,7 +32,10 @@ any change, and the slow walks move by +-25-33 mm a run whatever changes (docs/t
 comparisons*): a standard error of 4-5 mm over 22 runs does not tell a 5 mm change from chance.
 
 Sequences and runs are kept in --out and reused (a run with an eval.json is not tracked again; delete it to
-re-run; a run folder without one, left by a run stopped before its evaluation, is tracked afresh). A run's
+re-run; a run folder without one, left by a run stopped before its evaluation, is tracked afresh). Several
+benchmark processes may share one --out (e.g. one per core, with different --seeds or --settings): each
+recording and each run is claimed by a lock file beside it (``claimed``), so a process waits for a recording or
+run another live process is making, then reuses it. A run's
 result bags (60-550 MB each; the reporting set over ten seeds would fill ~50 GB) are deleted once it is
 evaluated; --keep-bags keeps them, for benchmarks/depth_profile.py and likelihood_gap.py, which read the features.
 Prints ONE JSON document on stdout; progress on stderr.
@@ -63,6 +66,55 @@ FAILED = "failed.txt"         # in a run's directory: why `awalker track` refuse
 
 def log(text: str) -> None:
     print(f"bench_realwalks: {text}", file=sys.stderr, flush=True)
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (on this machine)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+@contextlib.contextmanager
+def claimed(path: Path, poll_s: float = 5.0):
+    """Hold ``path`` (a recording's or a run's folder) for this process: the lock file ``<path>.lock`` holds its
+    pid, made atomically. While another live process holds it, wait (saying so once) and re-try; a lock whose
+    process has died (a benchmark stopped by a signal) is taken over. The lock is removed on leaving, also after an
+    error. Without it, a second process found a run folder without its eval.json, took it for one left by a
+    stopped run and deleted it under the process tracking it."""
+    lock = path.with_name(path.name + ".lock")
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    waited = False
+    while True:
+        try:
+            descriptor = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            try:
+                holder = int(lock.read_text().strip() or 0)
+            except (OSError, ValueError):
+                holder = 0           # being written, or gone: look again
+            if holder and not _alive(holder):
+                log(f"{lock}: its process {holder} is gone; taking it over")
+                with contextlib.suppress(FileNotFoundError):
+                    lock.unlink()
+                continue
+            if not waited:
+                log(f"{path.name}: process {holder or '?'} is making it; waiting")
+                waited = True
+            time.sleep(poll_s)
+            continue
+        with os.fdopen(descriptor, "w") as handle:
+            handle.write(str(os.getpid()))
+        break
+    try:
+        yield
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            lock.unlink()
 
 
 def variant_of(setting: str, mode: str) -> str:
@@ -291,10 +343,36 @@ def drop_result_bags(run_dir: Path) -> list[Path]:
     return bags
 
 
-def main(argv: list[str] | None = None) -> int:
-    from awalker_tools import devset
+def track_and_evaluate(run_dir: Path, bag: Path, args: argparse.Namespace, seed: int, mode: str) -> None:
+    """Track ``bag`` into ``run_dir`` and evaluate it, unless an earlier run left its eval.json or its
+    ``FAILED`` note (a folder with neither was left by a run stopped before its evaluation: tracked afresh)."""
     from awalker_tools.pipeline import TrackOptions, run_tracking
     from awalker_tracker.errors import InputError
+
+    if (run_dir / "eval.json").exists():
+        if "view_bias" not in json.loads((run_dir / "eval.json").read_text()):
+            evaluate_run(run_dir)           # evaluated before eval split the error by camera: again
+        return
+    if (run_dir / FAILED).exists():
+        return
+    if run_dir.exists():    # left by a run stopped before its evaluation (Ctrl-C, a full disk)
+        shutil.rmtree(run_dir)
+    try:
+        with contextlib.redirect_stdout(sys.stderr):
+            run_tracking(TrackOptions(bag=bag, out=run_dir, particles=args.particles,
+                                      min_particles=args.min_particles, seed=seed, auto_start=mode == "handsoff",
+                                      overlays=False, quiet=True))
+        evaluate_run(run_dir)
+        if not args.keep_bags:
+            drop_result_bags(run_dir)
+    except InputError as exc:       # e.g. no walking person found: the run failed, say so
+        run_dir.mkdir(parents=True, exist_ok=True)
+        (run_dir / FAILED).write_text(str(exc))
+
+
+def main(argv: list[str] | None = None) -> int:
+    from awalker_tools import devset
+    from awalker_tools.pipeline import TrackOptions
 
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--set", choices=("quick", "tuning", "reporting", "all"), default="quick",
@@ -352,29 +430,15 @@ def main(argv: list[str] | None = None) -> int:
     scores: dict[str, dict[tuple[str, int], dict]] = {}
     for k, (trial, seed) in enumerate(jobs):
         recording = devset.Recording.draw(trial, seed)
-        bags = devset.make_recording(recording, args.out / "sequences" / f"{trial}_s{seed}", progress=False)
+        sequence = args.out / "sequences" / f"{trial}_s{seed}"
+        with claimed(sequence):
+            bags = devset.make_recording(recording, sequence, progress=False)
         for setting in args.settings:
             for mode in args.modes:
                 variant = variant_of(setting, mode)
                 run_dir = args.out / "runs" / f"{trial}_s{seed}_{variant}{suffix}"
-                if not (run_dir / "eval.json").exists() and not (run_dir / FAILED).exists():
-                    if run_dir.exists():    # left by a run stopped before its evaluation (Ctrl-C, a full disk)
-                        shutil.rmtree(run_dir)
-                    try:
-                        with contextlib.redirect_stdout(sys.stderr):
-                            run_tracking(TrackOptions(bag=bags[variant], out=run_dir, particles=args.particles,
-                                                      min_particles=args.min_particles,
-                                                      seed=seed, auto_start=mode == "handsoff", overlays=False,
-                                                      quiet=True))
-                        evaluate_run(run_dir)
-                        if not args.keep_bags:
-                            drop_result_bags(run_dir)
-                    except InputError as exc:       # e.g. no walking person found: the run failed, say so
-                        run_dir.mkdir(parents=True, exist_ok=True)
-                        (run_dir / FAILED).write_text(str(exc))
-                elif (run_dir / "eval.json").exists() and "view_bias" not in json.loads(
-                        (run_dir / "eval.json").read_text()):
-                    evaluate_run(run_dir)           # evaluated before eval split the error by camera: again
+                with claimed(run_dir):
+                    track_and_evaluate(run_dir, bags[variant], args, seed, mode)
                 if (run_dir / FAILED).exists():
                     entry = failed_run((run_dir / FAILED).read_text())
                 else:

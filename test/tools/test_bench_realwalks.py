@@ -1,9 +1,12 @@
-"""benchmarks/bench_realwalks.py's paired comparison against an earlier report (``--against``)."""
+"""benchmarks/bench_realwalks.py's paired comparison against an earlier report (``--against``), and the locks that let
+several benchmark processes share one --out."""
 from __future__ import annotations
 
 import json
 import math
+import os
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -59,3 +62,53 @@ def test_against_a_file_that_is_not_a_report_is_refused_by_name(tmp_path: Path, 
     with pytest.raises(SystemExit):
         bench_realwalks.main(["--against", str(tmp_path / "missing.json"), "--out", str(tmp_path / "out")])
     assert "missing.json" in capsys.readouterr().err
+
+
+def test_a_run_another_live_process_is_making_is_waited_for_not_deleted(tmp_path: Path) -> None:
+    """Two benchmark processes sharing --out: the second waits while the first holds a run's lock, then finds the
+    finished run; the lock is gone once its holder leaves, also after an error."""
+    import subprocess
+    import threading
+
+    run_dir = tmp_path / "runs" / "07_01_s0_two"
+    lock = tmp_path / "runs" / "07_01_s0_two.lock"
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        lock.parent.mkdir(parents=True)
+        lock.write_text(str(other.pid))
+        run_dir.mkdir()                                  # being tracked: no eval.json yet
+
+        def finish() -> None:                            # the other process evaluates the run and lets go
+            time.sleep(0.3)
+            (run_dir / "eval.json").write_text("{}")
+            lock.unlink()
+
+        threading.Thread(target=finish).start()
+        started = time.monotonic()
+        with bench_realwalks.claimed(run_dir, poll_s=0.05):
+            assert time.monotonic() - started >= 0.25
+            assert (run_dir / "eval.json").exists()      # found finished, not deleted as a stopped run's
+            assert lock.read_text() == str(os.getpid())
+    finally:
+        other.kill()
+        other.wait()
+    assert not lock.exists()
+    with pytest.raises(RuntimeError):
+        with bench_realwalks.claimed(run_dir, poll_s=0.05):
+            raise RuntimeError("tracking failed")
+    assert not lock.exists()
+
+
+def test_a_lock_left_by_a_process_that_died_is_taken_over(tmp_path: Path) -> None:
+    import subprocess
+
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    sequence = tmp_path / "sequences" / "07_01_s0"
+    lock = tmp_path / "sequences" / "07_01_s0.lock"
+    lock.parent.mkdir(parents=True)
+    lock.write_text(str(gone.pid))
+    started = time.monotonic()
+    with bench_realwalks.claimed(sequence, poll_s=5.0):
+        assert lock.read_text() == str(os.getpid())
+    assert time.monotonic() - started < 1.0 and not lock.exists()
