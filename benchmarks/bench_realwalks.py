@@ -82,21 +82,24 @@ def _alive(pid: int) -> bool:
 @contextlib.contextmanager
 def claimed(path: Path, poll_s: float = 5.0):
     """Hold ``path`` (a recording's or a run's folder) for this process: the lock file ``<path>.lock`` holds its
-    pid, made atomically. While another live process holds it, wait (saying so once) and re-try; a lock whose
-    process has died (a benchmark stopped by a signal) is taken over. The lock is removed on leaving, also after an
-    error. Without it, a second process found a run folder without its eval.json, took it for one left by a
-    stopped run and deleted it under the process tracking it."""
+    pid, made atomically with the pid already in it (written to a file of this process's own, then hard-linked to
+    the lock's name), so no lock is ever seen empty. While another live process holds it, wait (saying so once) and
+    re-try; a lock whose process has died (a benchmark stopped by a signal) is taken over. The lock is removed on
+    leaving, also after an error. Without it, a second process found a run folder without its eval.json, took it
+    for one left by a stopped run and deleted it under the process tracking it."""
     lock = path.with_name(path.name + ".lock")
     lock.parent.mkdir(parents=True, exist_ok=True)
+    mine = lock.with_name(f"{lock.name}.{os.getpid()}")
     waited = False
     while True:
+        mine.write_text(str(os.getpid()))
         try:
-            descriptor = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+            os.link(mine, lock)      # fails if the lock exists: atomic, like O_EXCL
         except FileExistsError:
             try:
                 holder = int(lock.read_text().strip() or 0)
             except (OSError, ValueError):
-                holder = 0           # being written, or gone: look again
+                holder = 0           # gone since: look again
             if holder and not _alive(holder):
                 log(f"{lock}: its process {holder} is gone; taking it over")
                 with contextlib.suppress(FileNotFoundError):
@@ -107,8 +110,8 @@ def claimed(path: Path, poll_s: float = 5.0):
                 waited = True
             time.sleep(poll_s)
             continue
-        with os.fdopen(descriptor, "w") as handle:
-            handle.write(str(os.getpid()))
+        finally:
+            mine.unlink()
         break
     try:
         yield

@@ -112,3 +112,24 @@ def test_a_lock_left_by_a_process_that_died_is_taken_over(tmp_path: Path) -> Non
     with bench_realwalks.claimed(sequence, poll_s=5.0):
         assert lock.read_text() == str(os.getpid())
     assert time.monotonic() - started < 1.0 and not lock.exists()
+
+
+def test_a_lock_appears_with_its_pid_already_in_it(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The lock comes into being whole (a process killed between creating it and writing its pid would leave an
+    empty lock that every other process waits on for ever), and the file it is made from does not stay behind."""
+    linked = []
+    real_link = os.link
+
+    def watching_link(source, target) -> None:
+        linked.append(Path(source).read_text())
+        real_link(source, target)
+
+    monkeypatch.setattr(bench_realwalks.os, "link", watching_link)
+    run_dir = tmp_path / "runs" / "07_01_s0_two"
+    with bench_realwalks.claimed(run_dir, poll_s=0.05):
+        assert [p.name for p in (tmp_path / "runs").iterdir()] == ["07_01_s0_two.lock"]
+    assert linked == [str(os.getpid())]
+    with pytest.raises(RuntimeError):
+        with bench_realwalks.claimed(run_dir, poll_s=0.05):
+            raise RuntimeError("tracking failed")
+    assert list((tmp_path / "runs").iterdir()) == []
