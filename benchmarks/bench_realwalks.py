@@ -95,24 +95,24 @@ def claimed(path: Path, poll_s: float = 5.0):
         mine.write_text(str(os.getpid()))
         try:
             os.link(mine, lock)      # fails if the lock exists: atomic, like O_EXCL
+            break
         except FileExistsError:
-            try:
-                holder = int(lock.read_text().strip() or 0)
-            except (OSError, ValueError):
-                holder = 0           # gone since: look again
-            if holder and not _alive(holder):
-                log(f"{lock}: its process {holder} is gone; taking it over")
-                with contextlib.suppress(FileNotFoundError):
-                    lock.unlink()
-                continue
-            if not waited:
-                log(f"{path.name}: process {holder or '?'} is making it; waiting")
-                waited = True
-            time.sleep(poll_s)
-            continue
+            pass
         finally:
             mine.unlink()
-        break
+        try:
+            holder = int(lock.read_text().strip() or 0)
+        except (OSError, ValueError):
+            holder = 0               # gone since: look again
+        if holder and not _alive(holder):
+            log(f"{lock}: its process {holder} is gone; taking it over")
+            with contextlib.suppress(FileNotFoundError):
+                lock.unlink()
+            continue
+        if not waited:
+            log(f"{path.name}: process {holder or '?'} is making it; waiting")
+            waited = True
+        time.sleep(poll_s)
     try:
         yield
     finally:
