@@ -10,7 +10,9 @@ true pelvis's. This is what the automatic start and the recovery of a lost track
 ``inference.recovery``), without the tracker.
 
 Report, per recording and over all: frames scored, the median error (m) and the frames more than 0.3 m and
-0.5 m off (a feet row a map row or more off; the trunk's own lowest row when a skirt cuts the legs off); the
+0.5 m off (a feet row a map row or more off; the trunk's own lowest row when a skirt cuts the legs off); how many
+map rows the blob reaches below the true body's lowest heel or toe in the image (median per recording; shoes,
+contact shadow and blur below the soles, or feet under the threshold where they look like the floor); the
 median signed error along the camera's ray (m, > 0: placed too far), over all frames and by where the person
 walks (``away`` from the camera, ``towards`` it, ``across``: the cosine of the walk's direction and the ray
 above 0.5, below -0.5, between). For the hands-off recordings also the automatic start
@@ -34,6 +36,8 @@ from pathlib import Path
 import numpy as np
 
 VARIANTS = ("mono", "mono_handsoff")
+#: The true body's sole points: the lowest of them in the image is where the person's blob should end
+SOLE_MARKERS = ("left_heel", "right_heel", "left_toe", "right_toe")
 
 
 def _walk_class(cosine: float) -> str:
@@ -54,6 +58,7 @@ def score_sequence(bag: Path, find_start: bool = False) -> dict:
 
     truth = evaluation.read_poses_csv(bag.parent / "ground_truth.csv")
     pelvis = truth.marker("pelvis")[:, :2]
+    soles = np.stack([truth.marker(name) for name in SOLE_MARKERS], axis=1)     # (frames, 4, 3) m
     dt = float(np.median(np.diff(truth.stamps_ns))) * 1e-9
     # the true walking direction: the pelvis's displacement over +-0.25 s (zero while standing)
     reach = max(1, int(round(0.25 / dt)))
@@ -61,6 +66,7 @@ def score_sequence(bag: Path, find_start: bool = False) -> dict:
     behind = pelvis[np.maximum(np.arange(len(pelvis)) - reach, 0)]
     walk = ahead - behind
     scored, offsets, row_depths = [], [], []      # truth rows of the frames scored, detection - truth (m), row depths
+    below_soles = []        # map rows from the true lowest heel or toe down to the blob's lowest row
     start = None
     with SequenceReader(bag) as reader:
         cameras = reader.cameras
@@ -89,6 +95,10 @@ def score_sequence(bag: Path, find_start: bool = False) -> dict:
                 scored.append(rows[0])
                 offsets.append(detection.position - (x, y))
                 row_depths.append(detection.row_depth_m)
+                by_name = {c.name: c for c in cameras}
+                for blob in detection.blobs:
+                    uv, _ = by_name[blob.camera].project(soles[rows[0]])
+                    below_soles.append((blob.feet_uv[1] - float(uv[:, 1].max())) / blob.row_px)
         if finder is not None and start is None:
             start = finder.finish()
     eye = cameras[0].position
@@ -104,6 +114,7 @@ def score_sequence(bag: Path, find_start: bool = False) -> dict:
               "over_0.3_m": int(np.sum(errors > 0.3)), "over_0.5_m": int(np.sum(errors > 0.5)),
               "along_ray_median_m": float(np.median(along_ray)) if errors.size else None,
               "row_depth_median_m": float(np.median(row_depths)) if errors.size else None,
+              "feet_row_below_soles_rows_median": float(np.median(below_soles)) if below_soles else None,
               "along_ray_by_walk": {k: {"frames": int(np.sum(classes == k)),
                                         "median_m": float(np.median(along_ray[classes == k]))}
                                     for k in ("away", "towards", "across") if np.any(classes == k)}}
@@ -168,6 +179,12 @@ def main(argv: list[str] | None = None) -> int:
         "over_0.3_m": sum(r["over_0.3_m"] for r in results),
         "over_0.5_m": sum(r["over_0.5_m"] for r in results),
         "median_of_recording_medians_m": median_of([r["median_m"] for r in results]),
+        # how far the blob reaches below the person's soles (map rows; per recording: shoes, floor and light)
+        "feet_row_below_soles_rows": {
+            variant: {"median": median_of(values), "min": min(values, default=None), "max": max(values, default=None)}
+            for variant in VARIANTS
+            for values in [[r["feet_row_below_soles_rows_median"] for name, r in report["recordings"].items()
+                            if name.endswith(f" {variant}") and r["feet_row_below_soles_rows_median"] is not None]]},
         # hand-started recordings learn the background from the empty room, hands-off ones from the walk (a ghost)
         "along_ray_median_of_recordings": {
             variant: along_ray([r for name, r in report["recordings"].items() if name.endswith(f" {variant}")])
