@@ -70,6 +70,7 @@ def score_sequence(bag: Path, find_start: bool = False) -> dict:
     start = None
     with SequenceReader(bag) as reader:
         cameras = reader.cameras
+        by_name = {c.name: c for c in cameras}
         # a hand-started recording's frames before its start are the empty room, as `awalker track` learns them
         described = bag.parent / "start.yaml"
         empty = StartDescription.from_yaml(described).frame if described.exists() else 0
@@ -95,7 +96,6 @@ def score_sequence(bag: Path, find_start: bool = False) -> dict:
                 scored.append(rows[0])
                 offsets.append(detection.position - (x, y))
                 row_depths.append(detection.row_depth_m)
-                by_name = {c.name: c for c in cameras}
                 for blob in detection.blobs:
                     uv, _ = by_name[blob.camera].project(soles[rows[0]])
                     below_soles.append((blob.feet_uv[1] - float(uv[:, 1].max())) / blob.row_px)

@@ -88,7 +88,7 @@ def claimed(path: Path, poll_s: float = 5.0):
     leaving, also after an error. Without it, a second process found a run folder without its eval.json, took it
     for one left by a stopped run and deleted it under the process tracking it."""
     lock = path.with_name(path.name + ".lock")
-    lock.parent.mkdir(parents=True, exist_ok=True)
+    lock.parent.resolve().mkdir(parents=True, exist_ok=True)     # also where a folder is a link to one not made yet
     mine = lock.with_name(f"{lock.name}.{os.getpid()}")
     waited = False
     while True:

@@ -133,3 +133,15 @@ def test_a_lock_appears_with_its_pid_already_in_it(tmp_path: Path, monkeypatch: 
         with bench_realwalks.claimed(run_dir, poll_s=0.05):
             raise RuntimeError("tracking failed")
     assert list((tmp_path / "runs").iterdir()) == []
+
+
+def test_a_sequences_folder_linked_to_one_not_made_yet_is_made(tmp_path: Path) -> None:
+    """A variant's ``--out`` may link its sequences folder to the default's before the default's benchmark has made
+    it; the first lock made there makes the folder the link points to (mkdir on the link itself refused: it exists
+    as a link)."""
+    target = tmp_path / "default" / "sequences"
+    (tmp_path / "variant").mkdir()
+    (tmp_path / "variant" / "sequences").symlink_to(target)
+    with bench_realwalks.claimed(tmp_path / "variant" / "sequences" / "07_01_s0", poll_s=0.05):
+        assert (target / "07_01_s0.lock").read_text() == str(os.getpid())
+    assert target.is_dir() and not (target / "07_01_s0.lock").exists()
