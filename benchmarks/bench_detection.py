@@ -36,8 +36,6 @@ from pathlib import Path
 import numpy as np
 
 VARIANTS = ("mono", "mono_handsoff")
-#: The true body's sole points: the lowest of them in the image is where the person's blob should end
-SOLE_MARKERS = ("left_heel", "right_heel", "left_toe", "right_toe")
 
 
 def _walk_class(cosine: float) -> str:
@@ -58,7 +56,8 @@ def score_sequence(bag: Path, find_start: bool = False) -> dict:
 
     truth = evaluation.read_poses_csv(bag.parent / "ground_truth.csv")
     pelvis = truth.marker("pelvis")[:, :2]
-    soles = np.stack([truth.marker(name) for name in SOLE_MARKERS], axis=1)     # (frames, 4, 3) m
+    # (frames, 4, 3) m: the heels and toes, the lowest of which in the image is where the person's blob should end
+    soles = np.stack([truth.marker(name) for foot in evaluation.FOOT_MARKERS.values() for name in foot], axis=1)
     dt = float(np.median(np.diff(truth.stamps_ns))) * 1e-9
     # the true walking direction: the pelvis's displacement over +-0.25 s (zero while standing)
     reach = max(1, int(round(0.25 / dt)))
@@ -172,6 +171,14 @@ def main(argv: list[str] | None = None) -> int:
                 **{f"{k}_m": median_of([r["along_ray_by_walk"].get(k, {}).get("median_m") for r in recordings])
                    for k in ("away", "towards", "across")}}
 
+    def below_soles(recordings: list[dict]) -> dict:
+        """Median and range over recordings of how many map rows their blobs reach below the soles."""
+        values = [r["feet_row_below_soles_rows_median"] for r in recordings
+                  if r["feet_row_below_soles_rows_median"] is not None]
+        return {"median": median_of(values), "min": min(values, default=None), "max": max(values, default=None)}
+
+    of_variant = {variant: [r for name, r in report["recordings"].items() if name.endswith(f" {variant}")]
+                  for variant in VARIANTS}
     starts = [r["start"] for r in results if "start" in r]
     found = [s for s in starts if s is not None]
     report["summary"] = {
@@ -180,15 +187,9 @@ def main(argv: list[str] | None = None) -> int:
         "over_0.5_m": sum(r["over_0.5_m"] for r in results),
         "median_of_recording_medians_m": median_of([r["median_m"] for r in results]),
         # how far the blob reaches below the person's soles (map rows; per recording: shoes, floor and light)
-        "feet_row_below_soles_rows": {
-            variant: {"median": median_of(values), "min": min(values, default=None), "max": max(values, default=None)}
-            for variant in VARIANTS
-            for values in [[r["feet_row_below_soles_rows_median"] for name, r in report["recordings"].items()
-                            if name.endswith(f" {variant}") and r["feet_row_below_soles_rows_median"] is not None]]},
+        "feet_row_below_soles_rows": {variant: below_soles(of_variant[variant]) for variant in VARIANTS},
         # hand-started recordings learn the background from the empty room, hands-off ones from the walk (a ghost)
-        "along_ray_median_of_recordings": {
-            variant: along_ray([r for name, r in report["recordings"].items() if name.endswith(f" {variant}")])
-            for variant in VARIANTS},
+        "along_ray_median_of_recordings": {variant: along_ray(of_variant[variant]) for variant in VARIANTS},
         "starts": {"recordings": len(starts), "found": len(found),
                    "along_ray_median_m": median_of([s["along_ray_m"] for s in found]),
                    "more_than_0.1_m_too_near": sum(s["along_ray_m"] < -0.1 for s in found),
