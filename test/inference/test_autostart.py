@@ -162,6 +162,42 @@ def test_a_camera_too_far_and_low_to_place_the_feet_does_not_start_it():
         AutoStartConfig(max_row_depth_m=0.0)
 
 
+def legs_hidden(features, hem: float = 0.6):
+    """``features`` with the person's blob cut at ``hem`` of its height from the top: the legs (bare, or in
+    shorts or a skirt of the floor's colour) gone into the background."""
+    from dataclasses import replace
+
+    from awalker_tracker.vision.detection import person_blob
+
+    blob = person_blob(features)
+    if blob is None:
+        return features
+    llr = features.llr.copy()
+    u0, v0, u1, v1 = (value / features.downsample for value in blob.box)
+    llr[:, int(v0 + hem * (v1 - v0)):, int(u0):int(np.ceil(u1)) + 1] = -5.0
+    return replace(features, llr=llr)
+
+
+def test_legs_lost_to_the_floor_in_every_other_frame_still_start_it(frames):
+    """A blob cut at the hem puts the person's feet row metres farther and their top taller than they are. In
+    every other frame of this walk the finder sees the person there but does not place them, and the start is
+    as near the person as with the legs seen; without that (the ratio out of reach) only half of the window's
+    frames place the person and it does not start."""
+    camera, features, poses = frames
+    cut = [legs_hidden(f) if k >= 8 and k % 2 else f for k, f in enumerate(features)]
+    found, finder = _start(camera, cut, AutoStartConfig(fit_window_s=0.9))
+    assert found is not None, finder.status()
+    assert finder.frames_feet_hidden >= 5
+    pose = poses[found.frame - 4]
+    pelvis = pose_body(BODY, PARAMS, pose.walker, pose.kin).markers[0, 0, :2]
+    assert np.linalg.norm(np.array(found.position) - pelvis) < 0.25
+    assert found.speed == pytest.approx(SPEED, rel=0.2)
+    unseen, finder = _start(camera, cut, AutoStartConfig(fit_window_s=0.9, feet_hidden_height_ratio=100.0))
+    assert unseen is None and "not yet walking" in finder.status() and finder.frames_feet_hidden == 0
+    with pytest.raises(ValueError, match="invalid settings"):
+        AutoStartConfig(feet_hidden_height_ratio=1.0)
+
+
 @pytest.fixture(scope="module")
 def two_walking():
     """The side camera's features of two people walking along +x: A from x = -0.8 m as in ``frames``, B from

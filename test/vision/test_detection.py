@@ -297,3 +297,24 @@ def test_ground_track_fit_drops_a_misplaced_detection():
     for f in range(31, 41):
         track.add(f, None)                                     # the person out of view
     assert track.velocity(40, 0.5) is None                     # too few detections in the window
+
+
+def test_ground_track_counts_frames_seen_without_a_position():
+    """Frames the person was seen in but not placed (their feet unseen) count towards a window's share of
+    frames, not into its fit; a window needs half that share placed."""
+    from awalker_tracker.vision.detection import GroundTrack
+
+    def track(seen: bool, placed_every: int = 2) -> GroundTrack:
+        t = GroundTrack(dt=1 / 30)
+        for f in range(31):
+            placed = f % placed_every == 0
+            t.add(f, np.array([1.2 * f / 30, 0.5]) if placed else None, seen=seen and not placed)
+        return t
+
+    assert track(seen=False).velocity(30, 1.0) is None           # 16 of 31 frames placed: under 0.8 of them
+    assert track(seen=True).velocity(30, 1.0) == pytest.approx([1.2, 0.0], abs=1e-6)
+    assert track(seen=True, placed_every=3).velocity(30, 1.0) is None   # 11 placed: under half of 0.8 x 30
+    assert track(seen=True).fitted_position(30, 1.0, at=15) == pytest.approx([0.6, 0.5], abs=1e-6)
+    old = track(seen=True)
+    old.add(400, None)                                           # frames older than keep_frames are dropped
+    assert not old.seen_without_position

@@ -17,8 +17,10 @@ wholly in view of some camera count, and with one camera only where one map row 
 per row on a tuning walk) the feet rows were metres off, and a track restarted there began 6.8 m from the
 person; the finder then says the camera is too far or too low rather than start. Once someone's detections over ``window_s``
 (at least ``min_fraction`` of its frames) form a ground track moving at ``min_speed_m_s`` or
-faster (the first seen of those who do, then the larger blob), the start is the central frame of that window's detections (the caller keeps the window's
-frames and tracks from there: the track begins about ``window_s`` / 2 before the walk was found).
+faster (the first seen of those who do, then the larger blob; frames where their blob ends above the feet,
+``feet_hidden_height_ratio``, count as seen but not placed), the start is the central frame of that window's
+detections (the caller keeps the window's frames and tracks from there: the track begins about ``window_s`` / 2
+before the walk was found).
 Its position, heading and speed (clamped to ``speed_range_m_s``, the gaits the tracker knows) come
 from a straight-line fit of the track over ``fit_window_s`` from the window's first frame: the
 finder waits that much longer before answering (one camera places the feet in steps of a map row,
@@ -39,7 +41,7 @@ import numpy as np
 from awalker_tracker.inference.filter_model import InitialSpread, StartDescription
 from awalker_tracker.vision.camera import Camera
 from awalker_tracker.vision.detection import (
-    GroundTrack, PersonBlob, PersonDetection, ground_point, locate_person, person_blobs, wholly_in_view)
+    GroundTrack, PersonBlob, PersonDetection, ground_point, locate_person, on_blob, person_blobs, wholly_in_view)
 
 
 # Initial particles of an automatic start: wider than around a hand-written start (one camera places the
@@ -63,11 +65,18 @@ class AutoStartConfig:
     follow_radius_m: float = 1.5                     # ... within this distance (several people in view)
     max_candidates: int = 4         # people (or ghosts) followed at once while none walks steadily
     max_row_depth_m: float = 0.5    # one camera: a feet row spanning more depth than this per map row does not count
+    # A feet-row sighting whose blob stands taller than this times the person's median height so far (after
+    # feet_hidden_after sightings) has lost its legs to the floor (bare legs, shorts or a skirt near the floor's
+    # colour: the blob ends at the hem and the feet row puts them metres farther): the person was seen there,
+    # not placed (``GroundTrack.add(seen=True)``). The recovery's feet rows stop counting at the same ratio.
+    feet_hidden_height_ratio: float = 1.10
+    feet_hidden_after: int = 5
 
     def __post_init__(self) -> None:
         if not (0 < self.window_s <= self.fit_window_s and 0 < self.min_fraction <= 1 and self.gate_s >= 0
                 and self.gate_m > 0 and self.min_speed_m_s >= 0 and 0 < self.speed_range_m_s[0] < self.speed_range_m_s[1]
-                and self.follow_radius_m > 0 and self.max_candidates >= 1 and self.max_row_depth_m > 0):
+                and self.follow_radius_m > 0 and self.max_candidates >= 1 and self.max_row_depth_m > 0
+                and self.feet_hidden_height_ratio > 1 and self.feet_hidden_after >= 1):
             raise ValueError(f"AutoStartConfig: invalid settings {self}")
         if self.follow_near is not None and not (len(self.follow_near) == 2 and np.all(np.isfinite(self.follow_near))):
             raise ValueError(f"AutoStartConfig: follow_near must be a finite ground point (x, y) in m, got "
@@ -91,10 +100,12 @@ class StartFinder:
 
     def __init__(self, cameras: list[Camera], dt: float, config: AutoStartConfig = AutoStartConfig()) -> None:
         self.cameras = list(cameras)
+        self._by_name = {c.name: c for c in self.cameras}
         self.config = config
         self.dt = float(dt)
         self.frames_seen = 0
         self.frames_detected = 0
+        self.frames_feet_hidden = 0     # frames the person was seen in with their feet unseen (``_feet_hidden``)
         self._candidates: list[_Candidate] = []
         self._coarse: deque[float] = deque(maxlen=300)   # row depths (m) of recent detections too coarse to count
         self._found: tuple[int, int, _Candidate] | None = None   # (start frame, its window's first frame, who)
@@ -126,6 +137,18 @@ class StartFinder:
             return position, cfg.gate_m + cfg.speed_range_m_s[1] * since
         return position + since * velocity, cfg.gate_m
 
+    def _feet_hidden(self, candidate: _Candidate, detection: PersonDetection | None, predicted: np.ndarray) -> bool:
+        """Whether ``detection`` (wholly in view, placed by a feet row, its blob over where ``candidate`` would
+        be now) stands taller than ``feet_hidden_height_ratio`` times the candidate's median height: its blob
+        ends above the feet."""
+        cfg = self.config
+        if (detection is None or detection.triangulated or not np.isfinite(detection.height)
+                or len(candidate.heights) < cfg.feet_hidden_after or not wholly_in_view(detection, self.cameras)):
+            return False
+        pelvis = np.append(predicted, 0.9)
+        over = any(on_blob(self._by_name[b.camera], pelvis, b, margin=0.0) for b in detection.blobs)
+        return over and detection.height > cfg.feet_hidden_height_ratio * float(np.median(candidate.heights))
+
     def push(self, frame: int, features: list[Any]) -> StartDescription | None:
         """The start description once the person was found walking and ``fit_window_s`` of track is in,
         else None. Its frame is the central frame of the window the walk was found over."""
@@ -147,17 +170,23 @@ class StartFinder:
         # would be now, a detection farther than the reach someone else (or two people's blobs merged); the
         # one seen first chooses first
         followed = [self._found[2]] if self._found is not None else self._candidates
+        hidden_now = False
         for candidate in followed:
             predicted, reach = self._predicted(candidate, frame)
             detection = locate_person(seen, self.cameras, near=np.append(predicted, 0.9))
-            whole = (placed(detection) and np.linalg.norm(detection.position - predicted) <= reach
+            hidden = self._feet_hidden(candidate, detection, predicted) and not taken.intersection(detection.blobs)
+            whole = (not hidden and placed(detection) and np.linalg.norm(detection.position - predicted) <= reach
                      and not taken.intersection(detection.blobs))
-            candidate.track.add(frame, detection.position if whole else None)
+            candidate.track.add(frame, detection.position if whole else None, seen=hidden)
+            if hidden:
+                taken.update(detection.blobs)
+                hidden_now = True
             if whole:
                 taken.update(detection.blobs)
                 candidate.last_seen = (frame, detection.position)
                 if np.isfinite(detection.height):
                     candidate.heights.append(float(detection.height))
+        self.frames_feet_hidden += hidden_now
         if self._found is not None:
             if frame - self._found[1] >= self._found[2].track.span(cfg.fit_window_s):
                 return self.finish()
@@ -224,5 +253,6 @@ class StartFinder:
         if self._found is not None:
             return (f"person walking since frame {self._found[0]}, fitting the track over "
                     f"{self.config.fit_window_s:g} s")
-        return (f"person wholly in view in {self.frames_detected} of {self.frames_seen} frames, "
+        hidden = f" (and in {self.frames_feet_hidden} more with the feet unseen)" if self.frames_feet_hidden else ""
+        return (f"person wholly in view in {self.frames_detected} of {self.frames_seen} frames{hidden}, "
                 f"not yet walking steadily for {self.config.window_s:g} s")

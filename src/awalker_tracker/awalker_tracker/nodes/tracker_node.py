@@ -423,10 +423,12 @@ class TrackerNode(AwalkerNode):
             # track from the start's frame, inside the window the walk was found over
             self._pending[:0] = [p for p in self._seen if p.frame_index >= found.frame]
             self.start, self.start_found_automatically = found, True
+            hidden = self._finder.frames_feet_hidden
             self.get_logger().info(
                 f"automatic start at frame {found.frame}: person at ({found.position[0]:.2f}, "
                 f"{found.position[1]:.2f}) m, heading {np.degrees(found.heading):.0f} deg, "
-                f"{found.speed:.2f} m/s, stance leg unknown (both sampled)")
+                f"{found.speed:.2f} m/s, stance leg unknown (both sampled)"
+                + (f"; their feet unseen (the blob ending above them) in {hidden} frames" if hidden else ""))
             self._write_start()
             return True
 

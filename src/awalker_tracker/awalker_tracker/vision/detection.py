@@ -380,17 +380,24 @@ def wholly_in_view(detection: PersonDetection, cameras: list[Camera], border_px:
 
 
 class GroundTrack:
-    """Detected ground positions per frame (None: no reliable detection) and their recent velocity."""
+    """Detected ground positions per frame (None: no reliable detection) and their recent velocity. A frame
+    may also hold the person seen without a position (``add(..., seen=True)``: their feet hidden), which
+    counts towards a window's frames but not into its fit."""
 
     def __init__(self, dt: float, keep_frames: int = 300) -> None:
         self.dt = float(dt)
         self.keep_frames = keep_frames
         self.positions: dict[int, np.ndarray | None] = {}
+        self.seen_without_position: set[int] = set()
 
-    def add(self, frame: int, position: np.ndarray | None) -> None:
+    def add(self, frame: int, position: np.ndarray | None, seen: bool = False) -> None:
+        """Frame ``frame``'s ground position (m), or None; ``seen`` with None: the person was there, unplaced."""
         self.positions[frame] = None if position is None else np.asarray(position, float)
+        if seen and position is None:
+            self.seen_without_position.add(frame)
         for old in [f for f in self.positions if f < frame - self.keep_frames]:
             del self.positions[old]
+            self.seen_without_position.discard(old)
 
     def span(self, window_s: float) -> int:
         """Frames in a window of ``window_s`` (at least 2)."""
@@ -403,9 +410,12 @@ class GroundTrack:
 
     def velocity(self, frame: int, window_s: float, min_fraction: float = 0.8) -> np.ndarray | None:
         """Ground velocity (m/s) of the line fit (``_line_fit``) over the ``window_s`` up to ``frame``, or None
-        when fewer than ``min_fraction`` of its frames (and fewer than 3) have a position."""
+        when fewer than ``min_fraction`` of its frames (and fewer than 3) saw the person, or fewer than half of
+        those had a position."""
         span, points = self._window(frame, window_s)
-        if len(points) < max(3, int(min_fraction * span)):
+        needed = max(3, int(min_fraction * span))
+        unplaced = sum(1 for f in range(frame - span, frame + 1) if f in self.seen_without_position)
+        if len(points) + unplaced < needed or len(points) < max(3, int(0.5 * min_fraction * span)):
             return None
         return self._line_fit(points, frame)[0] / self.dt
 
