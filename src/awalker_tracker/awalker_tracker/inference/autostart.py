@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from awalker_tracker.inference.filter_model import InitialSpread, StartDescription
+from awalker_tracker.inference.recovery import RecoveryConfig
 from awalker_tracker.vision.camera import Camera
 from awalker_tracker.vision.detection import (
     GroundTrack, PersonBlob, PersonDetection, ground_point, locate_person, on_blob, person_blobs, wholly_in_view)
@@ -69,7 +70,7 @@ class AutoStartConfig:
     # feet_hidden_after sightings) has lost its legs to the floor (bare legs, shorts or a skirt near the floor's
     # colour: the blob ends at the hem and the feet row puts them metres farther): the person was seen there,
     # not placed (``GroundTrack.add(seen=True)``). The recovery's feet rows stop counting at the same ratio.
-    feet_hidden_height_ratio: float = 1.10
+    feet_hidden_height_ratio: float = RecoveryConfig.feet_row_height_ratio[1]
     feet_hidden_after: int = 5
 
     def __post_init__(self) -> None:
@@ -137,15 +138,14 @@ class StartFinder:
             return position, cfg.gate_m + cfg.speed_range_m_s[1] * since
         return position + since * velocity, cfg.gate_m
 
-    def _feet_hidden(self, candidate: _Candidate, detection: PersonDetection | None, predicted: np.ndarray) -> bool:
-        """Whether ``detection`` (wholly in view, placed by a feet row, its blob over where ``candidate`` would
-        be now) stands taller than ``feet_hidden_height_ratio`` times the candidate's median height: its blob
-        ends above the feet."""
+    def _feet_hidden(self, candidate: _Candidate, detection: PersonDetection, pelvis: np.ndarray) -> bool:
+        """Whether ``detection`` (wholly in view, placed by a feet row, its blob over ``pelvis``, the world point
+        (3,) where ``candidate``'s pelvis would be now) stands taller than ``feet_hidden_height_ratio`` times the
+        candidate's median height: its blob ends above the feet."""
         cfg = self.config
-        if (detection is None or detection.triangulated or not np.isfinite(detection.height)
+        if (detection.triangulated or not np.isfinite(detection.height)
                 or len(candidate.heights) < cfg.feet_hidden_after or not wholly_in_view(detection, self.cameras)):
             return False
-        pelvis = np.append(predicted, 0.9)
         over = any(on_blob(self._by_name[b.camera], pelvis, b, margin=0.0) for b in detection.blobs)
         return over and detection.height > cfg.feet_hidden_height_ratio * float(np.median(candidate.heights))
 
@@ -173,16 +173,17 @@ class StartFinder:
         hidden_now = False
         for candidate in followed:
             predicted, reach = self._predicted(candidate, frame)
-            detection = locate_person(seen, self.cameras, near=np.append(predicted, 0.9))
-            hidden = self._feet_hidden(candidate, detection, predicted) and not taken.intersection(detection.blobs)
+            pelvis = np.append(predicted, 0.9)
+            detection = locate_person(seen, self.cameras, near=pelvis)
+            free = detection is not None and not taken.intersection(detection.blobs)
+            hidden = free and self._feet_hidden(candidate, detection, pelvis)
             whole = (not hidden and placed(detection) and np.linalg.norm(detection.position - predicted) <= reach
-                     and not taken.intersection(detection.blobs))
+                     and free)
             candidate.track.add(frame, detection.position if whole else None, seen=hidden)
-            if hidden:
+            hidden_now |= hidden
+            if hidden or whole:
                 taken.update(detection.blobs)
-                hidden_now = True
             if whole:
-                taken.update(detection.blobs)
                 candidate.last_seen = (frame, detection.position)
                 if np.isfinite(detection.height):
                     candidate.heights.append(float(detection.height))
