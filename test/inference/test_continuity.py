@@ -247,6 +247,9 @@ class _OrderingMonitor:
     def depth_band(self, frame):
         return None
 
+    def heading_band(self, frame):
+        return None
+
     def still(self, frame):
         return False
 

@@ -556,3 +556,99 @@ def test_walkers_straying_in_depth_beyond_the_band_lose_weight(seen, band: float
         assert loglik[3] < loglik[2] < base and loglik[4] < base    # 0.5 and 0.8 m off: beyond the band
     with pytest.raises(ValueError, match="depth_band_sigma_m"):
         RecoveryConfig(depth_band_sigma_m=0.0)
+
+
+def _feet_rows_along(path: np.ndarray, recovery: RecoveryConfig = RecoveryConfig(),
+                     row_depth_m: float = 0.0) -> LostTrackMonitor:
+    """A one-camera monitor whose counted feet rows (the ground positions its detections gave, one a frame at 30 Hz,
+    each map row spanning ``row_depth_m`` of depth) lie along ``path`` (F, 2) m."""
+    monitor = LostTrackMonitor([], recovery, dt=1 / 30)
+    for frame, position in enumerate(path):
+        monitor._feet_rows.add(frame, position)
+        monitor._row_depths[frame] = row_depth_m
+    return monitor
+
+
+def test_heading_band_points_where_the_feet_rows_move_straight():
+    """One camera: the heading band points where the counted feet rows moved over ``heading_band_window_s`` (1 s),
+    its free half width ``heading_band_rad`` widened by the angle to the window's last half and by the angle a map
+    row's depth subtends over the distance moved; none where the track turns by more than
+    ``heading_band_turning_rad`` over the window, moves slower than ``moving_m_s``, the person stands still, this
+    frame's feet row does not count, or the band is off (``heading_band_rad`` 0, the default)."""
+    on = RecoveryConfig(heading_band_rad=0.6)
+    rng = np.random.default_rng(4)
+    t = np.arange(40) / 30
+    direction = 2.5                                            # rad: walking up and to the left
+    straight = t[:, None] * np.array([np.cos(direction), np.sin(direction)]) + 0.02 * rng.standard_normal((40, 2))
+    band = _feet_rows_along(straight, on).heading_band(39)
+    assert band is not None and abs(band[0] - direction) < 0.05
+    assert on.heading_band_rad <= band[1] < on.heading_band_rad + 0.1
+    # map rows 1 m deep over a 1 m walk: the direction is uncertain by ~45 degrees more
+    far = _feet_rows_along(straight, on, row_depth_m=1.0).heading_band(39)
+    assert far is not None and far[0] == band[0] and 0.7 < far[1] - band[1] < 0.85
+    turning = 0.5 * np.column_stack([np.cos(2.0 * t), np.sin(2.0 * t)])   # 1 m/s round a 0.5 m circle: 2 rad/s
+    assert _feet_rows_along(turning, on).heading_band(39) is None
+    assert _feet_rows_along(turning, replace(on, heading_band_turning_rad=1.0)).heading_band(39) is not None
+    assert _feet_rows_along(0.2 * straight, on).heading_band(39) is None      # 0.2 m/s, under moving_m_s
+    assert _feet_rows_along(straight).heading_band(39) is None                # off: the default
+    unseen = _feet_rows_along(straight, on)
+    unseen._feet_rows.add(40, None)                           # this frame's feet row does not count
+    assert unseen.heading_band(40) is None and unseen.heading_band(39) is not None
+    still = _feet_rows_along(straight, on)
+    still._still[39] = True
+    assert still.heading_band(39) is None
+    with pytest.raises(ValueError, match="heading_band_sigma_rad"):
+        RecoveryConfig(heading_band_sigma_rad=0.0)
+
+
+class _BandMonitor:
+    """A lost-track monitor that orders nothing and gives a heading band (rad) at every frame."""
+
+    def __init__(self, band: tuple[float, float] | None) -> None:
+        from awalker_tracker.vision.detection import GroundTrack
+
+        self.band, self.track = band, GroundTrack(1 / 30)
+
+    def update(self, frame, features, pelvis):
+        return None
+
+    def depth_band(self, frame):
+        return None
+
+    def heading_band(self, frame):
+        return self.band
+
+    def still(self, frame):
+        return False
+
+
+@pytest.mark.parametrize("band", [(0.3, 0.35), None])
+def test_walkers_heading_beyond_the_heading_band_lose_weight(seen, band):
+    """Walkers heading within the band's half width of its direction keep the image's log-likelihood; beyond it
+    they lose 0.5 (excess / heading_band_sigma_rad)^2 nats, levelling off at ~-log(depth_band_outlier), the
+    angle taken round the circle (a walker facing the other way loses the most). No band: no term."""
+    from awalker_tracker.inference.filter_model import ImageObservation
+
+    camera, features, markers = seen
+    config = TrackerConfig(dt=1 / 30, recovery=RecoveryConfig(heading_band_sigma_rad=0.2, depth_band_outlier=0.05))
+    start = StartDescription(0, (float(markers[PELVIS, 0]), float(markers[PELVIS, 1])), 0.0, 1.3, 0.7, LEFT)
+    flat = lambda prev, states, obs: np.full(len(states), -7.0)    # noqa: E731  the images rate all alike
+    model = TrackerModel(BODY, start, flat, config, cameras=[camera])
+    model.monitor = _BandMonitor(band)
+    rng = np.random.default_rng(0)
+    headings = np.array([0.3, 0.0, 0.6, 1.2, -0.6, 0.3 + np.pi, 0.3 - 2 * np.pi + 0.5])
+    states = model.initial(headings.size, rng)
+    states = replace(states, kin=replace(states.kin, heading=headings))
+    obs = ImageObservation(features=(features,))
+    states = model.rejuvenate(20, np.zeros(headings.size), states, states, obs, rng)
+    loglik = model.log_likelihood(None, states, obs)
+    base = config.likelihood_scale * -7.0
+    if band is None:
+        np.testing.assert_allclose(loglik, base)
+        return
+    excess = np.array([0.0, 0.0, 0.0, 0.55, 0.55, np.pi - 0.35, 0.15])
+    squared = 0.5 * (excess / 0.2) ** 2
+    np.testing.assert_allclose(loglik, base - (np.log1p(0.05) - np.logaddexp(-squared, np.log(0.05))), atol=1e-9)
+    assert np.all(loglik[:3] == base) and loglik[5] < loglik[3] < loglik[6] < base
+    assert base - loglik.min() < -np.log(0.05) + 0.06
+

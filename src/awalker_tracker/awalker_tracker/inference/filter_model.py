@@ -508,6 +508,7 @@ class TrackerModel:
         # frame periods the next transition spans (``Tracker.push``: from the stamps; > 1 over frames no image came for)
         self.frames_per_step = 1
         self._depth_band: tuple[np.ndarray, float] | None = None   # this frame's centre and half width, one camera
+        self._heading_band: tuple[float, float] | None = None      # this frame's direction and half width, one camera
         self._target_speed = float(start.speed)      # m/s, eq. (5)'s target speed (rejuvenate)
         # the naming test (TrackerConfig.naming_test_particles): log odds of the other naming, each frame's evidence
         # (filter frame index -> nats), the decision taken at each frame (True: every particle renamed its legs
@@ -778,12 +779,13 @@ class TrackerModel:
                    states: TrackerStates, obs: Any, rng: np.random.Generator) -> TrackerStates:
         """Hold the walkers while the person stands still and re-acquire a lost track from the image
         (``inference.recovery``); ``w``: the normalised weights of ``log_weights``."""
-        self._depth_band = None
+        self._depth_band = self._heading_band = None
         if self.monitor is None or not isinstance(obs, ImageObservation):
             return states
         pelvis = w @ states.pose.markers[:, MARKER_NAMES.index("pelvis")]
         order = self.monitor.update(frame, obs.features, pelvis)
         self._depth_band = self.monitor.depth_band(frame)
+        self._heading_band = self.monitor.heading_band(frame)
         if parent is not None and self.monitor.still(frame):
             # the person stands still: the frame's walkers are the previous frame's, not walking, but free to
             # turn where they stand (a person turning round on the spot)
@@ -887,7 +889,8 @@ class TrackerModel:
         loglik = np.asarray(self.likelihood(prev, states, obs), float)
         if pending is not None:
             self._naming_evidence_of(pending, loglik, states, obs)
-        return self.config.likelihood_scale * loglik - penalty - self.depth_band_penalty(states)
+        return (self.config.likelihood_scale * loglik - penalty - self.depth_band_penalty(states)
+                - self.heading_band_penalty(states))
 
     def depth_band_penalty(self, states: TrackerStates) -> np.ndarray:
         """(N,) nats taken from walkers whose pelvis strays over the ground beyond the band's half width
@@ -902,9 +905,19 @@ class TrackerModel:
             return np.zeros(len(states))
         centre, half_width = self._depth_band
         gap = np.linalg.norm(states.pose.markers[:, MARKER_NAMES.index("pelvis"), :2] - centre, axis=1)
-        inlier = -0.5 * (np.maximum(gap - half_width, 0.0) / r.depth_band_sigma_m) ** 2
-        outlier = np.log(r.depth_band_outlier)
-        return np.logaddexp(0.0, outlier) - np.logaddexp(inlier, outlier)
+        return _band_penalty(gap - half_width, r.depth_band_sigma_m, r.depth_band_outlier)
+
+    def heading_band_penalty(self, states: TrackerStates) -> np.ndarray:
+        """(N,) nats taken from walkers heading farther than the band's half width from the direction the frame's
+        one-camera feet rows move in (``LostTrackMonitor.heading_band``; a side view shows which way a person walks
+        by where they go, hardly by how the body looks): up to 0.5 (excess / ``heading_band_sigma_rad``)^2, levelling
+        off at about -log(``depth_band_outlier``); zeros where the frame has no band."""
+        r = self.config.recovery
+        if self._heading_band is None:
+            return np.zeros(len(states))
+        direction, half_width = self._heading_band
+        off = np.abs(np.angle(np.exp(1j * (states.kin.heading - direction))))
+        return _band_penalty(off - half_width, r.heading_band_sigma_rad, r.depth_band_outlier)
 
     # -- outputs --------------------------------------------------------------------------
     def outputs(self, states: TrackerStates, events: Any | None) -> ParticleOutputs:
@@ -926,6 +939,15 @@ class TrackerModel:
             strike_fraction=(np.full(n, np.nan) if events is None
                              else np.where(struck, np.asarray(events.strike_fraction, float), np.nan)),
             walker=walker_fields, reseeded=states.reseeded)
+
+
+def _band_penalty(excess: np.ndarray, sigma: float, outlier: float) -> np.ndarray:
+    """Nats (>= 0) a band takes from values ``excess`` beyond its free half width (<= 0 inside: nothing): a Gaussian
+    of ``sigma`` on the excess, mixed with an outlier of probability ``outlier``, so the band's own reading may be
+    wrong and the penalty levels off at about -log(outlier)."""
+    inlier = -0.5 * (np.maximum(excess, 0.0) / sigma) ** 2
+    log_outlier = np.log(outlier)
+    return np.logaddexp(0.0, log_outlier) - np.logaddexp(inlier, log_outlier)
 
 
 # ----------------------------------------------------------------------------- online tracker

@@ -55,6 +55,16 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   threshold), so it only holds the depth within a band, and not over the first half second, when the
   start is better than any one feet row (a hand start is right to 5 cm; the automatic start is made from
   the feet rows themselves). Measured in docs/tracking.md (Recovery, *One camera's depth band*).
+- **One camera's heading (off: ``heading_band_rad`` 0).** Seen from one side a walker facing 40-110 degrees
+  off still covers the person's silhouette, and slow walkers' headings drifted that far while the feet rows went
+  straight on. With ``heading_band_rad`` > 0, where this frame's feet row counts and the counted feet rows moved
+  at ``moving_m_s`` or faster over ``heading_band_window_s`` and its last half, in directions within
+  ``heading_band_turning_rad`` of each other (not turning), walkers heading farther than the band's half width
+  from that direction lose up to 0.5 (excess / ``heading_band_sigma_rad``)^2 nats, levelling off as the depth
+  band's does (``TrackerModel.heading_band_penalty``). The half width is ``heading_band_rad`` plus the angle
+  between the two directions plus the angle a map row of the feet row's depth subtends over the distance moved:
+  a far, low camera places the feet in steps of a row along its view. Measured in docs/tracking.md (Recovery,
+  *One camera's heading band*).
 - **A person who stops.** The walker only walks (the paper's model has no standing still): with
   ``hold_still``, while the detections' ground track moves slower than ``still_m_s`` over
   ``still_window_s`` (and until it moves faster than ``moving_m_s`` again), each frame's particles
@@ -108,6 +118,14 @@ class RecoveryConfig:
     depth_band_sigma_m: float = 0.1    # ... beyond it each frame costs 0.5 (excess / sigma)^2 nats; band 0: off
     depth_band_outlier: float = 0.05   # ... up to ~-log(this): a feet row may be wrong (feet hidden)
     depth_band_delay_s: float = 0.5    # ... from this long (s) after the first frame tracked: the start holds before
+    # one camera's heading band (module docstring; 0: off, the default: at 0.6 within the runs' spread on the
+    # tuning subjects, docs/tracking.md, *One camera's heading band*): walkers heading this far (rad) from where the
+    # feet rows go are free ...
+    heading_band_rad: float = 0.0
+    heading_band_sigma_rad: float = 0.2   # ... beyond it each frame costs 0.5 (excess / sigma)^2 nats, up to
+    #                                       ~-log(depth_band_outlier)
+    heading_band_window_s: float = 1.0    # ... the track's direction over this time, where it moves at moving_m_s
+    heading_band_turning_rad: float = 0.35   # ... and over the window's last half within this of it (not turning)
 
     def __post_init__(self) -> None:
         low, high = self.feet_row_height_ratio
@@ -120,11 +138,15 @@ class RecoveryConfig:
                self.box_margin, self.track_window_s, self.moving_m_s, self.lost_distance_m,
                self.lost_distance_one_camera_m, self.still_m_s,
                self.still_window_s, self.depth_band_m, self.depth_band_delay_s, self.reach_m, self.reach_m_s,
-               self.reach_reset_s, self.lost_rows_one_camera, self.depth_band_rows, self.reach_rows) < 0:
+               self.reach_reset_s, self.lost_rows_one_camera, self.depth_band_rows, self.reach_rows,
+               self.heading_band_rad, self.heading_band_turning_rad) < 0:
             raise ValueError("RecoveryConfig: times, spreads and margins must be >= 0")
         if not (self.depth_band_sigma_m > 0 and 0 < self.depth_band_outlier < 1):
             raise ValueError(f"RecoveryConfig: depth_band_sigma_m must be > 0 and depth_band_outlier in (0, 1), got "
                              f"{self.depth_band_sigma_m}, {self.depth_band_outlier}")
+        if not (self.heading_band_sigma_rad > 0 and self.heading_band_window_s > 0):
+            raise ValueError(f"RecoveryConfig: heading_band_sigma_rad and heading_band_window_s must be > 0, got "
+                             f"{self.heading_band_sigma_rad}, {self.heading_band_window_s}")
 
 
 def put_rows(target: Any, indices: np.ndarray, source: Any) -> Any:
@@ -232,6 +254,28 @@ class LostTrackMonitor:
         if self._first_frame is None or frame - self._first_frame < delay or centre is None:
             return None
         return centre, max(self.config.depth_band_m, self.config.depth_band_rows * self._row_depths[frame])
+
+    def heading_band(self, frame: int) -> tuple[float, float] | None:
+        """One camera: the heading band at ``frame``, its direction (rad: where the counted feet rows moved over
+        ``heading_band_window_s``) and half width (rad: ``heading_band_rad``, plus the angle between that direction
+        and the window's last half's, plus the angle a map row of the feet row's depth subtends over the distance
+        moved), where this frame's feet row counts, the window and its last half move at ``moving_m_s`` or faster
+        and turn by at most ``heading_band_turning_rad``, and the person does not stand still; else None."""
+        cfg = self.config
+        if cfg.heading_band_rad <= 0 or self.still(frame) or self.feet_row_position(frame) is None:
+            return None
+        whole = self._feet_rows.velocity(frame, cfg.heading_band_window_s)
+        recent = self._feet_rows.velocity(frame, 0.5 * cfg.heading_band_window_s)
+        if whole is None or recent is None or min(np.linalg.norm(whole), np.linalg.norm(recent)) < cfg.moving_m_s:
+            return None
+        direction = float(np.arctan2(whole[1], whole[0]))
+        turned = abs(float(np.angle(np.exp(1j * (np.arctan2(recent[1], recent[0]) - direction)))))
+        if turned > cfg.heading_band_turning_rad:
+            return None
+        # a far, low camera places the feet in steps of a map row along its view: over a window that moved less
+        # than a row's depth the direction is as uncertain as the row is long
+        rows = float(np.arctan2(self._row_depths[frame], np.linalg.norm(whole) * cfg.heading_band_window_s))
+        return direction, cfg.heading_band_rad + turned + rows
 
     def placed_position(self, frame: int) -> np.ndarray | None:
         """Where cameras at different angles place the person at ``frame`` (m, world xy: the line fit over
