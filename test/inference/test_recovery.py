@@ -599,6 +599,10 @@ def test_heading_band_points_where_the_feet_rows_move_straight():
     assert still.heading_band(39) is None
     with pytest.raises(ValueError, match="heading_band_sigma_rad"):
         RecoveryConfig(heading_band_sigma_rad=0.0)
+    with pytest.raises(ValueError, match="heading_band_window_s must be > 0"):
+        RecoveryConfig(heading_band_window_s=0.0)
+    with pytest.raises(ValueError, match="must be >= 0"):
+        RecoveryConfig(heading_band_rad=-0.1)
 
 
 class _BandMonitor:
