@@ -134,6 +134,49 @@ def test_a_body_with_its_legs_named_the_other_way_is_its_mirror_image():
     assert np.array_equal(walker.stance_leg, 1 - s.walker.stance_leg)
 
 
+def test_a_body_drawn_standing_brings_its_feet_together_under_the_kept_pelvis():
+    """``kinematics.standing_body``: mid-stride bodies taken the whole way stand with both legs vertical, both knees
+    straight and both feet flat, side by side under the pelvis and on the ground, the pelvis where it was; taken part
+    of the way, the feet come that far together; each body by its own fraction; the walker's hip stays put in its
+    own plane and the rates and eq. (6)'s previous joint angles are the originals'."""
+    from awalker_tracker.model import kinematics
+    from awalker_tracker.model.walker import hip_position
+
+    model, walk = _walking_particles(60, 12)
+    s = walk[-1]
+    pelvis = s.pose.markers[:, PELVIS, :2]
+    ankles = [MARKER_NAMES.index("left_ankle"), MARKER_NAMES.index("right_ankle")]
+    along = np.stack([np.cos(s.kin.heading), np.sin(s.kin.heading)], axis=1)
+
+    def feet_apart(markers: np.ndarray, rows: np.ndarray = np.ones(60, bool)) -> np.ndarray:
+        return np.abs(np.sum((markers[:, ankles[0], :2] - markers[:, ankles[1], :2]) * along[rows], axis=1))
+
+    def other_foot_up(markers: np.ndarray) -> np.ndarray:
+        return np.ptp(markers[:, ankles, 2], axis=1)
+
+    apart = feet_apart(s.pose.markers)
+    assert np.median(apart) > 0.1 and np.median(other_foot_up(s.pose.markers)) > 0.05   # mid-stride, a foot up
+    fraction = np.where(np.arange(60) % 2 == 0, 1.0, 0.5)
+    walker, kin = kinematics.standing_body(s.walker, s.kin, pelvis, fraction, model.body, model.params,
+                                           model.kin_config)
+    posed = kinematics.pose_body(model.body, model.params, walker, kin, model.kin_config).markers
+    np.testing.assert_allclose(posed[:, PELVIS, :2], pelvis, atol=1e-9)
+    np.testing.assert_allclose(hip_position(model.params, walker)[0], hip_position(model.params, s.walker)[0],
+                               atol=1e-12)
+    np.testing.assert_allclose(walker.stance_angle, (1 - fraction) * s.walker.stance_angle)
+    np.testing.assert_array_equal(walker.stance_rate, s.walker.stance_rate)
+    np.testing.assert_array_equal(kin.previous, s.kin.previous)
+    sole = kinematics.sole_point_world(model.body, walker, kin, kin.contact_leg, kin.contact_roll, model.kin_config)
+    np.testing.assert_allclose(sole[:, :2], kin.contact_point, atol=1e-9)
+    assert np.all(np.abs(sole[:, 2]) < 1e-9)             # the contact on the ground
+    whole, half = fraction == 1.0, fraction == 0.5
+    assert np.all(feet_apart(posed[whole], whole) < 0.03)
+    np.testing.assert_allclose(kin.dofs()[whole][:, 7:13], 0.0)
+    # what is left is the hips' roll and the legs' sideways spread, which standing leaves alone
+    assert np.all(other_foot_up(posed[whole]) < 0.03) and np.median(other_foot_up(posed[whole])) < 0.01
+    assert np.all(feet_apart(posed[half], half) < 0.75 * apart[half] + 0.02)
+
+
 def _renamed_walk(at: int, frames: int = 12):
     """One particle's walk (markers, joint angles, stance legs per frame) and the same walk with its legs renamed
     from frame ``at`` on (``kinematics.mirrored_legs``), as a lineage that flipped there records it, with the

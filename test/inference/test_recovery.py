@@ -336,6 +336,53 @@ def test_the_walkers_are_held_while_the_person_stands_still(walk_stop_walk, drif
     assert np.median(np.concatenate(accelerations)) < 2 * drift * np.sqrt(2)
 
 
+def test_held_bodies_are_shown_standing_and_tracked_as_before(walk_stop_walk):
+    """``TrackerConfig.held_settle_s``: while the person stands still the bodies the outputs show come dt /
+    held_settle_s a frame nearer standing, their feet side by side once there and their pelvis over the ground where
+    the walkers' is; once the person walks on they return to the walkers' own poses at the same rate. The particles
+    (what the likelihood scores) are those of the tracker without it, bit for bit."""
+    from awalker_tracker.inference.filter_model import ImageObservation, image_likelihood
+
+    camera, features, pelvis = walk_stop_walk
+    body = BodyDescription.default()
+    start = StartDescription(0, (float(pelvis[0, 0]), float(pelvis[0, 1])), 0.0, 1.3, 0.7, LEFT)
+    ankles = [MARKER_NAMES.index("left_ankle"), MARKER_NAMES.index("right_ankle")]
+    runs = {}
+    for settle in (0.0, 0.3):
+        config = TrackerConfig(dt=1 / 30, recovery=RecoveryConfig(reacquire=False), held_settle_s=settle)
+        model = TrackerModel(body, start, image_likelihood(body, [camera]), config, cameras=[camera])
+        rng = np.random.default_rng(0)
+        states = model.initial(16, rng)
+        frames = []
+        for f, feats in enumerate(features):
+            moved, events = model.transition(states, rng)
+            states = model.rejuvenate(f, np.zeros(16), states, moved, ImageObservation(features=(feats,)), rng)
+            frames.append((model.monitor.still(f), states, model.outputs(states, events).markers))
+        runs[settle] = frames
+    still = np.array([f[0] for f in runs[0.3]])
+    held = np.flatnonzero(still)
+    # standing reached within the stop, and the walk after it long enough to be shown as the walkers' own again
+    assert held.size > 0.3 * 30 and held[-1] + 1 + 0.3 * 30 < len(still) and np.all(np.diff(held) == 1)
+    step = (1 / 30) / 0.3
+    standing = 0.0
+    for f, ((_, own, own_shown), (_, particles, shown)) in enumerate(zip(runs[0.0], runs[0.3])):
+        standing = float(np.clip(standing + (step if still[f] else -step), 0.0, 1.0))
+        np.testing.assert_allclose(particles.standing, standing)
+        np.testing.assert_array_equal(particles.pose.markers, own.pose.markers)
+        np.testing.assert_array_equal(particles.walker.stance_angle, own.walker.stance_angle)
+        np.testing.assert_array_equal(own_shown, own.pose.markers)
+        np.testing.assert_allclose(shown[:, PELVIS, :2], own.pose.markers[:, PELVIS, :2], atol=1e-9)
+        if standing == 0.0:
+            np.testing.assert_allclose(shown, own.pose.markers, atol=1e-9)
+        if standing == 1.0:
+            along = np.stack([np.cos(own.kin.heading), np.sin(own.kin.heading)], axis=1)
+            apart = np.abs(np.sum((shown[:, ankles[0], :2] - shown[:, ankles[1], :2]) * along, axis=1))
+            assert np.all(apart < 0.03)
+            own_apart = np.abs(np.sum((own.pose.markers[:, ankles[0], :2] - own.pose.markers[:, ankles[1], :2])
+                                      * along, axis=1))
+            assert np.median(own_apart) > 0.1                  # the walkers held mid-stride
+
+
 @pytest.mark.parametrize("follow_s", [0.0, 0.3])
 def test_held_walkers_follow_where_two_cameras_place_the_person(seen, follow_s: float):
     """A person standing where cameras at two angles place them, the walkers held 0.25 m off (they walked on past

@@ -288,6 +288,12 @@ class TrackerConfig:
     held_follow_s: float = 0.0
     held_follow_m_s: float = 0.3
     held_follow_within_m: float = 0.15
+    # ... and are shown standing (kinematics.standing_body): each held frame the body the outputs show (poses.csv,
+    # joint states, markers, the posterior's particles) comes dt / held_settle_s further from the walker's stride
+    # towards standing with both legs vertical and the pelvis kept over the ground; once the person walks on it
+    # returns at the same rate. The likelihood still scores the walkers' own bodies, so the tracking is as without it.
+    # 0 s: off.
+    held_settle_s: float = 0.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -321,6 +327,8 @@ class TrackerConfig:
         if self.naming_test_particles < 0 or not (np.isfinite(self.naming_switch_nats) and self.naming_switch_nats > 0):
             raise ValueError(f"TrackerConfig: naming_test_particles must be >= 0 and naming_switch_nats > 0, got "
                              f"{self.naming_test_particles}, {self.naming_switch_nats}")
+        if not (np.isfinite(self.held_settle_s) and self.held_settle_s >= 0.0):
+            raise ValueError(f"TrackerConfig.held_settle_s must be >= 0 s, got {self.held_settle_s}")
         if not (self.held_follow_s >= 0.0 and self.held_follow_m_s >= 0.0 and self.held_follow_within_m >= 0.0):
             raise ValueError(f"TrackerConfig: held_follow_s, held_follow_m_s and held_follow_within_m must be >= 0, "
                              f"got {self.held_follow_s}, {self.held_follow_m_s}, {self.held_follow_within_m}")
@@ -383,6 +391,8 @@ class TrackerStates:
     flipped: np.ndarray
     # (N, 2) m/s: the ground velocity of a held walker's shuffle (``TrackerConfig.held_drift``); 0 while walking
     held_velocity: np.ndarray
+    # (N,) 0-1: how far the body shown in the outputs stands instead of striding (``TrackerConfig.held_settle_s``)
+    standing: np.ndarray
 
     def __len__(self) -> int:
         return len(self.walker)
@@ -393,7 +403,7 @@ class TrackerStates:
         return TrackerStates(self.walker.take(indices), self.control.take(indices), self.kin.take(indices),
                              pose, self.speed[indices], self.fallen[indices], self.reseeded[indices],
                              np.arange(len(indices)), self.jump[indices], self.flipped[indices],
-                             self.held_velocity[indices])
+                             self.held_velocity[indices], self.standing[indices])
 
 
 LikelihoodFn = Callable[[TrackerStates | None, TrackerStates, Any], np.ndarray]
@@ -493,6 +503,7 @@ class TrackerModel:
         self._control = control
         self._cyclic_gaits = cyclic_gaits
         self._kin = kin_mod
+        self._standing: dict[int, float] = {}       # frame -> how far the bodies shown stand (``_shown_standing``)
         self.monitor = (LostTrackMonitor(cameras, config.recovery, config.dt, body_height_m=self.body.height)
                         if cameras and (config.recovery.reacquire or config.recovery.hold_still) else None)
         # eq. (5)'s target as used (TrackerConfig.stiffness_target: "seen_gait" needs the monitor's detections)
@@ -563,7 +574,7 @@ class TrackerModel:
             posture_spread=self.posture_spread, pelvis_ceiling_spread=self.pelvis_ceiling_spread)
         pose = self._kin.pose_body(self.body, self.params, walker, kin, self.kin_config)
         return TrackerStates(walker, control, kin, pose, speed.copy(), np.zeros(n, bool), np.zeros(n, np.int8),
-                             np.arange(n), np.zeros((n, 3)), np.zeros(n, bool), np.zeros((n, 2)))
+                             np.arange(n), np.zeros((n, 3)), np.zeros(n, bool), np.zeros((n, 2)), np.zeros(n))
 
     def _gait_known(self, speed: np.ndarray, step: np.ndarray) -> np.ndarray:
         """True where the gait table's lookup has converged corners with weight (a margin above what lookup needs)."""
@@ -657,7 +668,7 @@ class TrackerModel:
                          update_speed(states.speed, moved, self.config.dt, self.config.speed_time_constant_s))
         new = TrackerStates(walker, control, kin, pose, speed, fallen, np.zeros(len(states), np.int8),
                             np.arange(len(states)), np.zeros((len(states), 3)), np.zeros(len(states), bool),
-                            np.zeros((len(states), 2)))
+                            np.zeros((len(states), 2)), np.zeros(len(states)))
         if self.config.recovery.reseed_fallen and fallen.any():
             new = self._reseed_fallen(new, np.flatnonzero(fallen), rng)
         if self.config.label_flip_rate_hz > 0:
@@ -759,6 +770,18 @@ class TrackerModel:
         return replace(states, walker=walker, kin=kin,
                        pose=self._kin.pose_body(self.body, self.params, walker, kin, self.kin_config))
 
+    def _shown_standing(self, frame: int, states: TrackerStates) -> TrackerStates:
+        """``states`` with how far their bodies are shown standing at ``frame`` (``TrackerConfig.held_settle_s``):
+        dt / held_settle_s further than at the frame before while the person stands still, as much less after."""
+        settle = self.config.held_settle_s
+        if settle <= 0:
+            return states
+        step = self.config.dt / settle * (1 if self.monitor.still(frame) else -1)
+        amount = self._standing[frame] = float(np.clip(self._standing.get(frame - 1, 0.0) + step, 0.0, 1.0))
+        if amount == 0.0 and not np.any(states.standing > 0.0):
+            return states
+        return replace(states, standing=np.full(len(states), amount))
+
     def _naming_evidence_of(self, pending: tuple, loglik: np.ndarray, states: TrackerStates, obs: Any) -> None:
         """This frame's evidence for the other naming (nats, tempered; ``TrackerConfig.naming_test_particles``),
         from the frame's likelihoods ``loglik`` (N,) of ``states`` (``pending``: ``_named``'s frame, log weights,
@@ -782,6 +805,11 @@ class TrackerModel:
         self._depth_band = self._heading_band = None
         if self.monitor is None or not isinstance(obs, ImageObservation):
             return states
+        return self._shown_standing(frame, self._held_or_reacquired(frame, log_weights, w, parent, states, obs, rng))
+
+    def _held_or_reacquired(self, frame: int, log_weights: np.ndarray, w: np.ndarray, parent: TrackerStates | None,
+                            states: TrackerStates, obs: Any, rng: np.random.Generator) -> TrackerStates:
+        """``_recovered``'s holding and re-acquisition."""
         pelvis = w @ states.pose.markers[:, MARKER_NAMES.index("pelvis")]
         order = self.monitor.update(frame, obs.features, pelvis)
         self._depth_band = self.monitor.depth_band(frame)
@@ -926,14 +954,20 @@ class TrackerModel:
         # (held walkers did not make the transition whose events these are)
         struck = (np.zeros(n, bool) if events is None else np.asarray(events.heel_strike, bool)) & (states.reseeded != HELD)
         c = states.control
+        pose = states.pose
+        if np.any(states.standing > 0.0):      # shown standing (TrackerConfig.held_settle_s), the pelvis kept
+            pelvis = pose.markers[:, MARKER_NAMES.index("pelvis"), :2]
+            walker, kin = self._kin.standing_body(states.walker, states.kin, pelvis, states.standing, self.body,
+                                                  self.params, self.kin_config)
+            pose = self._kin.pose_body(self.body, self.params, walker, kin, self.kin_config)
         walker_fields = {k: getattr(states.walker, k) for k in
                          ("stance_angle", "swing_angle", "stance_rate", "swing_rate", "contact_origin")}
         walker_fields.update({k: np.asarray(getattr(c, k), float) for k in
                               ("stiffness", "stiffness_mean_mean", "stiffness_mean_variance", "toe_off_impulse")})
         return ParticleOutputs(
-            markers=states.pose.markers, joint_angles=states.pose.joint_angles,
-            torso_position=states.pose.markers[:, MARKER_NAMES.index("pelvis")],
-            torso_rotation=states.pose.segments.rotation[:, 0],
+            markers=pose.markers, joint_angles=pose.joint_angles,
+            torso_position=pose.markers[:, MARKER_NAMES.index("pelvis")],
+            torso_rotation=pose.segments.rotation[:, 0],
             speed=states.speed, stance_leg=states.walker.stance_leg, contact_point=contact,
             heel_strike=struck, strike_point=contact,
             strike_fraction=(np.full(n, np.nan) if events is None

@@ -386,6 +386,36 @@ def mirrored_legs(walker: WalkerState, kin: KinematicState, pelvis_xy: np.ndarra
     return mirrored_walker, mirrored
 
 
+def standing_body(walker: WalkerState, kin: KinematicState, pelvis_xy: np.ndarray, fraction: np.ndarray,
+                  body: BodyDescription, params: WalkerParams, config: KinematicConfig | None = None
+                  ) -> tuple[WalkerState, KinematicState]:
+    """Copies of ``walker``/``kin`` whose bodies are ``fraction`` (N,) (0-1) of the way from their own pose towards
+    standing with both legs vertical, both knees straight and both feet flat (ankle flexion and inversion 0), the
+    pelvis kept at ``pelvis_xy`` (N, 2) m: the walker's leg angles phi1, phi2 shrink towards 0, its contact origin
+    moves so that its hip stays put, and the contact foot stands on its sole's lowest point, slid on the ground
+    under the pelvis. For posing only (a person who stops brings the trailing foot alongside, where a walker held
+    mid-stride stands on one leg): the copies' rates and eq. (6)'s previous joint angles are the originals'."""
+    keep = 1.0 - np.clip(np.asarray(fraction, float), 0.0, 1.0)
+    settled = walker.copy()
+    hip_x = hip_position(params, walker)[0]
+    settled.stance_angle = keep * walker.stance_angle
+    settled.swing_angle = keep * walker.swing_angle
+    r, length = params.foot_radius, params.leg_length
+    settled.contact_origin = hip_x + r * settled.stance_angle + (length - r) * np.sin(settled.stance_angle)
+    moved = kin.copy()
+    moved.knee = keep[:, None] * kin.knee
+    moved.ankle = keep[:, None, None] * kin.ankle
+    geometry, legs, dofs = _geometry(body, config), leg_angles(settled), moved.dofs()
+    sole = np.empty((len(moved), 3))
+    beta = np.array(moved.contact_roll, float)
+    _sole_points_kernel(geometry, legs, dofs, np.ascontiguousarray(moved.leg_scale, float),
+                        np.ascontiguousarray(moved.contact_leg, np.int8), beta, True, sole)
+    moved.contact_roll = beta
+    moved.contact_point = np.asarray(pelvis_xy, float) + sole[:, :2]
+    moved.plane_origin = _plane_origin(params, settled, moved.contact_point, moved.heading)
+    return settled, moved
+
+
 def initial_kinematics(
     config: KinematicConfig,
     walker: WalkerState,
