@@ -503,7 +503,6 @@ class TrackerModel:
         self._control = control
         self._cyclic_gaits = cyclic_gaits
         self._kin = kin_mod
-        self._standing: dict[int, float] = {}       # frame -> how far the bodies shown stand (``_shown_standing``)
         self.monitor = (LostTrackMonitor(cameras, config.recovery, config.dt, body_height_m=self.body.height)
                         if cameras and (config.recovery.reacquire or config.recovery.hold_still) else None)
         # eq. (5)'s target as used (TrackerConfig.stiffness_target: "seen_gait" needs the monitor's detections)
@@ -770,14 +769,16 @@ class TrackerModel:
         return replace(states, walker=walker, kin=kin,
                        pose=self._kin.pose_body(self.body, self.params, walker, kin, self.kin_config))
 
-    def _shown_standing(self, frame: int, states: TrackerStates) -> TrackerStates:
+    def _shown_standing(self, frame: int, parent: TrackerStates | None, states: TrackerStates) -> TrackerStates:
         """``states`` with how far their bodies are shown standing at ``frame`` (``TrackerConfig.held_settle_s``):
-        dt / held_settle_s further than at the frame before while the person stands still, as much less after."""
+        dt / held_settle_s further than their ``parent``'s (the frame before; every particle alike) while the person
+        stands still, as much less after."""
         settle = self.config.held_settle_s
         if settle <= 0:
             return states
+        before = float(parent.standing.max()) if parent is not None and len(parent) else 0.0
         step = self.config.dt / settle * (1 if self.monitor.still(frame) else -1)
-        amount = self._standing[frame] = float(np.clip(self._standing.get(frame - 1, 0.0) + step, 0.0, 1.0))
+        amount = float(np.clip(before + step, 0.0, 1.0))
         if amount == 0.0 and not np.any(states.standing > 0.0):
             return states
         return replace(states, standing=np.full(len(states), amount))
@@ -805,7 +806,8 @@ class TrackerModel:
         self._depth_band = self._heading_band = None
         if self.monitor is None or not isinstance(obs, ImageObservation):
             return states
-        return self._shown_standing(frame, self._held_or_reacquired(frame, log_weights, w, parent, states, obs, rng))
+        return self._shown_standing(frame, parent,
+                                    self._held_or_reacquired(frame, log_weights, w, parent, states, obs, rng))
 
     def _held_or_reacquired(self, frame: int, log_weights: np.ndarray, w: np.ndarray, parent: TrackerStates | None,
                             states: TrackerStates, obs: Any, rng: np.random.Generator) -> TrackerStates:

@@ -400,8 +400,7 @@ def standing_body(walker: WalkerState, kin: KinematicState, pelvis_xy: np.ndarra
     hip_x = hip_position(params, walker)[0]
     settled.stance_angle = keep * walker.stance_angle
     settled.swing_angle = keep * walker.swing_angle
-    r, length = params.foot_radius, params.leg_length
-    settled.contact_origin = hip_x + r * settled.stance_angle + (length - r) * np.sin(settled.stance_angle)
+    settled.contact_origin = walker.contact_origin + hip_x - hip_position(params, settled)[0]   # the hip kept
     moved = kin.copy()
     moved.knee = keep[:, None] * kin.knee
     moved.ankle = keep[:, None, None] * kin.ankle
