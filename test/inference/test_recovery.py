@@ -427,7 +427,8 @@ def test_held_walkers_follow_where_two_cameras_place_the_person(seen, follow_s: 
 @pytest.mark.parametrize("held", [{"held_turn": (1.5, 0.3)}, {"held_turn": (0.9, -0.1)},
                                   {"held_drift": (-0.1, 0.03)}, {"held_drift": (0.95, float("nan"))},
                                   {"held_follow_s": -0.1}, {"held_follow_m_s": float("nan")},
-                                  {"held_follow_within_m": -0.2}])
+                                  {"held_follow_within_m": -0.2}, {"held_settle_s": -0.3},
+                                  {"held_settle_s": float("nan")}, {"held_settle_s": float("inf")}])
 def test_held_walkers_refuse_a_persistence_outside_0_1_or_a_negative_or_nan_noise(held: dict):
     with pytest.raises(ValueError, match=next(iter(held))):
         TrackerConfig(**held)
