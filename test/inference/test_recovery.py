@@ -428,10 +428,60 @@ def test_held_walkers_follow_where_two_cameras_place_the_person(seen, follow_s: 
                                   {"held_drift": (-0.1, 0.03)}, {"held_drift": (0.95, float("nan"))},
                                   {"held_follow_s": -0.1}, {"held_follow_m_s": float("nan")},
                                   {"held_follow_within_m": -0.2}, {"held_settle_s": -0.3},
-                                  {"held_settle_s": float("nan")}, {"held_settle_s": float("inf")}])
+                                  {"held_settle_s": float("nan")}, {"held_settle_s": float("inf")},
+                                  {"walk_on_mirror_fraction": 1.5}, {"walk_on_mirror_fraction": float("nan")},
+                                  {"walk_on_min_hold_s": -0.5}, {"walk_on_after_walked_s": float("inf")}])
 def test_held_walkers_refuse_a_persistence_outside_0_1_or_a_negative_or_nan_noise(held: dict):
     with pytest.raises(ValueError, match=next(iter(held))):
         TrackerConfig(**held)
+
+
+@pytest.mark.parametrize("min_hold_s", [0.5, 5.0])
+def test_walkers_walk_on_with_either_foot_after_a_hold(walk_stop_walk, min_hold_s: float):
+    """``TrackerConfig.walk_on_mirror_fraction``: at the first frame after a hold of ``walk_on_min_hold_s`` or longer,
+    that share of the walkers walk on with their legs named the other way round (each body its own mirror image about
+    its pelvis: the other foot steps), as a new stride, not a renaming; up to then the run is the run without it, bit
+    for bit, and after a shorter hold nothing changes."""
+    from awalker_tracker.inference.filter_model import ImageObservation, image_likelihood
+
+    camera, features, pelvis = walk_stop_walk
+    body = BodyDescription.default()
+    start = StartDescription(0, (float(pelvis[0, 0]), float(pelvis[0, 1])), 0.0, 1.3, 0.7, LEFT)
+    n = 64
+    runs = {}
+    for fraction in (0.0, 0.5):
+        config = TrackerConfig(dt=1 / 30, recovery=RecoveryConfig(reacquire=False), walk_on_mirror_fraction=fraction,
+                               walk_on_min_hold_s=min_hold_s, walk_on_after_walked_s=0.5)
+        model = TrackerModel(body, start, image_likelihood(body, [camera]), config, cameras=[camera])
+        rng = np.random.default_rng(0)
+        states = model.initial(n, rng)
+        frames = []
+        for f, feats in enumerate(features):
+            moved, _ = model.transition(states, rng)
+            states = model.rejuvenate(f, np.zeros(n), states, moved, ImageObservation(features=(feats,)), rng)
+            frames.append((model.monitor.still(f), states))
+        runs[fraction] = frames
+    still = np.array([s for s, _ in runs[0.5]])
+    held = np.flatnonzero(still)
+    walk_on = held[-1] + 1
+    assert held.size > 0.5 * 30 and np.all(np.diff(held) == 1) and held[0] >= 0.5 * 30 and walk_on < len(still)
+    for f in range(walk_on):
+        np.testing.assert_array_equal(runs[0.5][f][1].pose.markers, runs[0.0][f][1].pose.markers)
+    own, mixed = runs[0.0][walk_on][1], runs[0.5][walk_on][1]
+    other = mixed.walker.stance_leg != own.walker.stance_leg
+    if min_hold_s * 30 > held.size:
+        assert not other.any()
+        np.testing.assert_array_equal(mixed.pose.markers, own.pose.markers)
+        return
+    assert 0.25 < other.mean() < 0.75, other.mean()
+    np.testing.assert_array_equal(mixed.pose.markers[~other], own.pose.markers[~other])
+    np.testing.assert_allclose(mixed.pose.markers[:, PELVIS], own.pose.markers[:, PELVIS], atol=1e-9)
+    # mirrored about the sagittal plane: each joint stands as high as its other side's did, and the feet swap sides
+    left, right = (np.array([MARKER_NAMES.index(f"{side}_{j}") for j in ("hip", "knee", "ankle", "heel", "toe")])
+                   for side in ("left", "right"))
+    np.testing.assert_allclose(mixed.pose.markers[other][:, left, 2], own.pose.markers[other][:, right, 2], atol=1e-9)
+    np.testing.assert_allclose(mixed.pose.markers[other][:, right, 2], own.pose.markers[other][:, left, 2], atol=1e-9)
+    assert np.array_equal(mixed.continues, np.arange(n)) and not mixed.flipped.any()     # no renaming of the past
 
 
 @pytest.mark.parametrize("target", ["seen_gait", "usual_gait"])

@@ -294,6 +294,15 @@ class TrackerConfig:
     # returns at the same rate. The likelihood still scores the walkers' own bodies, so the tracking is as without it.
     # 0 s: off.
     held_settle_s: float = 0.0
+    # A person who stood for walk_on_min_hold_s or longer may walk on with either foot: at the first frame after such
+    # a hold this share of the walkers, drawn at random, walk on with their legs named the other way round
+    # (kinematics.mirrored_legs: the other foot steps; a new stride, not a renaming of the frames before), for the
+    # images to choose. 0 (the default): the walkers go on with the strides they stopped in.
+    walk_on_mirror_fraction: float = 0.0
+    walk_on_min_hold_s: float = 0.5
+    # ... where the hold began after the track had walked this long (s): a start names the stance leg of the first
+    # steps (the user's, or the leg fit's over its first frames), also where the person stood at the start
+    walk_on_after_walked_s: float = 1.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
@@ -329,6 +338,12 @@ class TrackerConfig:
                              f"{self.naming_test_particles}, {self.naming_switch_nats}")
         if not (np.isfinite(self.held_settle_s) and self.held_settle_s >= 0.0):
             raise ValueError(f"TrackerConfig.held_settle_s must be >= 0 s, got {self.held_settle_s}")
+        if not 0.0 <= self.walk_on_mirror_fraction <= 1.0:
+            raise ValueError(f"TrackerConfig.walk_on_mirror_fraction must lie in 0-1, got "
+                             f"{self.walk_on_mirror_fraction}")
+        for name in ("walk_on_min_hold_s", "walk_on_after_walked_s"):
+            if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0.0):
+                raise ValueError(f"TrackerConfig.{name} must be >= 0 s, got {getattr(self, name)}")
         if not (self.held_follow_s >= 0.0 and self.held_follow_m_s >= 0.0 and self.held_follow_within_m >= 0.0):
             raise ValueError(f"TrackerConfig: held_follow_s, held_follow_m_s and held_follow_within_m must be >= 0, "
                              f"got {self.held_follow_s}, {self.held_follow_m_s}, {self.held_follow_within_m}")
@@ -823,6 +838,8 @@ class TrackerModel:
                              speed=np.zeros(len(parent)),
                              reseeded=np.full(len(parent), HELD, np.int8), continues=np.arange(len(parent)),
                              jump=np.zeros((len(parent), 3)), flipped=np.zeros(len(parent), bool))
+        elif parent is not None and self._walks_on_after_hold(frame):
+            states = self._stepping_off_either_foot(states, rng)
         if order is None:
             return states
         n = len(states)
@@ -863,6 +880,25 @@ class TrackerModel:
         continues = np.arange(n)
         continues[rows[:half]] = sources
         return replace(states, continues=continues)
+
+    def _walks_on_after_hold(self, frame: int) -> bool:
+        """Whether ``frame`` is the first after the person stood still for ``walk_on_min_hold_s`` or longer."""
+        cfg = self.config
+        if cfg.walk_on_mirror_fraction <= 0 or self.monitor.still(frame) or not self.monitor.still(frame - 1):
+            return False
+        held = 1
+        while self.monitor.still(frame - held - 1):
+            held += 1
+        walked = frame - held - self.monitor.first_frame
+        return held * cfg.dt >= cfg.walk_on_min_hold_s - 1e-9 and walked * cfg.dt >= cfg.walk_on_after_walked_s - 1e-9
+
+    def _stepping_off_either_foot(self, states: TrackerStates, rng: np.random.Generator) -> TrackerStates:
+        """``states`` with a random share (``walk_on_mirror_fraction``) of the walkers walking on with their legs named
+        the other way round: a new stride on the other foot, not a renaming (the frames before keep their naming)."""
+        rows = np.flatnonzero(rng.random(len(states)) < self.config.walk_on_mirror_fraction)
+        if rows.size == 0:
+            return states
+        return replace(put_rows(states, rows, self._mirrored(states.take(rows))), continues=states.continues)
 
     def _follow_step(self, frame: int, w: np.ndarray, held: TrackerStates) -> np.ndarray:
         """The ground step (2,) m every held walker takes at ``frame`` towards where the cameras place the person

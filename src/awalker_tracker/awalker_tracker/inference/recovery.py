@@ -285,6 +285,11 @@ class LostTrackMonitor:
             return None
         return self._placed.fitted_position(frame, self.config.track_window_s)
 
+    @property
+    def first_frame(self) -> int | None:
+        """The first frame ``update`` saw (None before)."""
+        return self._first_frame
+
     def still(self, frame: int) -> bool:
         """Whether the person stood still at ``frame`` (decided by ``update``; False if not yet)."""
         return self._still.get(frame, False)
