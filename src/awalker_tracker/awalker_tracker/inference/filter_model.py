@@ -882,7 +882,8 @@ class TrackerModel:
         return replace(states, continues=continues)
 
     def _walks_on_after_hold(self, frame: int) -> bool:
-        """Whether ``frame`` is the first after the person stood still for ``walk_on_min_hold_s`` or longer."""
+        """Whether ``frame`` is the first after the person stood still for ``walk_on_min_hold_s`` or longer, in a hold
+        that began ``walk_on_after_walked_s`` or more after the first frame the monitor saw."""
         cfg = self.config
         if cfg.walk_on_mirror_fraction <= 0 or self.monitor.still(frame) or not self.monitor.still(frame - 1):
             return False
