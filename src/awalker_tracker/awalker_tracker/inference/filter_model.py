@@ -897,9 +897,7 @@ class TrackerModel:
         """``states`` with a random share (``walk_on_mirror_fraction``) of the walkers walking on with their legs named
         the other way round: a new stride on the other foot, not a renaming (the frames before keep their naming)."""
         rows = np.flatnonzero(rng.random(len(states)) < self.config.walk_on_mirror_fraction)
-        if rows.size == 0:
-            return states
-        return replace(put_rows(states, rows, self._mirrored(states.take(rows))), continues=states.continues)
+        return replace(self._flip_labels(states, rows), flipped=states.flipped, continues=states.continues)
 
     def _follow_step(self, frame: int, w: np.ndarray, held: TrackerStates) -> np.ndarray:
         """The ground step (2,) m every held walker takes at ``frame`` towards where the cameras place the person
