@@ -336,29 +336,35 @@ def test_the_walkers_are_held_while_the_person_stands_still(walk_stop_walk, drif
     assert np.median(np.concatenate(accelerations)) < 2 * drift * np.sqrt(2)
 
 
-def test_held_bodies_are_shown_standing_and_tracked_as_before(walk_stop_walk):
-    """``TrackerConfig.held_settle_s``: while the person stands still the bodies the outputs show come dt /
-    held_settle_s a frame nearer standing, their feet side by side once there and their pelvis over the ground where
-    the walkers' is; once the person walks on they return to the walkers' own poses at the same rate. The particles
-    (what the likelihood scores) are those of the tracker without it, bit for bit."""
+def _tracked(walk_stop_walk, config: TrackerConfig, n: int) -> list[tuple[bool, object, np.ndarray]]:
+    """Each frame of ``walk_stop_walk`` tracked by ``n`` particles under ``config`` (seed 0, flat weights, the person
+    started where they are at 1.3 m/s on the left leg): whether the person stood still, the particles after the
+    frame's recovery, and the markers the outputs show."""
     from awalker_tracker.inference.filter_model import ImageObservation, image_likelihood
 
     camera, features, pelvis = walk_stop_walk
     body = BodyDescription.default()
     start = StartDescription(0, (float(pelvis[0, 0]), float(pelvis[0, 1])), 0.0, 1.3, 0.7, LEFT)
+    model = TrackerModel(body, start, image_likelihood(body, [camera]), config, cameras=[camera])
+    rng = np.random.default_rng(0)
+    states = model.initial(n, rng)
+    frames = []
+    for f, feats in enumerate(features):
+        moved, events = model.transition(states, rng)
+        states = model.rejuvenate(f, np.zeros(n), states, moved, ImageObservation(features=(feats,)), rng)
+        frames.append((model.monitor.still(f), states, model.outputs(states, events).markers))
+    return frames
+
+
+def test_held_bodies_are_shown_standing_and_tracked_as_before(walk_stop_walk):
+    """``TrackerConfig.held_settle_s``: while the person stands still the bodies the outputs show come dt /
+    held_settle_s a frame nearer standing, their feet side by side once there and their pelvis over the ground where
+    the walkers' is; once the person walks on they return to the walkers' own poses at the same rate. The particles
+    (what the likelihood scores) are those of the tracker without it, bit for bit."""
     ankles = [MARKER_NAMES.index("left_ankle"), MARKER_NAMES.index("right_ankle")]
-    runs = {}
-    for settle in (0.0, 0.3):
-        config = TrackerConfig(dt=1 / 30, recovery=RecoveryConfig(reacquire=False), held_settle_s=settle)
-        model = TrackerModel(body, start, image_likelihood(body, [camera]), config, cameras=[camera])
-        rng = np.random.default_rng(0)
-        states = model.initial(16, rng)
-        frames = []
-        for f, feats in enumerate(features):
-            moved, events = model.transition(states, rng)
-            states = model.rejuvenate(f, np.zeros(16), states, moved, ImageObservation(features=(feats,)), rng)
-            frames.append((model.monitor.still(f), states, model.outputs(states, events).markers))
-        runs[settle] = frames
+    runs = {settle: _tracked(walk_stop_walk, TrackerConfig(dt=1 / 30, recovery=RecoveryConfig(reacquire=False),
+                                                          held_settle_s=settle), 16)
+            for settle in (0.0, 0.3)}
     still = np.array([f[0] for f in runs[0.3]])
     held = np.flatnonzero(still)
     # standing reached within the stop, and the walk after it long enough to be shown as the walkers' own again
@@ -442,26 +448,12 @@ def test_walkers_walk_on_with_either_foot_after_a_hold(walk_stop_walk, min_hold_
     that share of the walkers walk on with their legs named the other way round (each body its own mirror image about
     its pelvis: the other foot steps), as a new stride, not a renaming; up to then the run is the run without it, bit
     for bit, and after a shorter hold nothing changes."""
-    from awalker_tracker.inference.filter_model import ImageObservation, image_likelihood
-
-    camera, features, pelvis = walk_stop_walk
-    body = BodyDescription.default()
-    start = StartDescription(0, (float(pelvis[0, 0]), float(pelvis[0, 1])), 0.0, 1.3, 0.7, LEFT)
     n = 64
-    runs = {}
-    for fraction in (0.0, 0.5):
-        config = TrackerConfig(dt=1 / 30, recovery=RecoveryConfig(reacquire=False), walk_on_mirror_fraction=fraction,
-                               walk_on_min_hold_s=min_hold_s, walk_on_after_walked_s=0.5)
-        model = TrackerModel(body, start, image_likelihood(body, [camera]), config, cameras=[camera])
-        rng = np.random.default_rng(0)
-        states = model.initial(n, rng)
-        frames = []
-        for f, feats in enumerate(features):
-            moved, _ = model.transition(states, rng)
-            states = model.rejuvenate(f, np.zeros(n), states, moved, ImageObservation(features=(feats,)), rng)
-            frames.append((model.monitor.still(f), states))
-        runs[fraction] = frames
-    still = np.array([s for s, _ in runs[0.5]])
+    runs = {fraction: _tracked(walk_stop_walk, TrackerConfig(
+                dt=1 / 30, recovery=RecoveryConfig(reacquire=False), walk_on_mirror_fraction=fraction,
+                walk_on_min_hold_s=min_hold_s, walk_on_after_walked_s=0.5), n)
+            for fraction in (0.0, 0.5)}
+    still = np.array([frame[0] for frame in runs[0.5]])
     held = np.flatnonzero(still)
     walk_on = held[-1] + 1
     assert held.size > 0.5 * 30 and np.all(np.diff(held) == 1) and held[0] >= 0.5 * 30 and walk_on < len(still)
