@@ -328,3 +328,24 @@ def test_a_reacquired_copy_of_a_walker_reseeded_after_a_fall_records_both_jumps(
     moved = out.pose.markers[:, PELVIS, :2] - walked_on.pose.markers[out.continues, PELVIS, :2]
     np.testing.assert_allclose(out.jump[:, :2], moved, atol=1e-9)
     assert np.all(np.linalg.norm(out.jump[out.reseeded == 2, :2], axis=1) > 2.0)
+
+
+def test_renaming_the_legs_keeps_each_particles_lineage_and_jump():
+    """The naming test renames every particle's legs after the recovery has run (``rejuvenate``): a frame's
+    re-acquired copies keep the walk they continue (``continues``) and their recorded jump through the renaming;
+    reset to each row itself, the MAP lineage of a copy went on through the row it overwrote."""
+    from awalker_tracker.inference.filter_model import ImageObservation
+
+    model, walk = _walking_particles(40, 5)
+    model.monitor = _OrderingMonitor((3.0, 2.0))
+    log_weights = np.zeros(40)
+    out = model._recovered(5, log_weights, np.full(40, 1 / 40), walk[-2], walk[-1], ImageObservation(features=()),
+                           np.random.default_rng(2))
+    assert np.any(out.continues != np.arange(40))
+    for rows in (np.arange(40), np.arange(0, 40, 3)):
+        renamed = model._flip_labels(out, rows)
+        np.testing.assert_array_equal(renamed.continues, out.continues)
+        np.testing.assert_array_equal(renamed.jump, out.jump)
+        np.testing.assert_array_equal(renamed.reseeded, out.reseeded)
+        assert renamed.flipped[rows].all() and not np.delete(renamed.flipped, rows).any()
+        np.testing.assert_array_equal(renamed.walker.stance_leg[rows], 1 - out.walker.stance_leg[rows])

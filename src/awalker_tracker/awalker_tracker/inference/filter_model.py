@@ -693,10 +693,12 @@ class TrackerModel:
 
     def _flip_labels(self, states: TrackerStates, rows: np.ndarray) -> TrackerStates:
         """The particles ``rows`` with their legs named the other way round (``kinematics.mirrored_legs``: each body
-        its own mirror image, pelvis kept): the prior's jump between the two namings a side view cannot tell apart."""
+        its own mirror image, pelvis kept), each continuing its own lineage (``continues``): the prior's jump between
+        the two namings a side view cannot tell apart."""
         if rows.size == 0:
             return states
-        flipped = replace(self._mirrored(states.take(rows)), flipped=np.ones(rows.size, bool))
+        flipped = replace(self._mirrored(states.take(rows)), flipped=np.ones(rows.size, bool),
+                          continues=states.continues[rows])
         return put_rows(states, rows, flipped)
 
     def _reseed_fallen(self, states: TrackerStates, rows: np.ndarray, rng: np.random.Generator) -> TrackerStates:
@@ -897,7 +899,7 @@ class TrackerModel:
         """``states`` with a random share (``walk_on_mirror_fraction``) of the walkers walking on with their legs named
         the other way round: a new stride on the other foot, not a renaming (the frames before keep their naming)."""
         rows = np.flatnonzero(rng.random(len(states)) < self.config.walk_on_mirror_fraction)
-        return replace(self._flip_labels(states, rows), flipped=states.flipped, continues=states.continues)
+        return replace(self._flip_labels(states, rows), flipped=states.flipped)
 
     def _follow_step(self, frame: int, w: np.ndarray, held: TrackerStates) -> np.ndarray:
         """The ground step (2,) m every held walker takes at ``frame`` towards where the cameras place the person
