@@ -221,6 +221,35 @@ def test_one_camera_far_and_low_counts_a_feet_row_that_moves_by_one_map_row(far_
             assert monitor.depth_band(19) is None
 
 
+@pytest.mark.parametrize("agree_s", [0.0, 0.3])
+def test_one_camera_far_and_low_counts_a_feet_row_that_stepped_and_stayed_where_the_particles_are(far_and_low,
+                                                                                                 agree_s: float):
+    """A feet row that steps 3 m nearer (beyond ``reach_rows`` rows) and stays there counts, with
+    ``reach_agree_s``, once it has stayed that long and lies where the particles are (a far, low camera's feet row
+    that stepped a row or two after the counted ones went off); not where the particles are not (legs hidden behind
+    something put the row away from a body on the person), nor, without ``reach_agree_s``, before
+    ``reach_reset_s``."""
+    far, there, pelvis_there = far_and_low
+    _, nearer, pelvis_nearer = _far_and_low_view((0.0, -3.0))
+    span = round(agree_s * 30)
+    for particles_follow in (True, False):
+        monitor = LostTrackMonitor([far], RecoveryConfig(reach_agree_s=agree_s), dt=1 / 30,
+                                   body_height_m=BODY.height)
+        for f in range(30):
+            monitor.update(f, [nearer if f >= 10 else there],
+                           pelvis_nearer if f >= 10 and particles_follow else pelvis_there)
+        assert all(monitor.feet_row_position(f) is not None for f in range(10))
+        counted = [f for f in range(10, 30) if monitor.feet_row_position(f) is not None]
+        if agree_s and particles_follow:
+            assert counted and counted[0] == 10 + span - 1
+            row = monitor.feet_row_position(counted[0])     # the new feet row (a row spans ~1.3 m there)
+            assert np.linalg.norm(row - pelvis_nearer[:2]) < np.linalg.norm(row - pelvis_there[:2]) - 0.5
+        else:
+            assert counted == []
+    with pytest.raises(ValueError, match="must be >= 0"):
+        RecoveryConfig(reach_agree_s=-0.1)
+
+
 def test_a_second_larger_person_does_not_count_as_losing_the_first():
     """Two people in view: the one followed stands at x = 0.4 m; another, nearer the camera (larger),
     at x = -0.5 m. The track on the first is not lost; a track on neither is."""

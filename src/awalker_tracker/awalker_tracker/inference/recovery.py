@@ -29,7 +29,10 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   jumps: a feet row counts only within ``reach_m`` (or ``reach_rows`` map rows of its depth, where farther: a
   far, low camera's feet row moves in steps of a whole row) + ``reach_m_s`` x (time since the last one counted)
   of where the counted ones put the person now (the last of them, moved on at their velocity over
-  ``track_window_s``), unless none has counted for ``reach_reset_s``. Legs hidden behind a box put the
+  ``track_window_s``), unless none has counted for ``reach_reset_s``, or (``reach_agree_s`` > 0) this one and
+  the feet rows left out over the last ``reach_agree_s``, one every frame, all lie within that reach of each other
+  and of the particles' pelvis: a far, low camera's feet row that stepped a row or two from where the counted
+  ones were and stayed there. Legs hidden behind a box put the
   blob's lowest row on the box's top edge, metres behind the person, and with the camera near head
   height the blob still looks as tall as the body (a box in front of a whole 40-frame walk, ``synth
   --occluder 1.2``: 3.4 m behind, ratio under 1.10); people do not jump, so those rows are not counted (for up to ``reach_reset_s``: legs
@@ -107,7 +110,9 @@ class RecoveryConfig:
     reach_m: float = 0.5               # ... and whose feet row lies within this of where the counted ones put the
     reach_rows: float = 1.5            # ... person (or this many map rows of the feet row's depth, if farther),
     reach_m_s: float = 0.5             # ... now, plus this per second since the last counted one,
-    reach_reset_s: float = 2.0         # ... unless none counted for this long (module docstring)
+    reach_reset_s: float = 2.0         # ... unless none counted for this long (module docstring),
+    reach_agree_s: float = 0.0         # ... or the feet rows left out for this long lie within that reach of
+    #                                    this one (0: off; module docstring)
     track_window_s: float = 0.5        # detections over this time give the person's ground velocity
     moving_m_s: float = 0.3            # slower ground tracks give no heading (and do not end a stop)
     hold_still: bool = True            # hold the walkers while the person stands still
@@ -138,7 +143,7 @@ class RecoveryConfig:
                self.box_margin, self.track_window_s, self.moving_m_s, self.lost_distance_m,
                self.lost_distance_one_camera_m, self.still_m_s,
                self.still_window_s, self.depth_band_m, self.depth_band_delay_s, self.reach_m, self.reach_m_s,
-               self.reach_reset_s, self.lost_rows_one_camera, self.depth_band_rows, self.reach_rows,
+               self.reach_reset_s, self.reach_agree_s, self.lost_rows_one_camera, self.depth_band_rows, self.reach_rows,
                self.heading_band_rad, self.heading_band_turning_rad) < 0:
             raise ValueError("RecoveryConfig: times, spreads and margins must be >= 0")
         if not (self.depth_band_sigma_m > 0 and 0 < self.depth_band_outlier < 1):
@@ -188,6 +193,7 @@ class LostTrackMonitor:
         self._gaps: dict[int, float] = {}   # one camera: the pelvis's ground distance from the feet-row position
         self._row_depths: dict[int, float] = {}   # one camera: the counted feet rows' depth per map row (m)
         self._feet_rows = GroundTrack(dt)   # one camera: the feet-row ground position per frame (None: it does not count)
+        self._left_out: dict[int, np.ndarray] = {}   # one camera: feet rows as tall as the body but out of reach
         self._placed = GroundTrack(dt)      # the triangulated ground position per frame (None: not triangulated)
         self._quiet_until = -1
         self._first_frame: int | None = None
@@ -207,7 +213,8 @@ class LostTrackMonitor:
         low, high = self.config.feet_row_height_ratio
         as_tall = self.body_height_m is None or low <= detection.height / self.body_height_m <= high
         counts = (as_tall and not any(ends_on_occlusion(blob, features[blob.camera]) for blob in detection.blobs)
-                  and self._reachable(frame, detection.position, detection.row_depth_m))
+                  and (self._reachable(frame, detection.position, detection.row_depth_m)
+                       or self._agreeing(frame, detection.position, detection.row_depth_m, pelvis)))
         self._feet_rows.add(frame, detection.position.copy() if counts else None)
         if counts:
             self._gaps[frame] = float(np.linalg.norm(pelvis[:2] - detection.position))
@@ -239,6 +246,22 @@ class LostTrackMonitor:
         predicted = (counted[last] if where is None else where) + (0.0 if velocity is None else velocity * elapsed)
         reach = max(cfg.reach_m, cfg.reach_rows * row_depth_m)
         return bool(np.linalg.norm(position - predicted) <= reach + cfg.reach_m_s * elapsed)
+
+    def _agreeing(self, frame: int, position: np.ndarray, row_depth_m: float, pelvis: np.ndarray) -> bool:
+        """Whether a feet-row ground position (m) at ``frame`` out of reach of the counted ones lies within
+        ``reach_m`` (or ``reach_rows`` map rows of its depth) of the particles' ``pelvis`` and of every feet row
+        left out over the last ``reach_agree_s``, one every frame: the person stands there and the counted ones
+        were off (a far, low camera's feet row that stepped a row or two and stayed; legs hidden behind something
+        put it metres behind the pelvis). Records ``position`` as left out when it does not."""
+        cfg = self.config
+        span = int(round(cfg.reach_agree_s / self.dt))
+        reach = max(cfg.reach_m, cfg.reach_rows * row_depth_m)
+        agree = (span > 1 and np.linalg.norm(position - pelvis[:2]) <= reach
+                 and all(f in self._left_out and np.linalg.norm(self._left_out[f] - position) <= reach
+                         for f in range(frame - span + 1, frame)))
+        if not agree:
+            self._left_out[frame] = position.copy()
+        return agree
 
     def feet_row_position(self, frame: int) -> np.ndarray | None:
         """One camera: the person's ground position (m, world xy) from ``frame``'s feet row where it counts
@@ -330,7 +353,7 @@ class LostTrackMonitor:
             self._quiet_until = frame + max(1, int(round(self.config.cooldown_s / self.dt)))
             self.reacquisitions += 1
         self._orders[frame] = order
-        for store in (self._run, self._orders, self._still, self._gaps, self._row_depths):     # keep a few seconds of history (the tracks keep their own)
+        for store in (self._run, self._orders, self._still, self._gaps, self._row_depths, self._left_out):     # keep a few seconds of history (the tracks keep their own)
             for old in [f for f in store if f < frame - 300]:
                 del store[old]
         return order
