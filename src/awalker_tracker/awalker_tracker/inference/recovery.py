@@ -353,7 +353,8 @@ class LostTrackMonitor:
             self._quiet_until = frame + max(1, int(round(self.config.cooldown_s / self.dt)))
             self.reacquisitions += 1
         self._orders[frame] = order
-        for store in (self._run, self._orders, self._still, self._gaps, self._row_depths, self._left_out):     # keep a few seconds of history (the tracks keep their own)
+        # keep a few seconds of history (the tracks keep their own)
+        for store in (self._run, self._orders, self._still, self._gaps, self._row_depths, self._left_out):
             for old in [f for f in store if f < frame - 300]:
                 del store[old]
         return order
