@@ -251,8 +251,9 @@ class LostTrackMonitor:
         """Whether a feet-row ground position (m) at ``frame`` out of reach of the counted ones lies within
         ``reach_m`` (or ``reach_rows`` map rows of its depth) of the particles' ``pelvis`` and of every feet row
         left out over the last ``reach_agree_s``, one every frame: the person stands there and the counted ones
-        were off (a far, low camera's feet row that stepped a row or two and stayed; legs hidden behind something
-        put it metres behind the pelvis). Records ``position`` as left out when it does not."""
+        were off (a far, low camera's feet row that stepped a row or two and stayed). Legs hidden behind something
+        put the row metres behind a pelvis on the person, so those stay out. Records ``position`` as left out when
+        it does not agree."""
         cfg = self.config
         span = int(round(cfg.reach_agree_s / self.dt))
         reach = max(cfg.reach_m, cfg.reach_rows * row_depth_m)
