@@ -229,6 +229,11 @@ class LostTrackMonitor:
         return not any(on_blob(by_name[blob.camera], pelvis, blob, self.config.box_margin)
                        for blobs in seen for blob in blobs)
 
+    def _reach(self, row_depth_m: float) -> float:
+        """How far (m) a feet row whose map row spans ``row_depth_m`` of depth may lie from where it is expected:
+        ``reach_m``, or ``reach_rows`` of its rows where farther."""
+        return max(self.config.reach_m, self.config.reach_rows * row_depth_m)
+
     def _reachable(self, frame: int, position: np.ndarray, row_depth_m: float) -> bool:
         """Whether a feet-row ground position (m) at ``frame``, whose map row spans ``row_depth_m`` of depth, is
         within reach of the counted ones (module docstring: ``reach_m`` or ``reach_rows``, ``reach_m_s``,
@@ -244,8 +249,7 @@ class LostTrackMonitor:
         velocity = self._feet_rows.velocity(last, cfg.track_window_s)
         elapsed = (frame - last) * self.dt
         predicted = (counted[last] if where is None else where) + (0.0 if velocity is None else velocity * elapsed)
-        reach = max(cfg.reach_m, cfg.reach_rows * row_depth_m)
-        return bool(np.linalg.norm(position - predicted) <= reach + cfg.reach_m_s * elapsed)
+        return bool(np.linalg.norm(position - predicted) <= self._reach(row_depth_m) + cfg.reach_m_s * elapsed)
 
     def _agreeing(self, frame: int, position: np.ndarray, row_depth_m: float, pelvis: np.ndarray) -> bool:
         """Whether a feet-row ground position (m) at ``frame`` out of reach of the counted ones lies within
@@ -256,7 +260,7 @@ class LostTrackMonitor:
         it does not agree."""
         cfg = self.config
         span = int(round(cfg.reach_agree_s / self.dt))
-        reach = max(cfg.reach_m, cfg.reach_rows * row_depth_m)
+        reach = self._reach(row_depth_m)
         agree = (span > 1 and np.linalg.norm(position - pelvis[:2]) <= reach
                  and all(f in self._left_out and np.linalg.norm(self._left_out[f] - position) <= reach
                          for f in range(frame - span + 1, frame)))
