@@ -207,7 +207,9 @@ def test_one_camera_far_and_low_counts_a_feet_row_that_moves_by_one_map_row(far_
     _, nearer, pelvis_nearer = _far_and_low_view((0.0, -1.0))       # 1 m nearer the camera
     frames, pelvis = (there, nearer), (pelvis_there, pelvis_nearer)
     for rows, counts in ((RecoveryConfig.reach_rows, True), (0.0, False)):
-        monitor = LostTrackMonitor([far], RecoveryConfig(reach_rows=rows), dt=1 / 30, body_height_m=BODY.height)
+        # (reach_agree_s off: the rows' reach alone; with it the step would count once it stayed where the pelvis is)
+        monitor = LostTrackMonitor([far], RecoveryConfig(reach_rows=rows, reach_agree_s=0.0), dt=1 / 30,
+                                   body_height_m=BODY.height)
         for f in range(20):
             monitor.update(f, [frames[f >= 10]], pelvis[f >= 10])
         before, after = monitor.feet_row_position(9), monitor.feet_row_position(10)
@@ -248,6 +250,25 @@ def test_one_camera_far_and_low_counts_a_feet_row_that_stepped_and_stayed_where_
             assert counted == []
     with pytest.raises(ValueError, match="must be >= 0"):
         RecoveryConfig(reach_agree_s=-0.1)
+
+
+def test_two_cameras_count_no_feet_row_by_agreement_where_one_camera_sees_the_person(far_and_low):
+    """``reach_agree_s`` is one camera's: in a rig of two whose second camera does not see the person (its
+    frames fall back on the first camera's feet row), the row that stepped 3 m nearer and stayed where the
+    particles are is left out until ``reach_reset_s``, as without the option, and counts with the first camera
+    alone."""
+    far, there, pelvis_there = far_and_low
+    _, nearer, pelvis_nearer = _far_and_low_view((0.0, -3.0))
+    away = Camera.look_at("away", 320, 240, 300.0, np.array([0.3, 10.0, 0.5]), np.array([0.3, 20.0, 0.9]))
+    empty = features_of(away, walking_poses(3, x0=0.4), 2)[0][-1]
+    for cameras in ([far], [far, away]):
+        monitor = LostTrackMonitor(cameras, RecoveryConfig(reach_agree_s=0.3), dt=1 / 30, body_height_m=BODY.height)
+        for f in range(30):
+            monitor.update(f, [nearer if f >= 10 else there, empty][:len(cameras)], pelvis_nearer if f >= 10
+                           else pelvis_there)
+        assert all(monitor.feet_row_position(f) is not None for f in range(10))
+        counted = [f for f in range(10, 30) if monitor.feet_row_position(f) is not None]
+        assert bool(counted) == (len(cameras) == 1), len(cameras)
 
 
 def test_a_second_larger_person_does_not_count_as_losing_the_first():

@@ -29,10 +29,10 @@ Two failure modes of the physics-based filter are not repaired by the likelihood
   jumps: a feet row counts only within ``reach_m`` (or ``reach_rows`` map rows of its depth, where farther: a
   far, low camera's feet row moves in steps of a whole row) + ``reach_m_s`` x (time since the last one counted)
   of where the counted ones put the person now (the last of them, moved on at their velocity over
-  ``track_window_s``), unless none has counted for ``reach_reset_s``, or (``reach_agree_s`` > 0) this one and
-  the feet rows left out over the last ``reach_agree_s``, one every frame, all lie within that reach of each other
-  and of the particles' pelvis: a far, low camera's feet row that stepped a row or two from where the counted
-  ones were and stayed there. Legs hidden behind a box put the
+  ``track_window_s``), unless none has counted for ``reach_reset_s``, or (one camera, ``reach_agree_s`` > 0) this
+  one and the feet rows left out over the last ``reach_agree_s``, one every frame, all lie within that reach of
+  each other and of the particles' pelvis: a far, low camera's feet row that stepped a row or two from where the
+  counted ones were and stayed there. Legs hidden behind a box put the
   blob's lowest row on the box's top edge, metres behind the person, and with the camera near head
   height the blob still looks as tall as the body (a box in front of a whole 40-frame walk, ``synth
   --occluder 1.2``: 3.4 m behind, ratio under 1.10); people do not jump, so those rows are not counted (for up to ``reach_reset_s``: legs
@@ -111,7 +111,7 @@ class RecoveryConfig:
     reach_rows: float = 1.5            # ... person (or this many map rows of the feet row's depth, if farther),
     reach_m_s: float = 0.5             # ... now, plus this per second since the last counted one,
     reach_reset_s: float = 2.0         # ... unless none counted for this long (module docstring),
-    reach_agree_s: float = 0.0         # ... or the feet rows left out for this long lie within that reach of
+    reach_agree_s: float = 0.3         # ... or the feet rows left out for this long lie within that reach of
     #                                    this one (0: off; module docstring)
     track_window_s: float = 0.5        # detections over this time give the person's ground velocity
     moving_m_s: float = 0.3            # slower ground tracks give no heading (and do not end a stop)
@@ -256,12 +256,13 @@ class LostTrackMonitor:
         ``reach_m`` (or ``reach_rows`` map rows of its depth) of the particles' ``pelvis`` and of every feet row
         left out over the last ``reach_agree_s``, one every frame: the person stands there and the counted ones
         were off (a far, low camera's feet row that stepped a row or two and stayed). Legs hidden behind something
-        put the row metres behind a pelvis on the person, so those stay out. Records ``position`` as left out when
-        it does not agree."""
+        put the row metres behind a pelvis on the person, so those stay out. One camera only: a rig of several
+        falls back on one camera's feet row only in frames the others miss, and was measured without it. Records
+        ``position`` as left out when it does not agree."""
         cfg = self.config
         span = int(round(cfg.reach_agree_s / self.dt))
         reach = self._reach(row_depth_m)
-        agree = (span > 1 and np.linalg.norm(position - pelvis[:2]) <= reach
+        agree = (len(self.cameras) == 1 and span > 1 and np.linalg.norm(position - pelvis[:2]) <= reach
                  and all(f in self._left_out and np.linalg.norm(self._left_out[f] - position) <= reach
                          for f in range(frame - span + 1, frame)))
         if not agree:
