@@ -1,5 +1,5 @@
-"""benchmarks/bench_realwalks.py's paired comparison against an earlier report (``--against``), and the locks that let
-several benchmark processes share one --out."""
+"""benchmarks/bench_realwalks.py's paired comparison against an earlier report (``--against``), the locks that let
+several benchmark processes share one --out, and where a run's start lies along the camera's view."""
 from __future__ import annotations
 
 import json
@@ -9,7 +9,9 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 
@@ -145,3 +147,31 @@ def test_a_sequences_folder_linked_to_one_not_made_yet_is_made(tmp_path: Path) -
     with bench_realwalks.claimed(tmp_path / "variant" / "sequences" / "07_01_s0", poll_s=0.05):
         assert (target / "07_01_s0.lock").read_text() == str(os.getpid())
     assert target.is_dir() and not (target / "07_01_s0.lock").exists()
+
+
+def test_the_start_is_scored_along_the_first_cameras_line_of_sight(tmp_path: Path) -> None:
+    """A start 0.3 m beyond the true pelvis along the first camera's horizontal line of sight and 0.2 m across it
+    scores +0.3 m (+ = farther from the camera), whatever the second camera; a start nearer the camera scores < 0;
+    no start, or a start at a frame the truth lacks, scores None."""
+    from awalker_tools.evaluation import PoseTrack, write_poses_csv
+    from awalker_tracker.vision.camera import Camera, save_calibration
+
+    first = Camera.look_at("cam0", 640, 480, 500.0, np.array([0.0, -5.0, 2.0]), np.array([1.0, 0.0, 0.9]))
+    second = Camera.look_at("cam1", 640, 480, 500.0, np.array([6.0, 0.0, 2.0]), np.array([1.0, 0.0, 0.9]))
+    save_calibration([first, second], tmp_path / "calibration.yaml")
+    pelvis = np.array([[1.0 + 0.04 * f, 0.0, 0.95] for f in range(10)])
+    truth = tmp_path / "ground_truth.csv"
+    write_poses_csv(truth, PoseTrack(np.arange(10), 1_000_000 * np.arange(10), ("pelvis",), pelvis[:, None, :]))
+    assert bench_realwalks.start_depth_m(tmp_path, truth) is None             # no start.yaml
+    at = pelvis[4, :2]
+    along = (at - first.position[:2]) / np.linalg.norm(at - first.position[:2])
+    across = np.array([-along[1], along[0]])
+
+    def scored(position: np.ndarray, frame: int = 4) -> float | None:
+        (tmp_path / "start.yaml").write_text(yaml.safe_dump(
+            {"start": {"frame": frame, "position": [float(v) for v in position], "heading": 0.0, "speed": 1.0}}))
+        return bench_realwalks.start_depth_m(tmp_path, truth)
+
+    assert scored(at + 0.3 * along + 0.2 * across) == pytest.approx(0.3, abs=1e-3)
+    assert scored(at - 0.25 * along) == pytest.approx(-0.25, abs=1e-3)
+    assert scored(at, frame=40) is None
