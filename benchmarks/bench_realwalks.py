@@ -52,6 +52,7 @@ import shutil
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -126,11 +127,9 @@ def variant_of(setting: str, mode: str) -> str:
     return setting if mode == "hand" else f"{setting}_handsoff"
 
 
-def start_leg_right(run_dir: Path, truth_csv: Path) -> bool | None:
-    """Whether the stance leg the run started on (its start.yaml, the leg weighed in the first pass) is the
-    person's at that frame (``evaluation.start_stance_left``: the planted foot, or for a person standing still the
-    other foot than the first step's); None if the run has no start or the truth no clear stance leg there (a
-    double support)."""
+def _start_at_truth(run_dir: Path, truth_csv: Path) -> tuple[dict, Any, int] | None:
+    """The run's start (its start.yaml's ``start``), the truth (``evaluation.read_poses_csv``) and the truth's row at
+    the start's frame; None if the run has no start or the truth has no such frame."""
     import yaml
 
     from awalker_tools import evaluation
@@ -139,13 +138,24 @@ def start_leg_right(run_dir: Path, truth_csv: Path) -> bool | None:
     if not start_file.is_file():
         return None
     start = (yaml.safe_load(start_file.read_text()) or {}).get("start", {})
-    leg = start.get("stance_leg")
     truth = evaluation.read_poses_csv(truth_csv)
     rows = np.flatnonzero(truth.frames == int(start.get("frame", -1)))
-    if leg not in ("left", "right") or not rows.size:
+    return (start, truth, int(rows[0])) if rows.size else None
+
+
+def start_leg_right(run_dir: Path, truth_csv: Path) -> bool | None:
+    """Whether the stance leg the run started on (its start.yaml, the leg weighed in the first pass) is the
+    person's at that frame (``evaluation.start_stance_left``: the planted foot, or for a person standing still the
+    other foot than the first step's); None if the run has no start or the truth no clear stance leg there (a
+    double support)."""
+    from awalker_tools import evaluation
+
+    found = _start_at_truth(run_dir, truth_csv)
+    if found is None or found[0].get("stance_leg") not in ("left", "right"):
         return None
-    left = evaluation.start_stance_left(truth, int(rows[0]))
-    return None if left is None else (leg == "left") == left
+    start, truth, row = found
+    left = evaluation.start_stance_left(truth, row)
+    return None if left is None else (start["stance_leg"] == "left") == left
 
 
 def start_depth_m(run_dir: Path, truth_csv: Path) -> float | None:
@@ -153,21 +163,15 @@ def start_depth_m(run_dir: Path, truth_csv: Path) -> float | None:
     true pelvis at its frame along the first camera's horizontal line of sight (+ = farther from the camera; what
     one camera places least well, and a run keeps: docs/tracking.md, *The automatic start placed 0.2 m farther*);
     None if the run has no start or the truth no pelvis at its frame."""
-    import yaml
-
     from awalker_tools import evaluation
     from awalker_tracker.vision.camera import load_calibration
 
-    start_file = run_dir / "start.yaml"
-    if not start_file.is_file():
+    found = _start_at_truth(run_dir, truth_csv)
+    if found is None or "position" not in found[0]:
         return None
-    start = (yaml.safe_load(start_file.read_text()) or {}).get("start", {})
-    truth = evaluation.read_poses_csv(truth_csv)
-    rows = np.flatnonzero(truth.frames == int(start.get("frame", -1)))
-    if "position" not in start or not rows.size:
-        return None
+    start, truth, row = found
     camera = load_calibration(run_dir / "calibration.yaml")[0]
-    pelvis = truth.marker("pelvis")[rows[0], :2]
+    pelvis = truth.marker("pelvis")[row, :2]
     depth, _ = evaluation.split_along_ray(np.asarray(start["position"], float) - pelvis, pelvis, camera.position)
     return round(float(depth), 3)
 
