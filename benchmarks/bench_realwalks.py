@@ -52,7 +52,6 @@ import shutil
 import sys
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -127,53 +126,42 @@ def variant_of(setting: str, mode: str) -> str:
     return setting if mode == "hand" else f"{setting}_handsoff"
 
 
-def _start_at_truth(run_dir: Path, truth_csv: Path) -> tuple[dict, Any, int] | None:
-    """The run's start (its start.yaml's ``start``), the truth (``evaluation.read_poses_csv``) and the truth's row at
-    the start's frame; None if the run has no start or the truth has no such frame."""
+def start_figures(run_dir: Path, truth_csv: Path) -> dict:
+    """Where the run started (its start.yaml: the user's, or hands off the automatic start with the leg weighed in
+    the first pass) against the truth at that frame, reading both once:
+
+    - ``start_leg_right``: whether its stance leg is the person's (``evaluation.start_stance_left``: the planted
+      foot, or for a person standing still the other foot than the first step's); None without a stance leg or
+      where the truth has no clear one (a double support);
+    - ``start_depth_m``: how far (m) its position lies beyond the true pelvis along the first camera's horizontal
+      line of sight (+ = farther from the camera; what one camera places least well, and a run keeps:
+      docs/tracking.md, *The automatic start placed 0.2 m farther*).
+
+    Both None if the run has no start or the truth no row at its frame."""
     import yaml
 
     from awalker_tools import evaluation
+    from awalker_tracker.vision.camera import load_calibration
 
+    out: dict = {"start_leg_right": None, "start_depth_m": None}
     start_file = run_dir / "start.yaml"
     if not start_file.is_file():
-        return None
+        return out
     start = (yaml.safe_load(start_file.read_text()) or {}).get("start", {})
     truth = evaluation.read_poses_csv(truth_csv)
     rows = np.flatnonzero(truth.frames == int(start.get("frame", -1)))
-    return (start, truth, int(rows[0])) if rows.size else None
-
-
-def start_leg_right(run_dir: Path, truth_csv: Path) -> bool | None:
-    """Whether the stance leg the run started on (its start.yaml, the leg weighed in the first pass) is the
-    person's at that frame (``evaluation.start_stance_left``: the planted foot, or for a person standing still the
-    other foot than the first step's); None if the run has no start or the truth no clear stance leg there (a
-    double support)."""
-    from awalker_tools import evaluation
-
-    found = _start_at_truth(run_dir, truth_csv)
-    if found is None or found[0].get("stance_leg") not in ("left", "right"):
-        return None
-    start, truth, row = found
-    left = evaluation.start_stance_left(truth, row)
-    return None if left is None else (start["stance_leg"] == "left") == left
-
-
-def start_depth_m(run_dir: Path, truth_csv: Path) -> float | None:
-    """How far (m) the run's start (its start.yaml: the user's, or hands off the automatic start's) lies beyond the
-    true pelvis at its frame along the first camera's horizontal line of sight (+ = farther from the camera; what
-    one camera places least well, and a run keeps: docs/tracking.md, *The automatic start placed 0.2 m farther*);
-    None if the run has no start or the truth no pelvis at its frame."""
-    from awalker_tools import evaluation
-    from awalker_tracker.vision.camera import load_calibration
-
-    found = _start_at_truth(run_dir, truth_csv)
-    if found is None or "position" not in found[0]:
-        return None
-    start, truth, row = found
-    camera = load_calibration(run_dir / "calibration.yaml")[0]
-    pelvis = truth.marker("pelvis")[row, :2]
-    depth, _ = evaluation.split_along_ray(np.asarray(start["position"], float) - pelvis, pelvis, camera.position)
-    return round(float(depth), 3)
+    if not rows.size:
+        return out
+    row = int(rows[0])
+    if start.get("stance_leg") in ("left", "right"):
+        left = evaluation.start_stance_left(truth, row)
+        out["start_leg_right"] = None if left is None else (start["stance_leg"] == "left") == left
+    if "position" in start:
+        camera = load_calibration(run_dir / "calibration.yaml")[0]
+        pelvis = truth.marker("pelvis")[row, :2]
+        depth, _ = evaluation.split_along_ray(np.asarray(start["position"], float) - pelvis, pelvis, camera.position)
+        out["start_depth_m"] = round(float(depth), 3)
+    return out
 
 
 def score(result: dict, run_dir: Path, truth_csv: Path) -> dict:
@@ -196,8 +184,7 @@ def score(result: dict, run_dir: Path, truth_csv: Path) -> dict:
             "step_length_error_m": gait.get("step_length_error_m_median"),
             "cadence_ratio": round(estimate / truth, 3) if estimate and truth else None,
             "depth_bias_mm": None if first_camera is None else first_camera["depth_mm"],
-            "start_leg_right": start_leg_right(run_dir, truth_csv),
-            "start_depth_m": start_depth_m(run_dir, truth_csv),
+            **start_figures(run_dir, truth_csv),
             "reacquisitions": result.get("recovery", {}).get("reacquisitions", 0),
             "frames_most_walkers_fallen": result.get("recovery", {}).get("frames_most_walkers_fallen", 0),
             **filter_load(run_dir)}

@@ -162,7 +162,7 @@ def test_the_start_is_scored_along_the_first_cameras_line_of_sight(tmp_path: Pat
     pelvis = np.array([[1.0 + 0.04 * f, 0.0, 0.95] for f in range(10)])
     truth = tmp_path / "ground_truth.csv"
     write_poses_csv(truth, PoseTrack(np.arange(10), 1_000_000 * np.arange(10), ("pelvis",), pelvis[:, None, :]))
-    assert bench_realwalks.start_depth_m(tmp_path, truth) is None             # no start.yaml
+    assert bench_realwalks.start_figures(tmp_path, truth)["start_depth_m"] is None    # no start.yaml
     at = pelvis[4, :2]
     along = (at - first.position[:2]) / np.linalg.norm(at - first.position[:2])
     across = np.array([-along[1], along[0]])
@@ -170,7 +170,7 @@ def test_the_start_is_scored_along_the_first_cameras_line_of_sight(tmp_path: Pat
     def scored(position: np.ndarray, frame: int = 4) -> float | None:
         (tmp_path / "start.yaml").write_text(yaml.safe_dump(
             {"start": {"frame": frame, "position": [float(v) for v in position], "heading": 0.0, "speed": 1.0}}))
-        return bench_realwalks.start_depth_m(tmp_path, truth)
+        return bench_realwalks.start_figures(tmp_path, truth)["start_depth_m"]
 
     assert scored(at + 0.3 * along + 0.2 * across) == pytest.approx(0.3, abs=1e-3)
     assert scored(at - 0.25 * along) == pytest.approx(-0.25, abs=1e-3)
